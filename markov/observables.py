@@ -1,0 +1,121 @@
+"""Observables of a stationary state, computed from state keys and weights.
+
+All observables here are translation invariant, so they are the same whether
+the chain is lumped by rotations (one representative key per orbit, carrying
+the orbit's total probability) or not.  Kernels stream over the keys; nothing
+of size ``states x L`` is materialised.
+
+Definitions, for a ring of ``L`` cells with ``N`` cars:
+
+* ``c_v``: probability that a given cell holds a car of velocity ``v``
+  (so ``sum_v c_v = N / L``);
+* flux ``f = sum_v v c_v`` (cars passing a given bond per time step);
+* gap distribution ``P(g)``: probability that a given car has ``g`` empty
+  cells in front of it, ``g = 0 .. L - N``;
+* n-cluster probabilities ``P(s_1, ..., s_n)``: probability that ``n``
+  consecutive cells hold the states ``s_i`` in ``{empty, 0..vmax}``, cars moving
+  toward higher index.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .model import PARALLEL, Ring
+from .rules import deterministic_velocity
+from .transition import _cars_of, _gap
+
+__all__ = ["cluster_probabilities", "velocity_densities", "gap_distribution", "expected_move"]
+
+
+@njit(cache=True)
+def _cluster_histogram(keys, weights, length, b, n, out):
+    digits = np.empty(length, np.int64)
+    for i in range(keys.shape[0]):
+        key = keys[i]
+        for x in range(length):
+            digits[x] = key % b
+            key //= b
+        for x in range(length):
+            idx = 0
+            for j in range(n - 1, -1, -1):
+                idx = idx * b + digits[(x + j) % length]
+            out[idx] += weights[i]
+
+
+def cluster_probabilities(ring: Ring, keys: np.ndarray, pi: np.ndarray, n: int) -> np.ndarray:
+    """n-cluster probabilities as an array of shape ``(vmax + 2,) * n``.
+
+    Index ``0`` is an empty cell and ``v + 1`` a car of velocity ``v``; axis
+    ``j`` is the ``j``-th cell of the window in the driving direction.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from markov.states import encode
+    >>> ring = Ring(2, 1, 1, 0.5)
+    >>> keys = np.array([encode([1, -1], 1)]); pi = np.array([1.0])
+    >>> cluster_probabilities(ring, keys, pi, 2)[2, 0]   # P(car v=1, empty)
+    0.5
+    """
+    if not 1 <= n <= ring.length:
+        raise ValueError(f"cluster size must be in 1..L = {ring.length}, got {n}")
+    b = ring.vmax + 2
+    out = np.zeros(b**n)
+    _cluster_histogram(np.ascontiguousarray(keys, np.int64), np.ascontiguousarray(pi, np.float64),
+                       ring.length, b, n, out)
+    # the j-th window cell is digit j of idx (least significant first): reverse to C order
+    return (out / ring.length).reshape((b,) * n).transpose(tuple(range(n - 1, -1, -1)))
+
+
+def velocity_densities(ring: Ring, keys: np.ndarray, pi: np.ndarray) -> np.ndarray:
+    """``c_v`` for ``v = 0..vmax`` (the 1-cluster probabilities of cars)."""
+    return cluster_probabilities(ring, keys, pi, 1)[1:]
+
+
+@njit(cache=True)
+def _gap_histogram(keys, weights, length, b, out):
+    pos = np.empty(length, np.int64)
+    vel = np.empty(length, np.int64)
+    for i in range(keys.shape[0]):
+        n = _cars_of(keys[i], length, b, pos, vel)
+        for j in range(n):
+            out[_gap(pos, n, j, length)] += weights[i] / n
+
+
+def gap_distribution(ring: Ring, keys: np.ndarray, pi: np.ndarray) -> np.ndarray:
+    """``P(g)``, ``g = 0..L-N``: headway distribution of a car (needs ``N >= 1``)."""
+    if ring.cars == 0:
+        raise ValueError("the gap distribution needs at least one car")
+    out = np.zeros(ring.length - ring.cars + 1)
+    _gap_histogram(np.ascontiguousarray(keys, np.int64), np.ascontiguousarray(pi, np.float64),
+                   ring.length, ring.vmax + 2, out)
+    return out
+
+
+@njit(cache=True)
+def _expected_move(keys, weights, length, vmax, p):
+    pos = np.empty(length, np.int64)
+    vel = np.empty(length, np.int64)
+    total = 0.0
+    for i in range(keys.shape[0]):
+        n = _cars_of(keys[i], length, vmax + 2, pos, vel)
+        for j in range(n):
+            u = deterministic_velocity(vel[j], _gap(pos, n, j, length), vmax)
+            if u > 0:
+                total += weights[i] * (u - p)
+    return total
+
+
+def expected_move(ring: Ring, keys: np.ndarray, pi: np.ndarray) -> float:
+    """Mean number of cells all cars advance in the next update, divided by ``L``.
+
+    For parallel update this is the flux of the *next* step, so in a
+    stationary state it equals ``sum_v v c_v``; for random-sequential update
+    every car is updated once per time step on average, so it is the flux per
+    time step (``L`` sub-steps).
+    """
+    total = _expected_move(np.ascontiguousarray(keys, np.int64),
+                           np.ascontiguousarray(pi, np.float64), ring.length, ring.vmax,
+                           float(ring.p))
+    return total / ring.length

@@ -1,0 +1,27 @@
+"""Progress bars on stderr: shown only on a terminal and never with ``quiet``."""
+from __future__ import annotations
+
+import sys
+
+from tqdm.auto import tqdm
+
+__all__ = ["progress_bar", "progress_enabled"]
+
+_quiet = False
+
+
+def set_quiet(quiet: bool) -> None:
+    """Silence (or re-enable) every progress bar of this process (``--quiet``)."""
+    global _quiet
+    _quiet = bool(quiet)
+
+
+def progress_enabled() -> bool:
+    """True when bars should be drawn: stderr is a terminal and not quiet."""
+    return not _quiet and sys.stderr.isatty()
+
+
+def progress_bar(total=None, desc: str = "", unit: str = "it"):
+    """A tqdm bar on stderr, disabled when :func:`progress_enabled` is false."""
+    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr,
+                disable=not progress_enabled(), leave=False, dynamic_ncols=True)

@@ -1,0 +1,165 @@
+"""State spaces: the recurrent class (from the compact jam) and all configurations.
+
+For ``0 < p < 1`` every configuration reaches the compact jam (stopped cars
+bunched together) with positive probability, so the chain has a single closed
+class: everything reachable from the jam.  We find it by breadth-first search
+over the *support* of the successor relation, which does not depend on ``p``.
+Sets of states are sorted ``int64`` key arrays (:mod:`markov.states`), 8 bytes
+per state, merged level by level; no Python containers of states.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+import os
+
+import numpy as np
+from numba import njit
+
+from .errors import StateSpaceTooLargeError
+from .model import PARALLEL, Ring
+from .progress import progress_bar
+from .states import canonical, check_encodable, compact_jam_key, powers
+from .transition import successors
+
+__all__ = [
+    "recurrent_keys",
+    "all_keys",
+    "count_all",
+    "available_memory",
+    "bytes_per_state",
+    "DEFAULT_MEMORY_FRACTION",
+]
+
+DEFAULT_MEMORY_FRACTION = 0.75
+_CHUNK = 1 << 16
+
+
+def available_memory() -> int:
+    """Physical memory of this machine in bytes."""
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def bytes_per_state(ring: Ring, lump: bool) -> float:
+    """Rough peak bytes per state of building and solving the chain.
+
+    Keys (8), the stationary vector and solver work vectors (about 12 x 8),
+    and the CSR row: ``(8 value + 4 index)`` bytes per nonzero plus the
+    unsummed successor list during assembly (``8 + 8 + 8``).  The mean row
+    length is bounded by ``2**(N/2)`` for parallel update (about half the cars
+    can move) and ``2N + 1`` for random-sequential update.
+    """
+    row = min(2.0 ** (ring.cars / 2), 4096.0) if ring.update == PARALLEL else 2 * ring.cars + 1
+    return 8 + 12 * 8 + row * (12 + 24)
+
+
+def _memory_limit(max_memory: float | None) -> float:
+    return DEFAULT_MEMORY_FRACTION * available_memory() if max_memory is None else max_memory
+
+
+def count_all(ring: Ring) -> int:
+    """Number of configurations with ``N`` cars: ``C(L, N) (vmax + 1)**N``."""
+    return math.comb(ring.length, ring.cars) * (ring.vmax + 1) ** ring.cars
+
+
+def _merge(visited: np.ndarray, new: np.ndarray) -> np.ndarray:
+    merged = np.concatenate([visited, new])
+    merged.sort(kind="stable")  # two sorted runs: timsort merges them in linear time
+    return merged
+
+
+def _not_in(sorted_set: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    idx = np.searchsorted(sorted_set, candidates)
+    idx[idx == len(sorted_set)] = 0
+    return candidates[sorted_set[idx] != candidates]
+
+
+def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = None) -> np.ndarray:
+    """Sorted keys of the recurrent class of the chain (``0 < p < 1`` support).
+
+    Parameters
+    ----------
+    ring : Ring
+        The system; ``p`` is irrelevant (only which transitions are possible).
+    lump : bool
+        Return canonical rotation keys (one per rotation orbit).
+    max_memory : float, optional
+        Bytes allowed for the whole solve; default 75 % of physical memory.
+
+    Returns
+    -------
+    (n,) int64 array, sorted
+
+    Raises
+    ------
+    StateSpaceTooLargeError
+        As soon as the states found so far, times :func:`bytes_per_state`,
+        exceed the limit.
+
+    Examples
+    --------
+    >>> from markov.model import Ring
+    >>> len(recurrent_keys(Ring(3, 1, 1, 0.5), lump=False))   # 1 car, v in {0, 1}
+    6
+    """
+    check_encodable(ring.length, ring.vmax)
+    limit = _memory_limit(max_memory)
+    per_state = bytes_per_state(ring, lump)
+    pw = powers(ring.length, ring.vmax)
+    start = compact_jam_key(ring.length, ring.cars, ring.vmax)
+    if lump:
+        start = canonical(np.int64(start), ring.length, pw)
+    visited = np.array([start], dtype=np.int64)
+    frontier = visited
+    with progress_bar(None, "recurrent class", "state") as bar:
+        while frontier.size:
+            found = []
+            for lo in range(0, frontier.size, _CHUNK):
+                _, succ, _ = successors(ring, frontier[lo:lo + _CHUNK], lump, p=0.5)
+                found.append(np.unique(succ))
+            new = _not_in(visited, np.unique(np.concatenate(found)))
+            visited = _merge(visited, new)
+            frontier = new
+            bar.update(new.size)
+            if visited.size * per_state > limit:
+                raise StateSpaceTooLargeError(
+                    f"the recurrent class has more than {visited.size:,} states"
+                    f" (L={ring.length}, N={ring.cars}, vmax={ring.vmax}, lump={lump});"
+                    f" at about {per_state:.0f} bytes per state that exceeds the memory"
+                    f" limit of {limit / 2**30:.1f} GiB")
+    return visited
+
+
+@njit(cache=True)
+def _canonicalise(keys, length, pw):
+    out = np.empty_like(keys)
+    for i in range(keys.shape[0]):
+        out[i] = canonical(keys[i], length, pw)
+    return out
+
+
+def all_keys(ring: Ring, lump: bool = False, max_memory: float | None = None) -> np.ndarray:
+    """Sorted keys of every configuration with ``N`` cars (canonical if ``lump``).
+
+    Refuses (:class:`StateSpaceTooLargeError`) when ``count_all(ring)`` keys
+    would not fit in ``max_memory`` bytes (default 75 % of physical memory).
+    """
+    check_encodable(ring.length, ring.vmax)
+    total = count_all(ring)
+    limit = _memory_limit(max_memory)
+    if total * 24 > limit:
+        raise StateSpaceTooLargeError(
+            f"{total:,} configurations (L={ring.length}, N={ring.cars}, vmax={ring.vmax})"
+            f" need about {total * 24 / 2**30:.1f} GiB, over the limit of {limit / 2**30:.1f} GiB")
+    pw = powers(ring.length, ring.vmax)
+    if ring.cars == 0:
+        return np.zeros(1, dtype=np.int64)
+    places = np.array(list(itertools.combinations(range(ring.length), ring.cars)), dtype=np.int64)
+    place_pw = pw[places]                                     # (C, N) B**x
+    digits = np.array(list(itertools.product(range(1, ring.vmax + 2), repeat=ring.cars)),
+                      dtype=np.int64)                         # (V, N) v + 1
+    keys = np.concatenate([place_pw @ row for row in digits]) if len(places) < len(digits) \
+        else (place_pw[:, None, :] * digits[None, :, :]).sum(axis=2).ravel()
+    if lump:
+        keys = _canonicalise(keys, ring.length, pw)
+    return np.unique(keys)
