@@ -25,7 +25,7 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/run.py
 
 bench-large: $(STAMP)
-	$(BIN)/python benchmarks/run.py --large
+	$(BIN)/python benchmarks/large.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info

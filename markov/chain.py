@@ -54,9 +54,12 @@ class RingChain:
 
     Examples
     --------
-    >>> chain = RingChain(Ring(4, 2, 1, 0.5))
-    >>> chain.n_states, round(chain.solution().flux, 6)
-    (2, 0.2)
+    Two cars on three cells, vmax = 1: the follower is always blocked, the
+    leader moves with ``q = 1 - p``; two rotation classes, flux ``q / 3``.
+
+    >>> chain = RingChain(Ring(3, 2, 1, 0.5))
+    >>> chain.n_states, round(chain.solution().flux, 12)
+    (2, 0.166666666667)
     """
 
     def __init__(self, ring: Ring, lump: bool = True, max_memory: float | None = None):
@@ -211,12 +214,11 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = 1e-1
 
     Examples
     --------
-    vmax = 1, L = 4, N = 2: by hand, the lumped chain has two classes, ``0.0.``
-    and ``00..`` (pairs with a car at v=1 behind... see tests); the flux is 1/5
-    at p = 1/2.
+    One car on three cells, vmax = 1: the gap is always 2, so the car moves
+    with probability ``q = 1 - p`` every step and ``f = q / 3``.
 
-    >>> round(solve(Ring(4, 2, 1, 0.5)).flux, 12)
-    0.2
+    >>> round(solve(Ring(3, 1, 1, 0.25)).flux, 12)
+    0.25
     """
     _ensure_unique(ring)
     return RingChain(ring, lump=lump, max_memory=max_memory).solution(method=method, tol=tol)

@@ -55,7 +55,7 @@ def cluster_probabilities(ring: Ring, keys: np.ndarray, pi: np.ndarray, n: int) 
     >>> from markov.states import encode
     >>> ring = Ring(2, 1, 1, 0.5)
     >>> keys = np.array([encode([1, -1], 1)]); pi = np.array([1.0])
-    >>> cluster_probabilities(ring, keys, pi, 2)[2, 0]   # P(car v=1, empty)
+    >>> float(cluster_probabilities(ring, keys, pi, 2)[2, 0])   # P(car v=1, empty)
     0.5
     """
     if not 1 <= n <= ring.length:

@@ -1,0 +1,67 @@
+"""The ``nasch solve`` command: output, JSON fields, errors without tracebacks."""
+import json
+import subprocess
+import sys
+
+import pytest
+from click.testing import CliRunner
+
+from markov import Ring, solve
+from markov.cli import main
+
+
+def run(*args):
+    return CliRunner().invoke(main, list(args))
+
+
+def test_help_shows_an_example():
+    result = run("--help")
+    assert result.exit_code == 0 and "nasch solve --length" in result.output
+    result = run("solve", "--help")
+    assert result.exit_code == 0 and "Example" in result.output and "--method" in result.output
+
+
+def test_solve_json_has_the_documented_fields_and_the_solver_values():
+    result = run("solve", "-L", "8", "-N", "4", "--vmax", "2", "--p", "0.25", "--json")
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    for key in ("length", "cars", "vmax", "p", "update", "states", "nonzeros", "method",
+                "residual", "flux", "mean_velocity", "c_v", "seconds"):
+        assert key in data
+    sol = solve(Ring(8, 4, 2, 0.25))
+    assert data["flux"] == pytest.approx(sol.flux, abs=1e-15)
+    assert data["c_v"] == pytest.approx(sol.c_v.tolist(), abs=1e-15)
+    assert data["mean_velocity"] == pytest.approx(sol.flux / 0.5, abs=1e-15)
+    assert data["residual"] < 1e-12 and data["states"] == sol.n_states
+
+
+def test_solve_text_and_options():
+    result = run("solve", "-L", "6", "-N", "3", "--vmax", "1", "--p", "0.5",
+                 "--update", "random-sequential", "--method", "power", "--no-lump")
+    assert result.exit_code == 0, result.output
+    # random-sequential vmax = 1: f = q N (L - N) / (L (L - 1)) = 0.5 * 9 / 30
+    assert "flux           0.15" in result.output and "method power" in result.output
+
+
+@pytest.mark.parametrize("args, words", [
+    (["-L", "5", "-N", "6", "--p", "0.5"], "0 <= N <= L = 5"),
+    (["-L", "5", "-N", "2", "--p", "1.5"], "p must be in [0, 1]"),
+    (["-L", "5", "-N", "2", "--p", "0.5", "--vmax", "0"], "vmax must be an integer >= 1"),
+    (["-L", "5", "-N", "2", "--p", "0"], "p = 0 makes the update deterministic"),
+    (["-L", "5", "-N", "2", "--p", "1"], "p = 1"),
+    (["-L", "5", "-N", "2", "--p", "nan"], "p must be a number"),
+    (["-L", "5", "-N", "x", "--p", "0.5"], "is not a valid integer"),
+    (["-L", "16", "-N", "8", "--p", "0.5", "--no-lump", "--max-memory", "0.001"],
+     "exceeds the memory limit"),
+])
+def test_bad_input_exit_code_2_without_traceback(args, words):
+    result = run("solve", *args)
+    assert result.exit_code == 2
+    assert words in result.output
+    assert "Traceback" not in result.output
+
+
+def test_console_script_runs_in_a_subprocess():
+    out = subprocess.run([sys.executable, "-m", "markov.cli", "solve", "-L", "4", "-N", "5",
+                          "--p", "0.5"], capture_output=True, text=True)
+    assert out.returncode == 2 and out.stderr.startswith("error:") and "Traceback" not in out.stderr

@@ -1,0 +1,57 @@
+"""Key encoding: round trips, rotations, text notation, overflow guard."""
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from markov import InvalidParameterError
+from markov.states import (canonical, check_encodable, compact_jam_key, decode, encode,
+                           from_text, max_length, orbit_size, powers, to_text)
+
+
+@st.composite
+def configurations(draw):
+    vmax = draw(st.integers(1, 4))
+    length = draw(st.integers(1, 12))
+    cells = draw(st.lists(st.integers(-1, vmax), min_size=length, max_size=length))
+    return vmax, cells
+
+
+@given(configurations())
+@settings(max_examples=200, deadline=None)
+def test_encode_decode_round_trip(case):
+    vmax, cells = case
+    key = encode(cells, vmax)
+    assert decode(key, len(cells), vmax).tolist() == cells
+
+
+@given(configurations())
+@settings(max_examples=200, deadline=None)
+def test_canonical_is_the_minimum_over_rotations(case):
+    vmax, cells = case
+    L = len(cells)
+    pw = powers(L, vmax)
+    rotations = [encode(cells[r:] + cells[:r], vmax) for r in range(L)]
+    for key in rotations:
+        assert canonical(np.int64(key), L, pw) == min(rotations)
+    assert orbit_size(np.int64(rotations[0]), L, pw) == len(set(rotations))
+
+
+def test_text_notation():
+    assert from_text("0..2", 2) == [0, -1, -1, 2]
+    assert to_text([0, -1, -1, 2]) == "0..2"
+    with pytest.raises(InvalidParameterError, match="velocity 0..1"):
+        from_text("02", 1)
+
+
+def test_compact_jam_and_base():
+    assert decode(compact_jam_key(5, 2, 1), 5, 1).tolist() == [0, 0, -1, -1, -1]
+    assert encode([0, -1, 1], 1) == 1 + 0 * 3 + 2 * 9
+
+
+def test_overflow_guard():
+    limit = max_length(2)
+    assert 2 * 4 ** limit <= np.iinfo(np.int64).max < 2 * 4 ** (limit + 1)
+    check_encodable(limit, 2)
+    with pytest.raises(InvalidParameterError, match="64-bit keys up to L"):
+        check_encodable(limit + 1, 2)
