@@ -22,8 +22,12 @@ def naive_keys(states, vmax):
     return sorted(encode([-1 if c is None else c for c in s], vmax) for s in states)
 
 
-@pytest.mark.parametrize("update", ["parallel", "random-sequential"])
-@pytest.mark.parametrize("L, N, vmax", SMALL)
+CASES = [(L, N, vmax, update) for L, N, vmax in SMALL for update in ("parallel", "random-sequential")
+         # random-sequential reaches (nearly) all configurations: keep the dense oracle small
+         if update == "parallel" or count_all(Ring(L, N, vmax, 0.5)) <= 3000]
+
+
+@pytest.mark.parametrize("L, N, vmax, update", CASES)
 def test_matches_naive_reference(L, N, vmax, update):
     p = 0.3
     ring = Ring(L, N, vmax, p, update)
@@ -147,10 +151,10 @@ def test_memory_guard_refuses_with_the_number():
 def test_vmax1_parallel_flux_tends_to_the_exact_infinite_ring_value():
     # f(c) = (1 - sqrt(1 - 4 q c (1 - c))) / 2 for L -> infinity (paper, pMF = exact).
     # finite rings approach it from above like 1/L; a three-term Richardson fit
-    # f(L) = f_inf + a/L + b/L^2 on L = 16, 18, 20 lands within 1e-4.
+    # f(L) = f_inf + a/L + b/L^2 on L = 12, 14, 16 lands within 1e-4 (6e-5 seen).
     p, c = 0.5, 0.5
     exact = (1 - np.sqrt(1 - 4 * (1 - p) * c * (1 - c))) / 2
-    sizes = [8, 12, 16, 18, 20]
+    sizes = [6, 8, 10, 12, 14, 16]
     flux = [solve(Ring(L, L // 2, 1, p)).flux for L in sizes]
     errors = np.array(flux) - exact
     assert np.all(errors > 0) and np.all(np.diff(errors) < 0)
