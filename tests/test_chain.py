@@ -1,4 +1,5 @@
 """The exact solver against a naive reference, hand-derived chains and invariants."""
+import math
 from fractions import Fraction
 
 import numpy as np
@@ -175,6 +176,16 @@ def test_random_sequential_vmax1_is_uniform_and_mean_field(L, N, p):
     assert sol.flux == pytest.approx((1 - p) * N * (L - N) / (L * (L - 1)), abs=1e-13)
     # the stored velocity is the last move, so sum_v v c_v is the flux too
     assert sol.c_v[1] == pytest.approx(sol.flux, abs=1e-13)
+    # the paper's "all configurations equally probable" holds for the occupation
+    # pattern (vmax = 1 dynamics ignore the stored velocity), not for velocities
+    full = solve(ring, lump=False)
+    occupation = {}
+    for key, prob in zip(full.keys, full.pi):
+        cells = tuple(decode(key, L, 1) >= 0)
+        occupation[cells] = occupation.get(cells, 0.0) + prob
+    assert len(occupation) == math.comb(L, N)
+    np.testing.assert_allclose(list(occupation.values()), 1 / math.comb(L, N), atol=1e-13)
+    assert np.ptp(full.pi) > 1e-3
 
 
 def _every_car_followed_on_the_cell_it_left(cells):
