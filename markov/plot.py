@@ -1,0 +1,264 @@
+"""The paper's Fig. 2, regenerated: fundamental diagrams with every route to the flux.
+
+For each braking probability ``p`` one panel shows, against the density ``c``:
+
+* pMF (solid line), MF (dotted), 2-cluster (dash-dotted) from :mod:`symbolic`;
+* Monte Carlo on a large ring (dots with 1-sigma error bars, mostly smaller
+  than the dots);
+* exact stationary fluxes of finite rings, every ``N`` for a few ``L``
+  (open markers);
+* the ``L -> infinity`` extrapolation of the exact fluxes at commensurate
+  densities (filled diamonds with the error estimate of
+  :func:`markov.extrapolate.extrapolate`).
+
+:func:`fundamental_data` computes the numbers (testable without drawing);
+:func:`fundamental_figure` draws them; :func:`save_figure` writes PNG or PDF
+by the file's extension, atomically.
+
+References
+----------
+A. Schadschneider and M. Schreckenberg, "Garden of Eden states in traffic
+models", Fig. 2 (``shared/paper``).
+"""
+from __future__ import annotations
+
+import io
+import warnings
+from fractions import Fraction
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .errors import InvalidParameterError, NaschError
+from .extrapolate import commensurate_lengths, extrapolate
+from .io import write_bytes_atomic
+from .sweep import run_jobs
+from .tables import _derived_seed, _task_cost, exact_job, mc_job, mc_ring
+
+__all__ = ["fundamental_data", "fundamental_figure", "save_figure", "FIGURE_FORMATS",
+           "EXTRAPOLATION_DENSITIES"]
+
+FIGURE_FORMATS = (".png", ".pdf")
+EXTRAPOLATION_DENSITIES = (Fraction(1, 4), Fraction(1, 3), Fraction(1, 2), Fraction(2, 3),
+                           Fraction(3, 4))
+_STYLE = {"pmf": ("pMF", "-", "C0"), "mf": ("MF", ":", "k"),
+          "cluster2": ("2-cluster", "-.", "C2"), "pmf2": ("pMF2", "--", "C4"),
+          "cluster3": ("3-cluster", (0, (5, 1)), "C5")}
+# Colours of the finite rings: none shared with a curve, Monte Carlo or the extrapolation.
+_EXACT_COLORS = ("C1", "C7", "C5", "C8", "C9", "C6")
+_MARKERS = ("o", "s", "^", "v", "<", ">", "p", "h")
+
+
+def _job(task):
+    kind, point = task
+    if kind == "mc":
+        return mc_job(point)
+    try:
+        return exact_job(point)
+    except NaschError as exc:
+        # One failing ring (e.g. a chain the exact solver refuses) must not
+        # cost the whole figure: the point is dropped and reported.
+        return {"flux": float("nan"), "error": str(exc)}
+
+
+def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
+                     extrapolation_lengths: Sequence[int] = tuple(range(8, 17)),
+                     extrapolation_densities: Sequence[Fraction] = EXTRAPOLATION_DENSITIES,
+                     order: int = 2, methods: Sequence[str] = ("pmf", "mf", "cluster2"),
+                     mc_length: int = 3000, mc_steps: int = 2000, mc_points: int = 39,
+                     seed: int = 0, serial: bool | None = None, scheduler: str | None = None,
+                     client=None):
+    """All numbers of the fundamental diagram: one panel per braking probability.
+
+    Parameters
+    ----------
+    vmax : int
+    p : float or sequence of float
+        Braking probabilities in ``(0, 1)``; a sequence gives one panel each
+        (all computed in one fan-out, so one cluster start-up).
+    lengths : sequence of int
+        Rings whose exact flux is shown for every ``0 < N < L``.
+    extrapolation_lengths : sequence of int
+        Candidate rings for the extrapolation (those commensurate with each
+        density are used).
+    extrapolation_densities : sequence of Fraction
+        Densities to extrapolate (those with at least ``order + 1`` rings).
+    order : int
+        Order of the ``1/L`` series.
+    methods : sequence of str
+        Approximation curves (skipped where undefined for ``vmax``).
+    mc_length, mc_steps, mc_points : int
+        Monte Carlo ring (rounded to match each density exactly), time steps
+        (plus half as many warm-up), and number of densities ``k / (mc_points + 1)``
+        (the extrapolated densities are added); ``mc_steps = 0``: no Monte Carlo.
+    seed : int
+    serial, scheduler, client
+        See :func:`markov.sweep.run_jobs`.
+
+    Returns
+    -------
+    dict, or list of dict for a sequence ``p``
+        ``{"vmax", "p", "curves": {method: (c, f)}, "mc": (c, f, err),
+        "exact": {L: (c, f)}, "extrapolated": (c, f, err), ...}``, numpy arrays.
+
+    Examples
+    --------
+    >>> d = fundamental_data(1, 0.5, lengths=[6], extrapolation_lengths=[6, 8, 10],
+    ...                      extrapolation_densities=[Fraction(1, 2)], methods=(),
+    ...                      mc_steps=0, serial=True)
+    >>> [round(float(x), 6) for x in d["exact"][6][1]]
+    [0.083333, 0.145833, 0.171053, 0.145833, 0.083333]
+    """
+    single = np.ndim(p) == 0
+    ps = [float(p)] if single else [float(x) for x in p]
+    for x in ps:
+        if not 0 < x < 1:
+            raise InvalidParameterError(f"p must lie strictly between 0 and 1, got {x}")
+    exact_points = {(int(L), N) for L in lengths for N in range(1, int(L))}
+    groups = {}
+    for c in extrapolation_densities:
+        c = Fraction(c)
+        Ls = commensurate_lengths(c, extrapolation_lengths)
+        if len(Ls) >= order + 1:
+            groups[c] = Ls
+            exact_points |= {(L, int(c * L)) for L in Ls}
+    exact_points = sorted(exact_points)
+    # Monte Carlo on a uniform grid plus the extrapolated densities, so that
+    # every extrapolated point has a simulation at exactly its density.
+    mc_c = sorted({Fraction(k, mc_points + 1) for k in range(1, mc_points + 1)}
+                  | set(groups)) if mc_steps else []
+    tasks = []
+    for x in ps:
+        tasks += [("exact", (L, N, vmax, x, "parallel")) for L, N in exact_points]
+        for c in mc_c:
+            Lm, Nm = mc_ring(c, mc_length)
+            s = _derived_seed(seed, c.numerator, c.denominator, vmax, round(x * 2**40))
+            tasks.append(("mc", (Lm, Nm, vmax, x, "parallel", mc_steps, mc_steps // 2, s)))
+    results = run_jobs(_job, tasks, serial=serial, scheduler=scheduler, client=client,
+                       cost=_task_cost, desc="fundamental diagram")
+    per_panel = len(exact_points) + len(mc_c)
+    panels = [_panel(vmax, x, results[i * per_panel:(i + 1) * per_panel], exact_points,
+                     groups, mc_c, lengths, order, methods, mc_length, mc_steps)
+              for i, x in enumerate(ps)]
+    return panels[0] if single else panels
+
+
+def _panel(vmax, p, results, exact_points, groups, mc_c, lengths, order, methods,
+           mc_length, mc_steps) -> dict:
+    exact_res = results[:len(exact_points)]
+    flux = {pt: r["flux"] for pt, r in zip(exact_points, exact_res)}
+    failed = [(pt, r["error"]) for pt, r in zip(exact_points, exact_res) if "error" in r]
+    if failed:
+        warnings.warn(f"p = {p:g}: exact solve failed for (L, N) = {[pt for pt, _ in failed]}:"
+                      f" {failed[0][1]}; those points are left out", RuntimeWarning,
+                      stacklevel=3)
+    exact = {}
+    for L in lengths:
+        Ns = np.arange(1, int(L))
+        f = np.array([flux[(int(L), int(N))] for N in Ns])
+        ok = np.isfinite(f)
+        exact[int(L)] = (Ns[ok] / L, f[ok])
+    ext = []
+    for c, Ls in sorted(groups.items()):
+        Ls = [L for L in Ls if np.isfinite(flux[(L, int(c * L))])]
+        if len(Ls) >= order + 1:
+            ext.append((float(c), extrapolate(Ls, [flux[(L, int(c * L))] for L in Ls],
+                                              order=order)))
+    mc_res = results[len(exact_points):]
+    data = {
+        "vmax": int(vmax), "p": float(p), "order": order, "exact": exact,
+        "extrapolated": (np.array([c for c, _ in ext]), np.array([e.f_inf for _, e in ext]),
+                         np.array([e.error for _, e in ext])),
+        "mc": (np.array([float(c) for c in mc_c]), np.array([r["flux"] for r in mc_res]),
+               np.array([r["error"] for r in mc_res])),
+        "mc_length": mc_length, "mc_steps": mc_steps, "curves": {},
+    }
+    try:
+        from symbolic import approximate, supported
+    except ImportError:  # the curves need the symbolic package; the rest does not
+        methods = ()
+    # 120 points draw smooth curves; the 2-cluster solve costs ~20 ms per point.
+    grid = np.linspace(0.005, 0.995, 120)
+    for m in methods:
+        if supported(m, vmax):
+            f = np.asarray(approximate(m, vmax, p, grid).flux, dtype=float)
+            # Close the curve at the end points, where every approximation has f = 0.
+            data["curves"][m] = (np.r_[0.0, grid, 1.0], np.r_[0.0, f, 0.0])
+    return data
+
+
+def fundamental_figure(panels: Sequence[dict], width: float = 4.6, height: float = 4.2):
+    """Draw one panel per :func:`fundamental_data` result; returns the Figure.
+
+    Examples
+    --------
+    >>> d = fundamental_data(1, 0.5, lengths=[6], extrapolation_lengths=[6, 8, 10],
+    ...                      extrapolation_densities=[Fraction(1, 2)], methods=(),
+    ...                      mc_steps=0, serial=True)
+    >>> len(fundamental_figure([d]).axes)
+    1
+    """
+    import matplotlib
+    matplotlib.use("Agg")  # files only: no display needed, same output everywhere
+    from matplotlib.figure import Figure
+
+    # A lone panel is narrow: its legend goes in two columns, so it needs more height.
+    ncol = 2 if len(panels) == 1 else 4
+    fig = Figure(figsize=(width * len(panels), height + (0.6 if ncol == 2 else 0.0)),
+                 layout="constrained")
+    axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    for ax, d in zip(axes, panels):
+        top = 0.0
+        for m, (c, f) in d["curves"].items():
+            label, ls, color = _STYLE.get(m, (m, "-", None))
+            ax.plot(c, f, ls=ls, color=color, lw=1.4, label=label, zorder=2)
+            top = max(top, float(np.max(f)))
+        c, f, err = d["mc"]
+        if len(c):
+            ax.errorbar(c, f, yerr=err, fmt="o", ms=3.2, color="k", elinewidth=0.8,
+                        label=f"Monte Carlo (L $\\approx$ {d['mc_length']})", zorder=4)
+            top = max(top, float(np.max(f)))
+        for i, (L, (c, f)) in enumerate(sorted(d["exact"].items())):
+            ax.plot(c, f, ls="none", marker=_MARKERS[i % len(_MARKERS)], ms=4.5, mfc="none",
+                    mew=0.9, color=_EXACT_COLORS[i % len(_EXACT_COLORS)],
+                    label=f"exact, L = {L}", zorder=3)
+            top = max(top, float(np.max(f)))
+        c, f, err = d["extrapolated"]
+        if len(c):
+            ax.errorbar(c, f, yerr=err, fmt="D", ms=5, color="C3", mec="k", mew=0.6,
+                        elinewidth=1.0, capsize=2.5,
+                        label=r"exact, $L\to\infty$ (extrapolated)", zorder=5)
+            top = max(top, float(np.max(f + err)))
+        ax.set_xlim(0.0, 1.0)
+        ax.set_ylim(0.0, 1.08 * top if top > 0 else 1.0)
+        ax.set_xlabel("density $c$")
+        ax.set_ylabel("flux $f$")
+        ax.set_title(f"$v_\\mathrm{{max}} = {d['vmax']}$, $p = {d['p']:g}$")
+        ax.grid(alpha=0.25, lw=0.5)
+    # One legend for all panels, below them: it never hides a curve.
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(ncol, len(labels)),
+               fontsize=8, frameon=False)
+    return fig
+
+
+def save_figure(fig, path) -> Path:
+    """Write ``fig`` to ``path`` (``.png`` or ``.pdf``) atomically.
+
+    Raises
+    ------
+    InvalidParameterError
+        For any other extension.
+    """
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext not in FIGURE_FORMATS:
+        raise InvalidParameterError(
+            f"figure file must end in {' or '.join(FIGURE_FORMATS)}, got {path.name!r}")
+    buf = io.BytesIO()
+    # Fixed metadata: the same data give the same bytes (no creation date).
+    meta = {"Software": None} if ext == ".png" else {"CreationDate": None, "Producer": None}
+    fig.savefig(buf, format=ext[1:], dpi=200, metadata=meta, bbox_inches="tight",
+                pad_inches=0.03)  # tight: nothing of the legend is ever clipped
+    return write_bytes_atomic(path, buf.getvalue())

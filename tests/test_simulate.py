@@ -1,0 +1,178 @@
+"""Monte Carlo simulator: against an independent naive stepper, the exact chain, closed forms."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from markov import InvalidParameterError, Ring, solve
+from markov.cli import main
+from markov.simulate import blocking_error, evolve, initial_configuration, simulate
+
+
+def naive_parallel_step(cells, vmax, p_brakes):
+    """One parallel step written from the rule text; ``p_brakes`` = set of braking cells.
+
+    ``cells`` is a list: None for empty, else the velocity.  Independent of
+    markov.rules on purpose.
+    """
+    L = len(cells)
+    new = [None] * L
+    for x, v in enumerate(cells):
+        if v is None:
+            continue
+        gap = 0
+        while gap < L - 1 and cells[(x + gap + 1) % L] is None:
+            gap += 1
+        v = min(v + 1, vmax)               # R1
+        v = min(v, gap)                    # R2
+        if x in p_brakes:                  # R3
+            v = max(v - 1, 0)
+        new[(x + v) % L] = v               # R4
+    return new
+
+
+def to_cells(L, pos, vel):
+    cells = [None] * L
+    for x, v in zip(pos, vel):
+        cells[int(x)] = int(v)
+    return cells
+
+
+@pytest.mark.parametrize("p", [0.0, 1.0])
+@pytest.mark.parametrize("L,N,vmax", [(12, 5, 2), (20, 7, 3), (9, 1, 2), (10, 9, 1), (15, 6, 5)])
+def test_deterministic_trajectory_matches_naive(L, N, vmax, p):
+    # p = 0 / p = 1: nobody / everybody brakes, so the trajectory is fixed and
+    # the compiled kernel must reproduce the naive stepper cell by cell.
+    rng = np.random.default_rng(L * 100 + N)
+    pos = np.sort(rng.choice(L, N, replace=False))
+    vel = rng.integers(0, vmax + 1, N)
+    cells = to_cells(L, pos, vel)
+    ring = Ring(L, N, vmax, p)
+    for t in range(1, 15):
+        cells = naive_parallel_step(cells, vmax, set(range(L)) if p == 1.0 else set())
+        got = to_cells(L, *evolve(ring, pos, vel, steps=t, seed=3))
+        assert got == cells, f"step {t}"
+
+
+CASES = [  # (L, N, vmax, p, update)
+    (10, 5, 2, 0.5, "parallel"),
+    (10, 3, 2, 0.25, "parallel"),
+    (9, 4, 1, 0.5, "parallel"),
+    (11, 4, 3, 0.3, "parallel"),
+    (8, 3, 2, 0.5, "random-sequential"),
+]
+
+
+@pytest.mark.parametrize("L,N,vmax,p,update", CASES)
+def test_flux_agrees_with_exact_chain(L, N, vmax, p, update):
+    exact = solve(Ring(L, N, vmax, p, update))
+    r = simulate(Ring(L, N, vmax, p, update), steps=100_000, seed=11)
+    z = (r.flux - exact.flux) / r.flux_error
+    assert abs(z) < 5, (r.flux, r.flux_error, exact.flux)
+    # c_v is measured on the same run; its statistical error is of the
+    # flux's order, so 10x the flux error bar is a loose but failing bound.
+    assert np.allclose(r.c_v, exact.c_v, atol=10 * r.flux_error + 1e-3)
+    assert math.isclose(r.c_v.sum(), N / L)
+
+
+@pytest.mark.parametrize("L,N,vmax,p,update", CASES)
+def test_wrong_braking_probability_is_detected(L, N, vmax, p, update):
+    # The bound of the test above must be able to fail: a simulator that
+    # brakes with p + 0.04 is rejected by it.
+    exact = solve(Ring(L, N, vmax, p, update))
+    r = simulate(Ring(L, N, vmax, p + 0.04, update), steps=100_000, seed=11)
+    assert abs(r.flux - exact.flux) / r.flux_error > 5
+
+
+@pytest.mark.parametrize("vmax,p", [(2, 0.5), (3, 0.2), (1, 0.3)])
+def test_single_car_closed_form(vmax, p):
+    # A lone car on a ring with gap L-1 >= vmax: its velocity u in {vmax-1, vmax}
+    # after the first steps (R1 lifts to vmax, R3 lowers by one w.p. p), so the
+    # stationary mean velocity is vmax - p and the flux (vmax - p) / L.
+    # vmax = 1: u in {0, 1}, mean 1 - p as well.
+    L = 50
+    r = simulate(Ring(L, 1, vmax, p), steps=200_000, seed=5)
+    assert abs(r.flux - (vmax - p) / L) < 5 * r.flux_error
+
+
+@pytest.mark.parametrize("c,vmax", [(0.1, 2), (0.2, 3), (0.6, 2), (0.8, 1)])
+def test_deterministic_limit(c, vmax):
+    # p = 0 from a random start on a large ring: the flux settles at
+    # min(c vmax, 1 - c) (free flow below c = 1/(vmax+1), jammed above).
+    L = 1000
+    r = simulate(Ring(L, int(c * L), vmax, 0.0), steps=200, warmup=3000, seed=1)
+    assert r.flux == pytest.approx(min(c * vmax, 1 - c), abs=1e-12)
+
+
+def test_same_seed_same_result_and_different_seed_differs():
+    ring = Ring(500, 150, 2, 0.5)
+    a = simulate(ring, steps=500, seed=42)
+    b = simulate(ring, steps=500, seed=42)
+    c = simulate(ring, steps=500, seed=43)
+    assert a == b and np.array_equal(a.batch_fluxes, b.batch_fluxes)
+    assert a.flux != c.flux
+
+
+def test_replicas_combine_and_first_replica_is_the_plain_run():
+    ring = Ring(300, 90, 2, 0.5)
+    one = simulate(ring, steps=320, seed=9)  # 32 equal batches
+    three = simulate(ring, steps=320, seed=9, replicas=3)
+    assert np.array_equal(three.batch_fluxes[:one.batches], one.batch_fluxes)
+    assert three.flux == pytest.approx(np.mean(three.batch_fluxes))
+    spread = np.std(three.batch_fluxes.reshape(3, -1).mean(axis=1), ddof=1) / math.sqrt(3)
+    assert three.flux_error >= spread - 1e-15
+
+
+def test_blocking_error_of_independent_and_correlated_data():
+    rng = np.random.default_rng(0)
+    iid = rng.normal(size=256)
+    assert blocking_error(iid) == pytest.approx(1 / 16, rel=0.35)
+    # Runs of 16 equal values: the naive error is ~4x too small, blocking sees it.
+    runs = np.repeat(rng.normal(size=16), 16)
+    naive = np.std(runs, ddof=1) / 16
+    assert blocking_error(runs) > 2.5 * naive
+
+
+def test_initial_configuration_distinct_and_sorted():
+    pos, vel = initial_configuration(Ring(30, 29, 2, 0.5), seed=4)
+    assert len(set(pos.tolist())) == 29 and np.all(np.diff(pos) > 0) and not vel.any()
+
+
+@pytest.mark.parametrize("kwargs", [dict(steps=0), dict(steps=10, batches=20),
+                                    dict(steps=100, batches=1), dict(steps=100, seed=-1),
+                                    dict(steps=100, warmup=-5), dict(steps=100, replicas=0)])
+def test_bad_arguments(kwargs):
+    with pytest.raises(InvalidParameterError):
+        simulate(Ring(10, 3, 2, 0.5), **kwargs)
+
+
+def test_bad_configuration():
+    with pytest.raises(InvalidParameterError, match="two cars"):
+        evolve(Ring(10, 2, 2, 0.5), [3, 3], [0, 0], steps=1)
+    with pytest.raises(InvalidParameterError, match="velocities"):
+        evolve(Ring(10, 2, 2, 0.5), [1, 3], [0, 3], steps=1)
+
+
+def test_cli_simulate_json_reproducible():
+    runner = CliRunner()
+    args = ["simulate", "-L", "400", "-c", "0.3", "--vmax", "2", "--p", "0.5",
+            "--steps", "400", "--seed", "3", "--json"]
+    a = runner.invoke(main, args)
+    b = runner.invoke(main, args)
+    assert a.exit_code == 0, a.output
+    da, db = json.loads(a.output), json.loads(b.output)
+    da.pop("seconds"), db.pop("seconds"), da.pop("car_updates_per_s"), db.pop("car_updates_per_s")
+    assert da == db and da["cars"] == 120
+    assert 0.2 < da["flux"] < 0.35
+
+
+def test_cli_simulate_errors():
+    runner = CliRunner()
+    bad = runner.invoke(main, ["simulate", "-L", "10", "-c", "0.5", "--p", "1.5"])
+    assert bad.exit_code == 2 and "error:" in bad.output
+    both = runner.invoke(main, ["simulate", "-L", "10", "-c", "0.5", "-N", "3", "--p", "0.5"])
+    assert both.exit_code == 2 and "exactly one" in both.output
