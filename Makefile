@@ -4,6 +4,9 @@ PYTHON ?= python3.11
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+BENCH_STAMP := $(VENV)/.installed-bench
+# pytest-xdist runs one worker per core; BLAS threads on top would oversubscribe them
+SINGLE_THREADED := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
 .PHONY: demo test bench bench-large clean
 
@@ -15,16 +18,20 @@ $(STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
+$(BENCH_STAMP): pyproject.toml $(STAMP)
+	$(BIN)/python -m pip install --quiet -e '.[test,bench]'
+	touch $(BENCH_STAMP)
+
 demo: $(STAMP)
 	$(BIN)/python examples/flux_table.py
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -n 2
+	$(SINGLE_THREADED) $(BIN)/python -m pytest -q -n 2
 
-bench: $(STAMP)
+bench: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/run.py
 
-bench-large: $(STAMP)
+bench-large: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/large.py
 
 clean:
