@@ -1,0 +1,177 @@
+"""Exact rational stationary states of tiny rings, with ``p`` a number or a symbol.
+
+The matrix comes from the same enumeration as the floating-point solver:
+:func:`markov.space.recurrent_keys` for the states and
+:func:`markov.transition.successors` for the transitions.  For parallel update
+a state with ``k`` cars able to move has ``2**k`` successor entries, one per
+brake mask, with probability ``q**a p**b`` (``a + b = k``, ``b`` = cars that
+brake).  The exponents are recovered exactly from one floating-point call at
+``p = 1/3``: the entry is ``2**a / 3**k``, so ``a = round(log2(prob * 3**k))``
+(exact in double precision for ``k`` up to ~30; checked).  Duplicated
+successors (after lumping by rotation) are summed as polynomials.
+
+The stationary vector solves ``pi (P - I) = 0``, ``sum pi = 1`` over the field
+``QQ`` (numeric rational ``p``) or ``QQ(p)`` (symbolic ``p``) with sympy's
+``DomainMatrix``; the flux is then an exact rational number or rational
+function of ``p``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+from functools import cached_property
+
+import numpy as np
+import sympy as sp
+from sympy.polys.matrices import DomainMatrix
+
+from markov.errors import InvalidParameterError, StateSpaceTooLargeError
+from markov.model import PARALLEL, Ring
+from markov.space import recurrent_keys
+from markov.states import decode
+from markov.transition import successors
+
+from .meanfield import p as P_SYMBOL
+
+__all__ = ["ExactSolution", "exact_solution", "transition_polynomials", "MAX_EXACT_STATES"]
+
+MAX_EXACT_STATES = 1500         # sparse rational elimination in pure Python: ~2 s at 270
+MAX_SYMBOLIC_STATES = 150       # over QQ(p) the entries grow: ~2 s at 63 states
+
+
+def transition_polynomials(ring: Ring, keys: np.ndarray, lump: bool = True):
+    """Exact transitions as ``{(i, j): {(a, b): count}}``: ``P_ij = sum count q^a p^b``.
+
+    Parameters
+    ----------
+    ring : Ring
+        Parallel update only (the random-sequential weights carry ``1/L``).
+    keys : (n,) int64 array, sorted
+        A closed state set (e.g. :func:`markov.space.recurrent_keys`).
+    lump : bool
+        Whether ``keys`` are rotation classes.
+    """
+    if ring.update != PARALLEL:
+        raise InvalidParameterError("exact rational solutions are implemented for parallel"
+                                    f" update only, got {ring.update!r}")
+    indptr, succ, prob = successors(ring, keys, lump, p=1.0 / 3.0)
+    cols = np.searchsorted(keys, succ)
+    cols[cols == len(keys)] = 0
+    if not np.array_equal(keys[cols], succ):
+        raise RuntimeError("a successor lies outside the state set: it is not closed")
+    out: dict[tuple[int, int], dict[tuple[int, int], int]] = {}
+    for i in range(len(keys)):
+        lo, hi = indptr[i], indptr[i + 1]
+        k = int(hi - lo).bit_length() - 1          # 2**k brake masks
+        if 1 << k != hi - lo:
+            raise RuntimeError("a parallel row does not have 2**k entries")
+        for j, pr in zip(cols[lo:hi], prob[lo:hi]):
+            a = int(round(math.log2(pr) + k * math.log2(3)))
+            if abs(pr - 2.0**a / 3.0**k) > 1e-9 * pr:
+                raise RuntimeError("a transition weight is not q**a p**b")
+            cell = out.setdefault((i, int(j)), {})
+            cell[(a, k - a)] = cell.get((a, k - a), 0) + 1
+    return out
+
+
+@dataclass(frozen=True)
+class ExactSolution:
+    """Exact stationary state of a ring.
+
+    Attributes
+    ----------
+    ring : Ring
+    keys : (n,) int64 array
+        Canonical keys of the recurrent rotation classes.
+    pi : list of sympy expressions
+        Stationary probabilities of the classes (rationals or rational functions of ``p``).
+    """
+
+    ring: Ring
+    keys: np.ndarray
+    pi: list
+
+    @cached_property
+    def c_v(self) -> list:
+        """``c_v``, ``v = 0..vmax``, exact."""
+        r = self.ring
+        counts = np.zeros((len(self.keys), r.vmax + 1), dtype=np.int64)
+        for i, key in enumerate(self.keys):
+            cells = decode(int(key), r.length, r.vmax)
+            for v in cells[cells >= 0]:
+                counts[i, v] += 1
+        return [sp.cancel(sum(int(counts[i, v]) * self.pi[i] for i in range(len(self.keys)))
+                          / r.length) for v in range(r.vmax + 1)]
+
+    @cached_property
+    def flux(self) -> sp.Expr:
+        """``sum_v v c_v``, exact (a rational number or a rational function of ``p``)."""
+        return sp.factor(sp.cancel(sum(v * cv for v, cv in enumerate(self.c_v))))
+
+
+def exact_solution(length: int, cars: int, vmax: int, p=None) -> ExactSolution:
+    """Exact stationary state of a parallel-update ring.
+
+    Parameters
+    ----------
+    length, cars, vmax : int
+    p : fractions.Fraction, int, sympy Rational, or None
+        Braking probability as an exact number in ``(0, 1)``; ``None`` keeps the
+        symbol ``p`` (rings with at most ``MAX_SYMBOLIC_STATES`` classes).
+
+    Returns
+    -------
+    ExactSolution
+
+    Examples
+    --------
+    >>> exact_solution(4, 2, 1, Fraction(1, 2)).flux      # vmax = 1, L = 4, N = 2
+    3/16
+    """
+    symbolic = p is None
+    if not symbolic:
+        if isinstance(p, float):
+            raise InvalidParameterError(f"p must be exact (a Fraction or Rational), got {p!r}")
+        p_exact = sp.Rational(p.numerator, p.denominator) if isinstance(p, Fraction) \
+            else sp.nsimplify(p)
+        if not p_exact.is_Rational or not 0 < p_exact < 1:
+            raise InvalidParameterError(f"p must be a rational number in (0, 1), got {p!r}")
+    ring = Ring(length, cars, vmax, Fraction(1, 2) if symbolic else Fraction(str(p_exact)))
+    if ring.trivial:
+        keys = recurrent_keys(ring, lump=True)
+        return ExactSolution(ring, keys[:1], [sp.Integer(1)])
+    keys = recurrent_keys(ring, lump=True)
+    n = len(keys)
+    limit = MAX_SYMBOLIC_STATES if symbolic else MAX_EXACT_STATES
+    if n > limit:
+        raise StateSpaceTooLargeError(
+            f"{n} recurrent rotation classes; exact {'symbolic' if symbolic else 'rational'}"
+            f" solutions are limited to {limit}")
+    poly = transition_polynomials(ring, keys)
+    if symbolic:
+        dom = sp.QQ.frac_field(P_SYMBOL)
+        pv, qv = dom.from_sympy(P_SYMBOL), dom.from_sympy(1 - P_SYMBOL)
+    else:
+        dom = sp.QQ
+        pv, qv = dom.from_sympy(p_exact), dom.from_sympy(1 - p_exact)
+    zero, one = dom.zero, dom.one
+    # A = (P - I)^T with the last equation replaced by sum(pi) = 1
+    rows = [[zero] * n for _ in range(n)]
+    for (i, j), terms in poly.items():
+        val = zero
+        for (a, b), count in terms.items():
+            val += dom(count) * qv**a * pv**b
+        rows[j][i] += val
+    for i in range(n):
+        rows[i][i] -= one
+    rows[n - 1] = [one] * n
+    rhs = [[zero] for _ in range(n - 1)] + [[one]]
+    # sparse elimination: a row has at most 2**k entries, fill-in stays moderate
+    aug = DomainMatrix([r + b for r, b in zip(rows, rhs)], (n, n + 1), dom).to_sparse()
+    red, pivots = aug.rref()
+    if len(pivots) != n or pivots[-1] != n - 1:
+        raise RuntimeError("the stationary equations are singular: the class is not irreducible")
+    last = red.to_dense().rep.to_ddm()
+    pi = [dom.to_sympy(last[i][n]) for i in range(n)]
+    return ExactSolution(ring, keys, pi)

@@ -1,0 +1,178 @@
+"""Paradisical mean-field (pMF): MF with the Garden of Eden (GoE) states removed.
+
+Construction (the paper's, made explicit; it reproduces eqs. (pmf10)-(pmf11),
+(c0eq)-(c2eq), its normalisation and the second-order modification exactly):
+
+* a car of velocity ``v`` at cell ``x`` and the ``K`` cells ahead of it form a
+  word, ``K = max(gap horizon, longest GoE pattern - 1)``;
+* words with a GoE pattern *starting at the car at x* get weight 0, the others
+  the product-measure weight (``d`` per empty cell, ``c_u`` per car);
+* the car moves ``w`` cells with the R3 coin weight from
+  :func:`markov.rules.velocity_outcomes`; summing gives ``F_w``;
+* the normalisation ``N = c / sum_w F_w`` restores ``sum_w c_w = c``; it is the
+  inverse probability that the continuation of a car is GoE free,
+  e.g. ``1 / (c_0 + d (1 - c_2))`` for ``vmax = 2``.
+
+Anchoring the patterns at the updated car (rather than removing every pattern
+anywhere in the window) is what the paper's equations encode; see
+``docs/symbolic.md`` for the check.
+
+References
+----------
+A. Schadschneider and M. Schreckenberg, "Garden of Eden states in traffic
+models" (``shared/paper``), eqs. (pmf10)-(c2eq), (goe1)-(goe3).
+"""
+from __future__ import annotations
+
+import itertools
+from functools import lru_cache
+
+import sympy as sp
+
+from markov.errors import InvalidParameterError
+from markov.rules import velocity_outcomes
+
+from .meanfield import EMPTY, c, d, gap_horizons, p, q, velocity_symbols, word_weight
+
+__all__ = [
+    "GOE_PATTERNS", "SECOND_ORDER_PATTERNS", "goe_patterns", "parse_pattern",
+    "pmf_rhs", "pmf_normalisation", "pmf_equations",
+    "paper_pmf_equations", "paper_pmf_normalisation", "paper_c2", "paper_cubic",
+]
+
+# Elementary GoE patterns from the paper (eqs. goe1-goe3 and Sec. 3), cars
+# driving to the right, '.' an empty cell.  Data, cross-checked against
+# markov.goe by the tests when that module offers a search.
+GOE_PATTERNS = {
+    1: ("01", "11"),
+    2: ("01", "02", "12", "0.2", "11", "21", "22", "1.2", "2.2"),
+}
+SECOND_ORDER_PATTERNS = {1: (), 2: ("0..2",)}
+
+
+def parse_pattern(text: str) -> tuple[int, ...]:
+    """``"0.2"`` -> ``(0, -1, 2)`` (``-1`` an empty cell)."""
+    return tuple(EMPTY if ch in ".•_" else int(ch) for ch in text)
+
+
+def goe_patterns(vmax: int, second_order: bool = False) -> tuple[tuple[int, ...], ...]:
+    """The paper's elementary GoE patterns as cell tuples.
+
+    Examples
+    --------
+    >>> goe_patterns(1)
+    ((0, 1), (1, 1))
+    """
+    if vmax not in GOE_PATTERNS:
+        raise InvalidParameterError(
+            f"the paper lists GoE patterns for vmax = 1 and 2 only, got vmax = {vmax}")
+    texts = GOE_PATTERNS[vmax] + (SECOND_ORDER_PATTERNS[vmax] if second_order else ())
+    return tuple(parse_pattern(t) for t in texts)
+
+
+def _gap(word) -> int:
+    g = 0
+    while g < len(word) and word[g] == EMPTY:
+        g += 1
+    return g
+
+
+def _starts_with(word, pattern) -> bool:
+    return len(pattern) <= len(word) and tuple(word[:len(pattern)]) == tuple(pattern)
+
+
+@lru_cache(maxsize=None)
+def pmf_rhs(vmax: int, second_order: bool = False,
+            anchored: bool = True) -> tuple[sp.Expr, ...]:
+    """Un-normalised ``F_w`` of the pMF equations ``c_w = N F_w``.
+
+    Expressions in ``c_v``, ``d``, ``p``, ``q`` (every car resolved by velocity).
+    ``anchored=False`` is the alternative reading (remove words with a GoE
+    pattern *anywhere* in the window); it is not the paper's and is kept for
+    the comparison in ``docs/symbolic.md``.
+    """
+    cv = velocity_symbols(vmax)
+    patterns = goe_patterns(vmax, second_order)
+    horizon = max(gap_horizons(vmax))
+    window = max(horizon, max(len(pt) for pt in patterns) - 1)
+    cells = (EMPTY,) + tuple(range(vmax + 1))
+    rhs = [sp.Integer(0)] * (vmax + 1)
+    for v in range(vmax + 1):
+        for ahead in itertools.product(cells, repeat=window):
+            word = (v,) + ahead
+            starts = range(1) if anchored else range(len(word))
+            if any(_starts_with(word[i:], pt) for pt in patterns for i in starts):
+                continue  # a GoE state: removed from the measure
+            weight = cv[v] * word_weight(ahead, cv)
+            for w, coin in velocity_outcomes(v, min(_gap(ahead), window), vmax, p):
+                rhs[w] += weight * sp.sympify(coin).subs(1 - p, q)
+    return tuple(sp.collect(sp.expand(r), cv) for r in rhs)
+
+
+def pmf_normalisation(vmax: int, second_order: bool = False,
+                      anchored: bool = True) -> sp.Expr:
+    """``N = c / sum_w F_w`` (makes ``sum_w c_w = c``)."""
+    # p + q = 1 lets the sum factor (vmax = 1: (c_0 + c_1)(c_0 + d))
+    return c / sp.factor(sp.expand(sum(pmf_rhs(vmax, second_order, anchored)).subs(q, 1 - p)))
+
+
+def pmf_equations(vmax: int, second_order: bool = False) -> list[sp.Eq]:
+    """pMF equations ``c_w = N F_w`` with ``N`` written out.
+
+    Examples
+    --------
+    >>> eqs = pmf_equations(1)
+    >>> eqs[1].rhs.has(sp.Symbol("c_0", positive=True))   # N = 1/(c_0 + d) on sum c_v = c
+    True
+    """
+    cv = velocity_symbols(vmax)
+    norm = pmf_normalisation(vmax, second_order)
+    return [sp.Eq(cv[w], norm * f) for w, f in enumerate(pmf_rhs(vmax, second_order))]
+
+
+def paper_pmf_equations(vmax: int, second_order: bool = False) -> tuple[tuple[sp.Expr, ...],
+                                                                          sp.Expr]:
+    """The paper's bracketed right-hand sides ``F_w`` and its ``N`` (as printed).
+
+    ``vmax = 1``: eqs. (pmf10), (pmf11) with ``N = 1/(c_0 + d)``.  ``vmax = 2``:
+    (c0eq)-(c2eq) with the *second* expression ``N = 1/(c_0 + d(1 - c_2))``;
+    ``second_order`` applies the replacement in the text after Fig. 2 (the
+    paper gives no ``N`` for it: ``c / sum F_w`` is returned).
+    """
+    cv = velocity_symbols(vmax)
+    if vmax == 1:
+        c0, _ = cv
+        return ((c0 + p * d) * c, q * c * d), 1 / (c0 + d)
+    if vmax != 2:
+        raise InvalidParameterError(f"the paper gives pMF equations for vmax = 1, 2, got {vmax}")
+    c0, c1, c2 = cv
+    last = (c0 + c1) * c + c0 * d * (1 - c2) if second_order else c0 + c1 * c
+    rhs = (c0 * c + p * d * last, p * d**2 * (c1 + c2) + q * d * last, q * d**2 * (c1 + c2))
+    norm = c / sp.expand(sum(rhs)) if second_order else 1 / (c0 + d * (1 - c2))
+    return rhs, norm
+
+
+def paper_pmf_normalisation() -> tuple[sp.Expr, sp.Expr]:
+    """Both expressions the paper prints as equal for ``N`` (vmax = 2).
+
+    ``1/(c_0 + d c_1 + d^2 c_2)`` and ``1/(c_0 + d(1 - c_2))``; they are not
+    equal (the first lacks a factor ``c``, see ``docs/symbolic.md``).
+    """
+    c0, c1, c2 = velocity_symbols(2)
+    return 1 / (c0 + d * c1 + d**2 * c2), 1 / (c0 + d * (1 - c2))
+
+
+def paper_c2() -> sp.Expr:
+    """Eq. (c2): ``c_2`` through ``c_0`` and ``c`` (vmax = 2, first-order pMF)."""
+    c0 = velocity_symbols(2)[0]
+    return (c0 + d - sp.sqrt((c0 + d)**2 - 4 * q * d**3 * (c - c0))) / (2 * d)
+
+
+def paper_cubic() -> tuple[sp.Expr, sp.Expr, sp.Expr, sp.Expr]:
+    """The paper's coefficients ``(alpha, beta, gamma, delta)`` of eq. (poly), as printed."""
+    alpha = -q * d**3 - p * d**2 + q * d - q
+    beta = ((3 * p**2 - p - 1) * d**4 + (-p**2 - 3 * p + 1) * d**3 + (-p**2 + p + 2) * d**2
+            - 3 * q * d + q)
+    gamma = p * c * d * ((-p**2 - 3 * p + 2) * d**3 + (p**2 + p + 1) * d**2 + (2 * p - 3) * d + q)
+    delta = -(p * c * d)**3
+    return alpha, beta, gamma, delta

@@ -1,0 +1,321 @@
+"""Solving the approximations: closed forms where they exist, robust numerics otherwise.
+
+Everything is vectorised over the density ``c`` and the braking probability
+``p`` (numpy broadcasting of the two); expressions are turned into numpy
+functions once with :func:`sympy.lambdify` and cached.
+
+* MF (any ``vmax``): the closed form of :func:`symbolic.meanfield.mf_solution`.
+* pMF, ``vmax = 1``: ``c_1 = (1 - sqrt(1 - 4 q c d)) / 2`` (paper, after eq. pmf11).
+* pMF, ``vmax = 2``: the paper's cubic (poly) in ``c_0``; it has two real
+  roots in ``(0, c)``, and the physical one is picked by the residual of
+  (c0eq) with ``c_2`` from eq. (c2) (see :func:`solve_pmf_cubic`); the tests
+  check it against the fixed point of the pMF map on a grid of ``0 < c, p < 1``.
+* pMF with the second-order pattern: fixed-point iteration of ``c <- N F(c)``
+  (:func:`solve_fixed_point`), vectorised, from the MF solution.
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+import sympy as sp
+
+from markov.errors import ConvergenceError, InvalidParameterError
+
+from .meanfield import c, d, mf_solution, p, q, velocity_symbols
+from .paradisical import paper_cubic, pmf_normalisation, pmf_rhs
+
+__all__ = [
+    "ensure_open_unit", "solve_mf", "solve_pmf_vmax1", "solve_pmf_cubic",
+    "cubic_roots", "solve_fixed_point", "newton_polish", "solve_pmf", "flux_of",
+]
+
+
+def ensure_open_unit(name: str, value) -> np.ndarray:
+    """``value`` as a float array, every entry strictly inside ``(0, 1)``."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InvalidParameterError(f"{name} must be a number in (0, 1), got {value!r}") from None
+    if arr.size == 0 or not np.all(np.isfinite(arr)) or np.any(arr <= 0) or np.any(arr >= 1):
+        raise InvalidParameterError(
+            f"{name} must lie strictly between 0 and 1 (the approximations are stationary"
+            f" states of 0 < {name} < 1 only), got {value!r}")
+    return arr
+
+
+def flux_of(c_v: np.ndarray) -> np.ndarray:
+    """``f = sum_v v c_v`` along axis 0."""
+    v = np.arange(c_v.shape[0]).reshape((-1,) + (1,) * (c_v.ndim - 1))
+    return (v * c_v).sum(axis=0)
+
+
+def _subs_pq(expr):
+    return sp.sympify(expr).subs({q: 1 - p, d: 1 - c})
+
+
+@lru_cache(maxsize=None)
+def _mf_functions(vmax: int):
+    sol = mf_solution(vmax)
+    return [sp.lambdify((c, p), _subs_pq(sol[v]), "numpy") for v in velocity_symbols(vmax)]
+
+
+def solve_mf(vmax: int, p_val, c_val) -> np.ndarray:
+    """MF ``c_v`` (axis 0: ``v = 0..vmax``), broadcast over ``p`` and ``c``.
+
+    Examples
+    --------
+    >>> solve_mf(1, 0.5, 0.5)      # c_1 = q c d
+    array([0.375, 0.125])
+    """
+    p_val, c_val = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
+    return np.array([np.broadcast_to(f(c_val, p_val), c_val.shape).astype(float)
+                     for f in _mf_functions(vmax)])
+
+
+def solve_pmf_vmax1(p_val, c_val) -> np.ndarray:
+    """pMF for ``vmax = 1``: ``c_1 = (1 - sqrt(1 - 4 q c (1 - c))) / 2``, ``c_0 = c - c_1``."""
+    p_val, c_val = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
+    c1 = 0.5 * (1 - np.sqrt(1 - 4 * (1 - p_val) * c_val * (1 - c_val)))
+    return np.array([c_val - c1, c1])
+
+
+@lru_cache(maxsize=None)
+def _cubic_functions():
+    """Numpy functions: cubic coefficients, and the residual ``g(c_0)`` of (c0eq) with its slope.
+
+    ``g(c_0) = c_0 / N - F_0`` with ``c_2(c_0)`` from eq. (c2) (rationalised) and
+    ``c_1 = c - c_0 - c_2``: the roots of ``g`` in ``[0, c]`` are the pMF solutions.
+    """
+    c0, c1, c2 = velocity_symbols(2)
+    coeffs = [sp.lambdify((c, p), _subs_pq(k), "numpy") for k in paper_cubic()]
+    from .paradisical import paper_pmf_equations
+    rhs, _ = paper_pmf_equations(2)
+    s = c0 + d
+    c2_of_c0 = 2 * q * d**2 * (c - c0) / (s + sp.sqrt(s**2 - 4 * q * d**3 * (c - c0)))
+    g = (c0 * (c0 + d * (1 - c2)) - rhs[0]).subs(c1, c - c0 - c2).subs(c2, c2_of_c0)
+    g = _subs_pq(g)
+    return (coeffs, sp.lambdify((c0, c, p), _subs_pq(c2_of_c0), "numpy"),
+            sp.lambdify((c0, c, p), g, "numpy"), sp.lambdify((c0, c, p), sp.diff(g, c0), "numpy"))
+
+
+def cubic_roots(p_val, c_val) -> np.ndarray:
+    """The three complex roots of the paper's cubic (poly) in ``c_0``, shape ``(3,) + shape``."""
+    p_val, c_val = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
+    coeffs = _cubic_functions()[0]
+    a, b, g, dl = (np.broadcast_to(f(c_val, p_val), c_val.shape).astype(float) for f in coeffs)
+    companion = np.zeros(c_val.shape + (3, 3))
+    companion[..., 0, :] = np.stack([-b / a, -g / a, -dl / a], axis=-1)
+    companion[..., 1, 0] = 1.0
+    companion[..., 2, 1] = 1.0
+    return np.moveaxis(np.linalg.eigvals(companion), -1, 0)
+
+
+def solve_pmf_cubic(p_val, c_val, tol: float = 1e-7) -> np.ndarray:
+    """First-order pMF for ``vmax = 2`` from the paper's cubic, ``c_v`` on axis 0.
+
+    The cubic has two real roots in ``(0, c)`` everywhere (the paper's "the
+    one in [0, 1]" does not decide): one is spurious, created where eliminating
+    ``c_2`` through (c0eq) divides by ``c p - c_0``.  Each real root in
+    ``[0, c]`` gets ``c_2`` from eq. (c2) (minus sign, rationalised) and
+    ``c_1 = c - c_0 - c_2``; among those with ``c_1 >= 0`` the root with the
+    smallest residual of (c0eq) is taken and polished by Newton steps on that
+    residual.  Raises :class:`~markov.errors.ConvergenceError` if a point has no
+    admissible root or the polished root fails (c0eq).
+    """
+    p_val, c_val = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
+    _, c2_fn, g_fn, dg_fn = _cubic_functions()
+    roots = cubic_roots(p_val, c_val)
+    real = np.clip(roots.real, 0.0, c_val[None])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c2 = c2_fn(real, c_val[None], p_val[None])
+        resid = np.abs(g_fn(real, c_val[None], p_val[None]))
+    c1 = c_val[None] - real - c2
+    ok = ((np.abs(roots.imag) <= tol * np.maximum(c_val[None], 1e-300))
+          & (roots.real > -tol * c_val[None]) & (roots.real < c_val[None] * (1 + tol))
+          & (c1 >= -tol * c_val[None]) & np.isfinite(resid))
+    if np.any(~ok.any(axis=0)):
+        raise ConvergenceError("no admissible root of the pMF cubic at some (c, p)", 0, np.inf)
+    pick = np.take_along_axis(real, np.argmin(np.where(ok, resid, np.inf), axis=0)[None], 0)[0]
+    for _ in range(30):  # Newton on (c0eq): the eigenvalues lose digits near double roots
+        slope = dg_fn(pick, c_val, p_val)
+        step = np.where(slope != 0, g_fn(pick, c_val, p_val) / np.where(slope != 0, slope, 1), 0)
+        pick = np.clip(pick - step, 0.0, c_val)
+        if np.all(np.abs(step) <= 1e-16 * np.maximum(c_val, 1e-300)):
+            break
+    final = np.abs(g_fn(pick, c_val, p_val))
+    if np.any(final > 1e-12):
+        raise ConvergenceError("the pMF root does not satisfy (c0eq)", 30, float(final.max()))
+    c2p = c2_fn(pick, c_val, p_val)
+    return np.array([pick, c_val - pick - c2p, c2p])
+
+
+@lru_cache(maxsize=None)
+def _pmf_map(vmax: int, second_order: bool, anchored: bool = True):
+    cv = velocity_symbols(vmax)
+    norm = pmf_normalisation(vmax, second_order, anchored)
+    exprs = [_subs_pq(norm * f) for f in pmf_rhs(vmax, second_order, anchored)]
+    return sp.lambdify((cv, c, p), exprs, "numpy")
+
+
+def solve_fixed_point(update, start: np.ndarray, tol: float = 1e-14,
+                      max_iter: int = 20_000, memory: int = 6,
+                      project=None, raise_on_fail: bool = True) -> tuple[np.ndarray, int]:
+    """Solve ``x = update(x)`` for a batch of independent problems (rows of ``x``).
+
+    Anderson acceleration (type II, ``memory`` past steps, one least-squares
+    problem per row) on top of the plain iteration, which for the cluster
+    update is slow when ``p`` is small (relaxation time ~ 1/p steps).  A
+    step that makes a row's residual grow tenfold, or leaves the domain
+    (negative or non-finite entries), restarts that row's history with a
+    plain step.
+
+    Parameters
+    ----------
+    update : callable
+        ``(k, m) -> (k, m)`` array map.
+    start : (k, m) ndarray
+    tol : float
+        Stop when ``max |update(x) - x| <= tol``, or when the best residual,
+        below ``100 tol``, has not halved in 100 steps (the rounding floor).
+    project : callable, optional
+        Maps an extrapolated iterate back onto the invariants of ``update``
+        (mass, density): an Anderson step is an affine combination of
+        iterates and need not keep invariants that ``update`` only keeps on
+        consistent inputs.
+
+    Returns
+    -------
+    x : (k, m) ndarray
+    iterations : int
+
+    Raises
+    ------
+    ConvergenceError
+        With the last iterate, after ``max_iter`` steps (unless
+        ``raise_on_fail`` is false: then the last iterate is returned).
+    """
+    project = project or (lambda y: y)
+    x = project(np.array(start, dtype=float))
+    k, m = x.shape
+    dx = np.zeros((k, memory, m))
+    df = np.zeros((k, memory, m))
+    filled = np.zeros(k, dtype=int)
+    gx = np.asarray(update(x), dtype=float)
+    f = gx - x
+    best = np.abs(f).max(axis=1)
+    err = float(best.max()) if best.size else 0.0
+    checkpoint = np.inf  # best residual 100 steps ago
+    for it in range(1, max_iter + 1):
+        if err <= tol:
+            return gx, it
+        if it % 100 == 0:
+            if float(best.max()) > 0.5 * checkpoint and float(best.max()) <= 100 * tol:
+                return gx, it        # stalled at the rounding floor
+            checkpoint = float(best.max())
+        new = gx.copy()
+        use = filled > 0
+        if np.any(use):
+            dfu, dxu, fu = df[use], dx[use], f[use]
+            gram = np.einsum("kim,kjm->kij", dfu, dfu)
+            scale = np.maximum(np.einsum("kii->k", gram), 1e-300)
+            gram += (1e-12 * scale)[:, None, None] * np.eye(memory)
+            gamma = np.linalg.solve(gram, np.einsum("kim,km->ki", dfu, fu)[..., None])[..., 0]
+            new[use] = (x[use] + fu) - np.einsum("ki,kim->km", gamma, dxu + dfu)
+        new = project(new)
+        bad = ~np.all(np.isfinite(new), axis=1) | np.any(new < -1e-12, axis=1)
+        new[bad] = gx[bad]
+        gnew = np.asarray(update(new), dtype=float)
+        fnew = gnew - new
+        res = np.abs(fnew).max(axis=1)
+        diverged = res > 10 * best
+        if np.any(diverged):  # restart those rows from a plain step
+            new[diverged] = gx[diverged]
+            gnew[diverged] = np.asarray(update(new), dtype=float)[diverged]
+            fnew[diverged] = gnew[diverged] - new[diverged]
+            res = np.abs(fnew).max(axis=1)
+        slot = (it - 1) % memory
+        dx[:, slot] = new - x
+        df[:, slot] = fnew - f
+        filled = np.minimum(filled + 1, memory)
+        dx[diverged | bad] = 0.0
+        df[diverged | bad] = 0.0
+        filled[diverged | bad] = 0
+        x, gx, f = new, gnew, fnew
+        best = np.minimum(best, res)
+        err = float(res.max())
+    if not raise_on_fail:
+        return gx, max_iter
+    raise ConvergenceError(f"fixed-point iteration did not reach {tol:g} in {max_iter} steps",
+                           max_iter, err, gx)
+
+
+def newton_polish(update, x: np.ndarray, project=None, tol: float = 1e-14,
+                  steps: int = 30, invariants: np.ndarray | None = None) -> np.ndarray:
+    """Newton steps on ``update(x) - x`` for one problem, ``x`` of shape ``(m,)``.
+
+    For slow modes (relaxation time ~ 1/q when ``p -> 1``) where even the
+    accelerated iteration crawls.  The Jacobian is taken by forward
+    differences in one batched call of ``update`` on ``m`` rows.  Fixed points
+    come in families along the conserved quantities (mass, density), which
+    makes the Jacobian singular; the rows of ``invariants`` (``(r, m)``, linear
+    functionals the step must not change) are appended to the linear system,
+    which is solved by least squares; ``project`` then removes rounding drift.
+    Raises :class:`~markov.errors.ConvergenceError` if ``tol`` is not reached.
+    """
+    cons = np.zeros((0, np.size(x))) if invariants is None else np.asarray(invariants, float)
+    project = project or (lambda y: y)
+    x = np.array(x, dtype=float)
+    m = x.size
+    err = np.inf
+    for _ in range(steps):
+        gx = np.asarray(update(x[None]), dtype=float)[0]
+        f = gx - x
+        previous, err = err, float(np.abs(f).max())
+        if err <= tol or (err <= 100 * tol and err > 0.5 * previous):
+            return gx        # converged, or stalled at the rounding floor
+        # central differences, step relative to each entry (they span many decades)
+        h = 1e-5 * np.maximum(np.abs(x), 1e-9 * max(np.abs(x).max(), 1e-300))
+        both = np.asarray(update(np.vstack([x[None] + np.diag(h), x[None] - np.diag(h)])),
+                          dtype=float)
+        jac = ((both[:m] - both[m:]) / (2 * h[:, None])).T - np.eye(m)
+        system = np.vstack([jac, cons])
+        rhs = np.concatenate([-f, np.zeros(len(cons))])
+        step = np.linalg.lstsq(system, rhs, rcond=None)[0]
+        x = project(np.clip(x + step, 0.0, None)[None])[0]
+    raise ConvergenceError(f"Newton polish did not reach {tol:g} in {steps} steps", steps, err, x)
+
+
+def solve_pmf(vmax: int, p_val, c_val, second_order: bool = False,
+              method: str = "auto", anchored: bool = True) -> np.ndarray:
+    """pMF ``c_v`` on axis 0, broadcast over ``p`` and ``c``.
+
+    ``method="auto"`` uses the closed form (vmax = 1) or the paper's cubic
+    (vmax = 2, first order) and the fixed-point iteration otherwise;
+    ``method="iterate"`` always iterates (the independent route of the tests);
+    ``anchored=False`` solves the non-paper variant (patterns removed anywhere
+    in the window; always iterated).
+    """
+    p_val, c_val = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
+    if method not in ("auto", "iterate"):
+        raise InvalidParameterError(f"method must be 'auto' or 'iterate', got {method!r}")
+    if not anchored:
+        method = "iterate"
+    if method == "auto" and vmax == 1:
+        return solve_pmf_vmax1(p_val, c_val)
+    if method == "auto" and vmax == 2 and not second_order:
+        return solve_pmf_cubic(p_val, c_val)
+    fmap = _pmf_map(vmax, second_order, anchored)
+
+    shape = c_val.shape
+    c_flat, p_flat = c_val.ravel(), p_val.ravel()
+
+    def update(x):  # rows = (c, p) points, columns = v
+        return np.array([np.broadcast_to(y, c_flat.shape)
+                         for y in fmap(list(x.T), c_flat, p_flat)]).T
+
+    def project(x):  # sum_v c_v = c
+        return x * (c_flat / x.sum(axis=1))[:, None]
+
+    x, _ = solve_fixed_point(update, solve_mf(vmax, p_flat, c_flat).T, project=project)
+    return x.T.reshape((vmax + 1,) + shape)
