@@ -14,14 +14,85 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import observables
-from .errors import NoUniqueStationaryStateError
+from .errors import InvalidParameterError, NoUniqueStationaryStateError, StateSpaceTooLargeError
 from .model import PARALLEL, Ring
-from .space import recurrent_keys
+from .space import _memory_limit, bytes_per_state, count_all, recurrent_keys
 from .stationary import StationaryResult, stationary
 from .states import compact_jam_key
-from .transition import transition_matrix
+from .transition import successor_counts, transition_matrix
 
-__all__ = ["RingChain", "Solution", "solve"]
+__all__ = ["RingChain", "Solution", "solve", "OPERATORS"]
+
+#: How ``x -> x P`` is applied (see :attr:`RingChain.operator_kind` for ``auto``):
+#: ``matrix`` the CSR matrix, ``compact`` the stored pattern at 4 bytes per
+#: transition (:class:`markov.operator.CompactOperator`, parallel update),
+#: ``matrix-free`` rows regenerated on the fly (:class:`markov.operator.TransitionOperator`).
+OPERATORS = ("auto", "matrix", "compact", "matrix-free")
+
+#: ``auto`` keeps the assembled matrix (and every solver of markov.stationary)
+#: up to this many states when it fits.
+AUTO_MATRIX_STATES = 200_000
+
+# Peak bytes per nonzero of transition_matrix: value + int32 column in the CSR,
+# plus the unsummed int64 successor/column/value lists while assembling.
+_MATRIX_BYTES_PER_NONZERO = 40
+# Per state on the matrix path besides the nonzeros: key and about 62 vectors
+# (GMRES with restart 60 in markov.stationary).
+_MATRIX_BYTES_PER_STATE = 8 + 62 * 8
+# Methods of the matrix-free path, with the names of markov.stationary mapped on them.
+_MATRIX_FREE_METHODS = {"auto": "gmres", "iterative": "gmres", "gmres": "gmres",
+                        "bicgstab": "bicgstab", "power": "power"}
+
+
+def _gib(nbytes: float) -> str:
+    return f"{nbytes / 2**30:.3g} GiB"
+
+
+def _ensure_operator(operator: str) -> str:
+    if operator not in OPERATORS:
+        raise InvalidParameterError(
+            f"operator must be one of {', '.join(OPERATORS)}, got {operator!r}")
+    return operator
+
+
+def matrix_free_bytes_per_state(method: str = "gmres") -> float:
+    """Peak bytes per state of the matrix-free path (keys, operator, solver vectors).
+
+    Enumeration holds the sorted keys, the frontier and its successors (about
+    24 bytes per state); the solve holds the key index and per-thread
+    accumulators (:meth:`markov.operator.TransitionOperator.bytes_per_state`)
+    and the solver's work vectors (:func:`markov.large.solver_vectors`).
+    """
+    from .large import solver_vectors
+    from .operator import TransitionOperator
+
+    return TransitionOperator.bytes_per_state() + 8 * solver_vectors(method) + 16
+
+
+# the GoE automata behind the count grow fast with vmax (3.5 s at vmax = 6)
+_PREDICT_VMAX = 5
+
+
+def predicted_states(ring: Ring, lump: bool) -> int | None:
+    """Lower bound of the recurrent-class size before enumerating, if one is known.
+
+    Uses ``markov.goe.recurrent_class_count`` (configurations free of Garden of
+    Eden patterns, ``markov.goe.pattern_free_count``, minus the frozen ones: an
+    exact transfer-matrix count) for parallel update; lumping divides by at
+    most ``L``, so the lumped figure is a lower bound.  ``None`` when no
+    prediction is available.
+    """
+    if ring.update != PARALLEL or ring.trivial or ring.vmax > _PREDICT_VMAX:
+        return None
+    try:
+        from .goe import recurrent_class_count
+    except ImportError:
+        return None
+    try:
+        count = int(recurrent_class_count(ring.length, ring.cars, ring.vmax))
+    except Exception:  # a prediction is optional: the growing-BFS guard still applies
+        return None
+    return -(-count // ring.length) if lump else count
 
 
 def _ensure_unique(ring: Ring) -> None:
@@ -62,11 +133,36 @@ class RingChain:
     (2, 0.166666666667)
     """
 
-    def __init__(self, ring: Ring, lump: bool = True, max_memory: float | None = None):
+    def __init__(self, ring: Ring, lump: bool = True, max_memory: float | None = None,
+                 operator: str = "auto"):
         self.ring = ring
         self.lump = lump
         self.max_memory = max_memory
+        self.operator = _ensure_operator(operator)
         self.build_seconds = 0.0
+
+    def _guard_bytes_per_state(self) -> float:
+        # the BFS refuses as soon as the states found cost more than the limit
+        if self.operator == "matrix":
+            return bytes_per_state(self.ring, self.lump)
+        return matrix_free_bytes_per_state()
+
+    def _precheck(self) -> None:
+        """Refuse before enumerating when a known lower bound already does not fit."""
+        per_state = self._guard_bytes_per_state()
+        limit = _memory_limit(self.max_memory)
+        if count_all(self.ring) * per_state <= limit:
+            return  # even every configuration would fit: no need to predict
+        n = predicted_states(self.ring, self.lump)
+        if n is None:
+            return
+        if n * per_state > limit:
+            r = self.ring
+            raise StateSpaceTooLargeError(
+                f"the recurrent class has at least {n:,} states (L={r.length}, N={r.cars},"
+                f" vmax={r.vmax}, lump={self.lump}); at about {per_state:.0f} bytes per state"
+                f" that is {_gib(n * per_state)}, which exceeds the memory limit of"
+                f" {_gib(limit)}")
 
     @cached_property
     def keys(self) -> np.ndarray:
@@ -76,13 +172,94 @@ class RingChain:
             keys = np.array([compact_jam_key(self.ring.length, self.ring.cars, self.ring.vmax)],
                             dtype=np.int64)
         else:
-            keys = recurrent_keys(self.ring, self.lump, self.max_memory)
+            self._precheck()
+            keys = recurrent_keys(self.ring, self.lump, self.max_memory,
+                                  per_state=self._guard_bytes_per_state())
         self.build_seconds += time.perf_counter() - start
         return keys
 
     @property
     def n_states(self) -> int:
         return len(self.keys)
+
+    @cached_property
+    def transitions(self) -> int:
+        """Number of (state, successor) pairs generated per product: ``nnz`` before summing."""
+        if self.ring.trivial:
+            return 1
+        return int(successor_counts(self.ring, self.keys).sum())
+
+    def matrix_bytes(self) -> float:
+        """Estimated peak bytes of assembling and solving with the CSR matrix."""
+        return (self.transitions * _MATRIX_BYTES_PER_NONZERO
+                + self.n_states * _MATRIX_BYTES_PER_STATE)
+
+    def compact_bytes(self) -> float:
+        """Estimated peak bytes of the compact operator and the GMRES solve."""
+        from .operator import CompactOperator
+
+        return (self.transitions * CompactOperator.bytes_per_transition()
+                + self.n_states * (matrix_free_bytes_per_state() + 9))
+
+    def _refuse(self, kind: str, need: float, limit: float):
+        raise StateSpaceTooLargeError(
+            f"the {kind} needs about {_gib(need)} for {self.transitions:,}"
+            f" transitions on {self.n_states:,} states, which exceeds the memory limit of"
+            f" {_gib(limit)}; use operator='matrix-free'")
+
+    @cached_property
+    def operator_kind(self) -> str:
+        """``"matrix"``, ``"compact"`` or ``"matrix-free"``: what :meth:`solution` uses.
+
+        ``auto`` resolves, in this order, to: the CSR matrix up to
+        :data:`AUTO_MATRIX_STATES` states if it fits in the memory limit (all
+        solvers available); the compact operator (parallel update) if it fits;
+        the CSR matrix (random-sequential update) if it fits; matrix-free.
+
+        Raises
+        ------
+        StateSpaceTooLargeError
+            For ``operator="matrix"`` or ``"compact"`` when it would not fit.
+        """
+        limit = _memory_limit(self.max_memory)
+        if self.ring.trivial:
+            return "matrix"
+        if self.operator == "matrix-free":
+            return "matrix-free"
+        parallel = self.ring.update == PARALLEL
+        matrix_fits = self.matrix_bytes() <= limit
+        compact_fits = parallel and self.compact_bytes() <= limit
+        if self.operator == "matrix":
+            if not matrix_fits:
+                self._refuse("transition matrix", self.matrix_bytes(), limit)
+            return "matrix"
+        if self.operator == "compact":
+            if not parallel:
+                raise InvalidParameterError(
+                    "operator='compact' is for parallel update; random-sequential rows"
+                    " have several weights: use 'matrix' or 'matrix-free'")
+            if not compact_fits:
+                self._refuse("compact operator", self.compact_bytes(), limit)
+            return "compact"
+        if matrix_fits and self.n_states <= AUTO_MATRIX_STATES:
+            return "matrix"
+        if compact_fits:
+            return "compact"
+        return "matrix" if matrix_fits else "matrix-free"
+
+    @cached_property
+    def transition_operator(self):
+        """``x -> x P`` without a CSR matrix: the compact operator when
+        :attr:`operator_kind` is ``"compact"``, else the matrix-free one."""
+        from .operator import CompactOperator, TransitionOperator
+
+        start = time.perf_counter()
+        if self.operator_kind == "compact":
+            op = CompactOperator(self.ring, self.keys, self.lump)
+        else:
+            op = TransitionOperator(self.ring, self.keys, self.lump)
+        self.build_seconds += time.perf_counter() - start
+        return op
 
     @cached_property
     def matrix(self) -> sp.csr_array:
@@ -93,12 +270,35 @@ class RingChain:
         self.build_seconds += time.perf_counter() - start
         return P
 
-    def solution(self, method: str = "auto", tol: float = 1e-13) -> "Solution":
-        """Solve for the stationary state (see :func:`markov.stationary.stationary`)."""
+    def solution(self, method: str = "auto", tol: float = 1e-13,
+                 x0: np.ndarray | None = None) -> "Solution":
+        """Solve for the stationary state.
+
+        On the matrix path see :func:`markov.stationary.stationary`; on the
+        matrix-free path :func:`markov.large.stationary_operator` (``auto`` and
+        ``iterative`` mean GMRES; ``gmres``, ``bicgstab``, ``power`` are
+        accepted; ``direct`` and ``eigs`` need the matrix).  ``x0`` warm-starts
+        the matrix-free solvers, e.g. with ``pi`` at a nearby ``p`` on the same
+        keys (the keys do not depend on ``p``).
+        """
         _ensure_unique(self.ring)
-        result = stationary(self.matrix, method=method, tol=tol)
-        return Solution(self.ring, self.keys, result, self.matrix.nnz, self.build_seconds,
-                        self.lump)
+        if self.ring.trivial or self.operator_kind == "matrix":
+            if method in ("gmres", "bicgstab"):
+                method = "iterative"
+            result = stationary(self.matrix, method=method, tol=tol)
+            return Solution(self.ring, self.keys, result, self.matrix.nnz, self.build_seconds,
+                            self.lump, "matrix")
+        from .large import stationary_operator
+
+        if method not in _MATRIX_FREE_METHODS:
+            raise InvalidParameterError(
+                f"the matrix-free path solves with {', '.join(_MATRIX_FREE_METHODS)};"
+                f" got {method!r} (direct and eigs need the assembled matrix)")
+        op = self.transition_operator
+        result = stationary_operator(op, _MATRIX_FREE_METHODS[method], tol=tol, x0=x0)
+        stored = op.transitions if self.operator_kind == "compact" else None
+        return Solution(self.ring, self.keys, result, stored, self.build_seconds, self.lump,
+                        self.operator_kind)
 
 
 @dataclass(frozen=True)
@@ -112,19 +312,23 @@ class Solution:
         State keys (canonical rotations when ``lumped``).
     result : StationaryResult
         The vector ``pi`` over ``keys`` and the solver diagnostics.
-    nonzeros : int
-        Nonzeros of the transition matrix.
+    nonzeros : int or None
+        Nonzeros of the transition matrix; for the compact operator its stored
+        transitions (duplicates not summed); ``None`` when matrix-free.
     build_seconds : float
         Time spent enumerating states and assembling the matrix.
     lumped : bool
+    operator : {"matrix", "compact", "matrix-free"}
+        How ``x -> x P`` was applied.
     """
 
     ring: Ring
     keys: np.ndarray = field(repr=False)
     result: StationaryResult = field(repr=False)
-    nonzeros: int
+    nonzeros: int | None
     build_seconds: float
     lumped: bool
+    operator: str = "matrix"
 
     @property
     def pi(self) -> np.ndarray:
@@ -174,7 +378,8 @@ class Solution:
         return {
             "length": r.length, "cars": r.cars, "vmax": r.vmax, "p": float(r.p),
             "update": r.update, "density": r.density, "lumped": self.lumped,
-            "states": self.n_states, "nonzeros": self.nonzeros, "method": self.result.method,
+            "states": self.n_states, "nonzeros": self.nonzeros, "operator": self.operator,
+            "method": self.result.method,
             "residual": self.residual, "iterations": self.result.iterations,
             "flux": self.flux, "mean_velocity": self.mean_velocity,
             "c_v": self.c_v.tolist(),
@@ -185,7 +390,7 @@ class Solution:
 
 
 def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = 1e-13,
-          max_memory: float | None = None) -> Solution:
+          max_memory: float | None = None, operator: str = "auto") -> Solution:
     """Exact stationary state of a NaSch ring.
 
     Parameters
@@ -200,6 +405,9 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = 1e-1
         Residual target of iterative solvers.
     max_memory : float, optional
         Byte limit for the state space; refuse beyond it.
+    operator : {"auto", "matrix", "compact", "matrix-free"}
+        Assemble ``P``, store its pattern compactly, or apply it on the fly
+        (``auto``: see :attr:`RingChain.operator_kind`).
 
     Returns
     -------
@@ -221,4 +429,5 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = 1e-1
     0.25
     """
     _ensure_unique(ring)
-    return RingChain(ring, lump=lump, max_memory=max_memory).solution(method=method, tol=tol)
+    return RingChain(ring, lump=lump, max_memory=max_memory,
+                     operator=operator).solution(method=method, tol=tol)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from .cli import emit_json, handle_errors, quiet_option
+from .cli_common import emit_json, handle_errors, quiet_option
 from .errors import InvalidParameterError
 
 __all__ = ["simulate", "table", "plot"]

@@ -1,8 +1,10 @@
 """State spaces: the recurrent class (from the compact jam) and all configurations.
 
-For ``0 < p < 1`` every configuration reaches the compact jam (stopped cars
-bunched together) with positive probability, so the chain has a single closed
-class: everything reachable from the jam.  We find it by breadth-first search
+For ``0 < p < 1`` and ``N >= 2`` every configuration reaches the compact jam
+(stopped cars bunched together) with positive probability, so the chain has a
+single closed class: everything reachable from the jam.  (A single car is the
+exception: it settles at velocities ``w - 1`` and ``w``, ``w = min(vmax, L - 1)``,
+and the search starts there.)  We find it by breadth-first search
 over the *support* of the successor relation, which does not depend on ``p``.
 Sets of states are sorted ``int64`` key arrays (:mod:`markov.states`), 8 bytes
 per state, merged level by level; no Python containers of states.
@@ -19,8 +21,8 @@ from numba import njit
 from .errors import StateSpaceTooLargeError
 from .model import PARALLEL, Ring
 from .progress import progress_bar
-from .states import canonical, check_encodable, compact_jam_key, powers
-from .transition import successors
+from .states import canonical, check_encodable, compact_jam_key, encode, powers
+from .operator import successor_keys
 
 __all__ = [
     "recurrent_keys",
@@ -74,7 +76,8 @@ def _not_in(sorted_set: np.ndarray, candidates: np.ndarray) -> np.ndarray:
     return candidates[sorted_set[idx] != candidates]
 
 
-def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = None) -> np.ndarray:
+def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = None,
+                   per_state: float | None = None) -> np.ndarray:
     """Sorted keys of the recurrent class of the chain (``0 < p < 1`` support).
 
     Parameters
@@ -85,6 +88,9 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
         Return canonical rotation keys (one per rotation orbit).
     max_memory : float, optional
         Bytes allowed for the whole solve; default 75 % of physical memory.
+    per_state : float, optional
+        Bytes per state the caller will need (default :func:`bytes_per_state`,
+        i.e. an assembled matrix); the matrix-free path passes its smaller figure.
 
     Returns
     -------
@@ -104,9 +110,15 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
     """
     check_encodable(ring.length, ring.vmax)
     limit = _memory_limit(max_memory)
-    per_state = bytes_per_state(ring, lump)
+    per_state = bytes_per_state(ring, lump) if per_state is None else per_state
     pw = powers(ring.length, ring.vmax)
     start = compact_jam_key(ring.length, ring.cars, ring.vmax)
+    if ring.cars == 1:
+        # A lone car sees the gap L - 1 forever, so R1+R2 push its velocity up to
+        # w = min(vmax, L - 1) and R3 takes it at most one below: only w - 1 and
+        # w are recurrent; the stopped car (the "jam") is transient once w >= 2.
+        top = min(ring.vmax, ring.length - 1)
+        start = encode([top] + [-1] * (ring.length - 1), ring.vmax)
     if lump:
         start = canonical(np.int64(start), ring.length, pw)
     visited = np.array([start], dtype=np.int64)
@@ -115,7 +127,8 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
         while frontier.size:
             found = []
             for lo in range(0, frontier.size, _CHUNK):
-                _, succ, _ = successors(ring, frontier[lo:lo + _CHUNK], lump, p=0.5)
+                # threaded kernel with the Gray-code rows and bit-rotation canonical form
+                _, succ = successor_keys(ring, frontier[lo:lo + _CHUNK], lump)
                 found.append(np.unique(succ))
             new = _not_in(visited, np.unique(np.concatenate(found)))
             visited = _merge(visited, new)

@@ -1,31 +1,15 @@
 """``nasch approx`` and ``nasch derive``: the approximations on the command line."""
 from __future__ import annotations
 
-import functools
-
 import click
 import sympy as sp
 
+from markov.cli_common import emit_json, handle_errors
 from markov.errors import InvalidParameterError
 
 from . import APPROXIMATIONS, approximate, supported
 
 __all__ = ["approx", "derive", "derived_equations"]
-
-
-def handle_errors(func):
-    """:func:`markov.cli.handle_errors`, looked up at call time.
-
-    ``markov.cli`` imports this module at its end to register the commands, so
-    importing it here at module level would be circular.
-    """
-
-    @functools.wraps(func)
-    def wrapper(*args, **kwargs):
-        from markov.cli import handle_errors as markov_handle_errors
-        return markov_handle_errors(func)(*args, **kwargs)
-
-    return wrapper
 
 
 @click.command()
@@ -44,8 +28,6 @@ def approx(method, vmax, p, density, as_json):
       nasch approx --method pmf --vmax 2 --p 0.5 --density 0.25
       nasch approx --method cluster2 --vmax 1 --p 0.5 --density 0.5 --json
     """
-    from markov.cli import emit_json
-
     result = approximate(method, vmax, p, density)
     if as_json:
         emit_json(result.to_dict())

@@ -1,0 +1,129 @@
+"""The matrix-free operator against the assembled CSR matrix and plain-Python routes."""
+import numpy as np
+import pytest
+
+from markov import Ring
+from markov.operator import (CompactOperator, KeyIndex, TransitionOperator, canonical_keys,
+                             rank_keys, successor_keys)
+from markov.space import recurrent_keys
+from markov.states import decode, encode
+from markov.transition import successors, transition_matrix
+
+CASES = [  # (L, N, vmax, update): B = 3 and 5 take the division path, B = 4 and 8 bit shifts
+    (9, 4, 1, "parallel"),
+    (10, 5, 2, "parallel"),
+    (12, 6, 2, "parallel"),
+    (9, 3, 3, "parallel"),
+    (10, 3, 6, "parallel"),
+    (7, 3, 1, "random-sequential"),
+    (8, 4, 2, "random-sequential"),
+    (7, 2, 6, "random-sequential"),
+]
+
+
+@pytest.mark.parametrize("lump", [True, False])
+@pytest.mark.parametrize("L, N, vmax, update", CASES)
+def test_apply_equals_csr_transpose_product(L, N, vmax, update, lump):
+    ring = Ring(L, N, vmax, 0.3, update)
+    keys = recurrent_keys(ring, lump=lump)
+    P = transition_matrix(ring, keys, lump=lump)
+    op = TransitionOperator(ring, keys, lump=lump)
+    rng = np.random.default_rng(L * 100 + N)
+    x = rng.random(len(keys))
+    x[rng.random(len(keys)) < 0.2] = 0.0  # the kernel skips zero entries: exercise it
+    y = op.apply(x)
+    np.testing.assert_allclose(y, P.T @ x, rtol=0, atol=1e-14 * x.sum())
+    # stochastic: the product conserves the total mass
+    assert y.sum() == pytest.approx(x.sum(), rel=1e-13)
+    assert op.products == 1
+
+
+@pytest.mark.parametrize("lump", [True, False])
+@pytest.mark.parametrize("L, N, vmax, update", [c for c in CASES if c[-1] == "parallel"])
+def test_compact_operator_equals_csr_at_any_p(L, N, vmax, update, lump):
+    ring = Ring(L, N, vmax, 0.3, update)
+    keys = recurrent_keys(ring, lump=lump)
+    op = CompactOperator(ring, keys, lump=lump)
+    x = np.random.default_rng(L).random(len(keys))
+    for p, compact in ((0.3, op), (0.8, op.with_p(0.8))):  # same pattern, new weights
+        P = transition_matrix(ring.with_p(p), keys, lump=lump)
+        np.testing.assert_allclose(compact.apply(x), P.T @ x, rtol=0, atol=1e-14 * x.sum())
+    # one stored column per coin outcome: the unsummed transition count
+    assert op.transitions == len(successors(ring, keys, lump)[1])
+
+
+def test_compact_operator_refuses_random_sequential_and_open_sets():
+    ring = Ring(6, 3, 2, 0.5, "random-sequential")
+    with pytest.raises(ValueError, match="parallel"):
+        CompactOperator(ring, recurrent_keys(ring), lump=True)
+    ring = Ring(8, 4, 2, 0.5)
+    keys = recurrent_keys(ring)
+    with pytest.raises(RuntimeError, match="not closed"):
+        CompactOperator(ring, keys[: len(keys) // 2], lump=True)
+
+
+def test_linear_operator_and_rows():
+    ring = Ring(8, 4, 2, 0.25)
+    keys = recurrent_keys(ring)
+    P = transition_matrix(ring, keys, lump=True).toarray()
+    A = TransitionOperator(ring, keys, lump=True).linear_operator()
+    for i in (0, 3, len(keys) - 1):  # e_i P is row i of P
+        e = np.zeros(len(keys))
+        e[i] = 1.0
+        np.testing.assert_allclose(A @ e, P[i], atol=1e-15)
+
+
+def _rotations_min(key, L, vmax):
+    cells = decode(key, L, vmax).tolist()
+    return min(encode(cells[r:] + cells[:r], vmax) for r in range(L))
+
+
+@pytest.mark.parametrize("L, vmax", [(9, 2), (11, 1), (7, 3), (8, 6), (13, 2)])
+def test_canonical_keys_match_plain_rotation(L, vmax):
+    rng = np.random.default_rng(L)
+    b = vmax + 2
+    keys = rng.integers(0, b**L, 300)
+    cells = rng.integers(0, b, (40, L))
+    cells[:5] = 0             # no car
+    cells[5:10, :] = 1        # no empty cell
+    cells[10:15, ::2] = 0     # periodic patterns: several minimal rotations
+    extra = (cells * b ** np.arange(L)).sum(axis=1)
+    keys = np.concatenate([keys, extra]).astype(np.int64)
+    expected = [_rotations_min(int(k), L, vmax) for k in keys]
+    assert canonical_keys(keys, L, vmax).tolist() == expected
+
+
+def test_rank_unrank_round_trip_and_misses():
+    rng = np.random.default_rng(5)
+    keys = np.unique(np.concatenate([rng.integers(0, 10**12, 5000),
+                                     rng.integers(0, 1000, 300)]))  # skewed: crowded buckets
+    index = KeyIndex(keys)
+    order = rng.permutation(len(keys))
+    assert np.array_equal(index.rank(keys[order]), order)        # rank(unrank(i)) = i
+    absent = np.setdiff1d(rng.integers(-5, 10**12 + 5, 2000), keys)
+    assert np.all(index.rank(absent) == -1)
+    assert rank_keys(keys, keys[:3]).tolist() == [0, 1, 2]
+    with pytest.raises(ValueError, match="sorted"):
+        KeyIndex(keys[::-1])
+
+
+@pytest.mark.parametrize("lump", [True, False])
+@pytest.mark.parametrize("L, N, vmax, update", CASES[:2] + CASES[5:7])
+def test_successor_keys_match_transition_successors(L, N, vmax, update, lump):
+    ring = Ring(L, N, vmax, 0.5, update)
+    keys = recurrent_keys(ring, lump=lump)
+    ptr_a, succ_a, _ = successors(ring, keys, lump)
+    ptr_b, succ_b = successor_keys(ring, keys, lump)
+    assert np.array_equal(ptr_a, ptr_b)
+    for i in range(len(keys)):
+        assert sorted(succ_a[ptr_a[i]:ptr_a[i + 1]]) == sorted(succ_b[ptr_b[i]:ptr_b[i + 1]])
+
+
+def test_open_state_set_is_reported():
+    ring = Ring(8, 4, 2, 0.5)
+    keys = recurrent_keys(ring)
+    op = TransitionOperator(ring, keys[: len(keys) // 2], lump=True)
+    with pytest.raises(RuntimeError, match="not closed"):
+        op.apply(np.ones(op.n))
+    with pytest.raises(ValueError, match="shape"):
+        op.apply(np.ones(op.n + 1))
