@@ -40,7 +40,7 @@ _MATRIX_BYTES_PER_NONZERO = 40
 # (GMRES with restart 60 in markov.stationary).
 _MATRIX_BYTES_PER_STATE = 8 + 62 * 8
 # Methods of the matrix-free path, with the names of markov.stationary mapped on them.
-_MATRIX_FREE_METHODS = {"auto": "gmres", "iterative": "gmres", "gmres": "gmres",
+_MATRIX_FREE_METHODS = {"auto": "gmres", "iterative": "iterative", "gmres": "gmres",
                         "bicgstab": "bicgstab", "power": "power"}
 
 
@@ -275,16 +275,14 @@ class RingChain:
         """Solve for the stationary state.
 
         On the matrix path see :func:`markov.stationary.stationary`; on the
-        matrix-free path :func:`markov.large.stationary_operator` (``auto`` and
-        ``iterative`` mean GMRES; ``gmres``, ``bicgstab``, ``power`` are
+        matrix-free path :func:`markov.large.stationary_operator` (``auto``
+        means GMRES; ``iterative``, ``gmres``, ``bicgstab``, ``power`` are
         accepted; ``direct`` and ``eigs`` need the matrix).  ``x0`` warm-starts
         the matrix-free solvers, e.g. with ``pi`` at a nearby ``p`` on the same
         keys (the keys do not depend on ``p``).
         """
         _ensure_unique(self.ring)
         if self.ring.trivial or self.operator_kind == "matrix":
-            if method in ("gmres", "bicgstab"):
-                method = "iterative"
             result = stationary(self.matrix, method=method, tol=tol)
             return Solution(self.ring, self.keys, result, self.matrix.nnz, self.build_seconds,
                             self.lump, "matrix")

@@ -18,6 +18,11 @@ Methods (:data:`LARGE_SOLVERS`)
 ``power``     plain power iteration ``pi <- pi P``; 4
               vectors, slow (the second eigenvalue of the NaSch chain is close
               to one), kept as the memory-light fallback and test oracle.
+``iterative`` the ladder BiCGSTAB -> GMRES -> power of
+              :func:`markov.stationary.iterate`.
+
+The iterations are :func:`markov.stationary.iterate`, shared with the
+assembled-matrix path: this module adds the progress bar and the error.
 
 A warm start ``x0`` (e.g. the solution at a nearby ``p`` on the same states)
 cuts the number of products; see :func:`markov.chain.RingChain.solution`.
@@ -27,46 +32,38 @@ from __future__ import annotations
 import time
 
 import numpy as np
-import scipy.sparse.linalg as spla
 
 from .errors import ConvergenceError, InvalidParameterError
 from .progress import progress_bar
-from .stationary import StationaryResult
+from .stationary import StationaryResult, iterate
 
 __all__ = ["LARGE_SOLVERS", "stationary_operator", "solver_vectors", "DEFAULT_RESTART"]
 
-LARGE_SOLVERS = ("gmres", "bicgstab", "power")
+LARGE_SOLVERS = ("gmres", "bicgstab", "power", "iterative")
 DEFAULT_RESTART = 60
 
 
 def solver_vectors(method: str, restart: int = DEFAULT_RESTART) -> int:
     """Work vectors of length ``n`` (float64) a method holds at its peak."""
-    return {"gmres": restart + 6, "bicgstab": 10, "power": 4}[method]
-
-
-def _normalise(x: np.ndarray) -> np.ndarray:
-    x = np.clip(np.real(x), 0.0, None)  # round-off negatives are below the residual
-    return x / x.sum()
+    return {"gmres": restart + 6, "bicgstab": 10, "power": 4,
+            "iterative": restart + 6}[method]
 
 
 def stationary_operator(op, method: str = "gmres", tol: float = 1e-10,
-                        x0: np.ndarray | None = None, maxiter: int = 5_000,
-                        restart: int = DEFAULT_RESTART) -> StationaryResult:
+                        x0: np.ndarray | None = None, maxiter: int = 5_000) -> StationaryResult:
     """Stationary distribution from the product ``x -> x P`` alone.
 
     Parameters
     ----------
     op : TransitionOperator
         Anything with ``n``, ``apply(x) -> x P`` (and optionally ``products``).
-    method : {"gmres", "bicgstab", "power"}
+    method : {"gmres", "bicgstab", "power", "iterative"}
     tol : float
         Target of ``||pi P - pi||_1`` for the normalised ``pi``.
     x0 : (n,) array, optional
         Warm start (any positive vector; normalised here).
     maxiter : int
         Cap on products ``x P``.
-    restart : int
-        GMRES restart length (memory: ``restart + 6`` vectors).
 
     Returns
     -------
@@ -97,66 +94,18 @@ def stationary_operator(op, method: str = "gmres", tol: float = 1e-10,
         raise InvalidParameterError(f"tol must be positive, got {tol!r}")
     n = op.n
     start = time.perf_counter()
-    x = np.full(n, 1.0 / n) if x0 is None else _normalise(np.asarray(x0, dtype=np.float64))
     if n == 1:
         return StationaryResult(np.ones(1), method, 0.0, 0, 0.0)
-    count = [0]
     with progress_bar(None, f"{method} (x P products)", "product") as bar:
 
         def product(v):
-            count[0] += 1
             bar.update(1)
             return op.apply(v)
 
-        if method == "power":
-            x, res = _power(product, x, tol, maxiter, count)
-        else:
-            x, res = _krylov(product, n, x, tol, maxiter, restart, method, count, bar)
+        x, res, products, _ = iterate(product, n, method, tol, maxiter, x0)
     seconds = time.perf_counter() - start
     if not res <= tol:
         raise ConvergenceError(
-            f"{method} reached ||pi P - pi||_1 = {res:.3e} after {count[0]} products,"
-            f" not {tol:g}", count[0], res, x)
-    return StationaryResult(x, method, res, count[0], seconds)
-
-
-def _power(product, x, tol, maxiter, count):
-    res = np.inf
-    while count[0] < maxiter:
-        y = product(x)
-        res = float(np.abs(y - x).sum())  # residual of x, measured on the way
-        if res <= tol:
-            return x, res
-        x = _normalise(y)
-    return x, res
-
-
-def _krylov(product, n, x, tol, maxiter, restart, method, count, bar):
-    ones_over_n = np.full(n, 1.0 / n)
-
-    def matvec(v):
-        # (I - P^T + 1 1^T / n) v: non-singular for an irreducible chain
-        return v - product(v) + ones_over_n * v.sum()
-
-    A = spla.LinearOperator((n, n), matvec=matvec, dtype=np.float64)
-    # ||r||_1 <= sqrt(n) ||r||_2 and ||b||_2 = 1/sqrt(n): rtol = tol bounds the
-    # 1-norm residual by tol (measured: tighter costs products); verify with the operator.
-    rtol = tol
-    res = np.inf
-    for _ in range(8):  # outer passes only when clipping/normalising left us short
-        left = maxiter - count[0]
-        if left <= 1:
-            break
-        if method == "gmres":
-            x, _ = spla.gmres(A, ones_over_n, x0=x, rtol=rtol, atol=0.0, restart=restart,
-                              maxiter=max(1, left // restart))
-        else:
-            x, _ = spla.bicgstab(A, ones_over_n, x0=x, rtol=rtol, atol=0.0,
-                                 maxiter=max(1, left // 2))
-        x = _normalise(x)
-        res = float(np.abs(product(x) - x).sum())
-        bar.set_postfix(residual=f"{res:.1e}")
-        if res <= tol:
-            break
-        rtol *= 0.1
-    return x, res
+            f"{method} reached ||pi P - pi||_1 = {res:.3e} after {products} products,"
+            f" not {tol:g}", products, res, x)
+    return StationaryResult(x, method, res, products, seconds)

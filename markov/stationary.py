@@ -17,6 +17,7 @@ Methods (:data:`SOLVERS`)
               ``(I - P^T + 1 1^T / n) pi = 1 / n`` from a few power steps:
               BiCGSTAB, falling back to GMRES(60) and then power iteration
               (the stage used is reported, e.g. ``iterative:bicgstab``).
+``gmres``, ``bicgstab``  one Krylov method alone (see :func:`iterate`).
 ``power``     power iteration ``pi <- pi P`` (the chain is aperiodic: the
               compact jam has a self-loop), stopped at the residual tolerance.
 ``auto``      ``direct`` up to :data:`DIRECT_LIMIT` states, else ``eigs``
@@ -35,10 +36,10 @@ from scipy.sparse.csgraph import connected_components
 
 from .errors import ConvergenceError, InvalidParameterError, NoUniqueStationaryStateError
 
-__all__ = ["SOLVERS", "METHODS", "DIRECT_LIMIT", "StationaryResult", "stationary",
-           "residual", "check_irreducible"]
+__all__ = ["SOLVERS", "METHODS", "PRODUCT_METHODS", "DIRECT_LIMIT", "StationaryResult",
+           "stationary", "iterate", "residual", "check_irreducible"]
 
-SOLVERS = ("direct", "eigs", "iterative", "power")
+SOLVERS = ("direct", "eigs", "iterative", "gmres", "bicgstab", "power")
 METHODS = ("auto",) + SOLVERS
 DIRECT_LIMIT = 1_000
 DENSE_LIMIT = 3_000
@@ -85,9 +86,8 @@ def check_irreducible(P: sp.csr_array) -> None:
 
 def _normalise(x: np.ndarray) -> np.ndarray:
     x = np.real(x)
-    x = x / x.sum()
-    # round-off can leave tiny negative entries; they are below the residual
-    return np.clip(x, 0.0, None) / np.clip(x, 0.0, None).sum()
+    x = np.clip(x / x.sum(), 0.0, None)  # round-off negatives are below the residual
+    return x / x.sum()
 
 
 def _direct(P, tol, maxiter):
@@ -111,65 +111,129 @@ def _eigs(P, tol, maxiter):
     return vecs[:, 0], 0
 
 
-def _power(P, tol, maxiter, x=None):
-    n = P.shape[0]
-    PT = P.T.tocsr()
-    x = np.full(n, 1.0 / n) if x is None else x
-    for it in range(1, maxiter + 1):
-        y = PT @ x
-        err = np.abs(y - x).sum()
-        x = y / y.sum()
-        if err <= tol:
-            return x, it
-    raise ConvergenceError(f"power iteration did not reach residual {tol:g} in {maxiter}"
-                           f" iterations (last {err:.3e})", maxiter, float(err), x)
+def _power_steps(product, x, tol, maxiter, count):
+    """Power iteration; returns (x, residual of x)."""
+    res = np.inf
+    while count[0] < maxiter:
+        y = product(x)
+        res = float(np.abs(y - x).sum())  # the residual of x, measured on the way
+        if res <= tol:
+            return x, res
+        x = _normalise(y)
+    return x, res
 
 
-def _krylov(solver, P, tol, maxiter, x0):
-    """One Krylov solve of ``(I - P^T + 1 1^T / n) pi = 1 / n``; (x, iterations, ok)."""
-    n = P.shape[0]
-    PT = P.T.tocsr()
-    ones = np.ones(n)
-    A = spla.LinearOperator((n, n), matvec=lambda x: x - PT @ x + ones * (x.sum() / n),
-                            dtype=np.float64)
+def _krylov_steps(product, n, x, tol, maxiter, method, count, restart=60):
+    """BiCGSTAB or GMRES(restart) on ``(I - P^T + 1 1^T / n) pi = 1 / n``.
+
+    The system is non-singular for an irreducible chain and its solution sums
+    to one.  Each pass asks for a relative 2-norm residual ``rtol`` (first
+    ``tol``: ``||r||_1 <= sqrt(n) ||r||_2`` and ``||b||_2 = 1 / sqrt(n)``), then
+    measures the reported ``||pi P - pi||_1`` of the normalised iterate and
+    tightens ``rtol`` tenfold only if that falls short.  Asking for far less
+    than the attainable accuracy up front makes GMRES stagnate for thousands
+    of restarts.
+    """
+    ones_over_n = np.full(n, 1.0 / n)
+    A = spla.LinearOperator((n, n), dtype=np.float64,
+                            matvec=lambda v: v - product(v) + ones_over_n * v.sum())
+    rtol, res = tol, np.inf
+    for _ in range(8):
+        left = maxiter - count[0]
+        if left <= 1:
+            break
+        if method == "gmres":
+            x, _ = spla.gmres(A, ones_over_n, x0=x, rtol=rtol, atol=0.0, restart=restart,
+                              maxiter=max(1, left // restart))
+        else:
+            x, _ = spla.bicgstab(A, ones_over_n, x0=x, rtol=rtol, atol=0.0,
+                                 maxiter=max(1, left // 2))
+        if not np.all(np.isfinite(x)) or x.sum() <= 0:  # a breakdown: give up this method
+            return None, np.inf
+        x = _normalise(x)
+        res = float(np.abs(product(x) - x).sum())
+        if res <= tol:
+            break
+        rtol *= 0.1
+    return x, res
+
+
+#: Methods that need only the product ``x -> x P`` (:func:`iterate`).
+PRODUCT_METHODS = ("iterative", "gmres", "bicgstab", "power")
+
+
+def iterate(product, n: int, method: str = "iterative", tol: float = 1e-13,
+            maxiter: int = 100_000, x0: np.ndarray | None = None):
+    """Stationary vector from the product ``x -> x P`` alone.
+
+    Parameters
+    ----------
+    product : callable
+        ``product(x)`` returns ``x P`` (i.e. ``P^T x``) for a float64 vector.
+    n : int
+        Number of states.
+    method : {"iterative", "gmres", "bicgstab", "power"}
+        ``iterative`` is the ladder BiCGSTAB -> GMRES(60) -> power iteration,
+        each started from the last iterate: BiCGSTAB is the fastest in
+        products for most ``p`` but can break down when the chain mixes
+        slowly (``p`` near 1); power iteration always converges on this
+        aperiodic chain.
+    tol : float
+        Target of ``||pi P - pi||_1``.
+    maxiter : int
+        Cap on the number of products (all stages together).
+    x0 : (n,) array, optional
+        Start vector (normalised here); default uniform.
+
+    Returns
+    -------
+    x : (n,) array
+        Normalised iterate.
+    residual : float
+        Its ``||x P - x||_1``.
+    products : int
+        Products used.
+    stage : str
+        The method that produced ``x``.
+    """
+    if method not in PRODUCT_METHODS:
+        raise InvalidParameterError(
+            f"method must be one of {', '.join(PRODUCT_METHODS)}, got {method!r}")
+    x = np.full(n, 1.0 / n) if x0 is None else _normalise(np.asarray(x0, dtype=np.float64))
     count = [0]
 
-    def callback(*_):
+    def counted(v):
         count[0] += 1
+        return product(v)
 
-    kwargs = dict(restart=60, callback_type="pr_norm") if solver is spla.gmres else {}
-    x, info = solver(A, ones / n, x0=x0, rtol=tol * 1e-2, atol=0.0, maxiter=maxiter,
-                     callback=callback, **kwargs)
-    x = _normalise(x) if np.all(np.isfinite(x)) and x.sum() != 0 else x0
-    return x, count[0], info == 0 and residual(P, x) <= tol
-
-
-def _iterative(P, tol, maxiter):
-    """BiCGSTAB, then GMRES(60), then power iteration, each from the last iterate.
-
-    BiCGSTAB converges in tens of steps for most ``p`` but can break down
-    when the chain mixes slowly (``p`` near 1); GMRES(60) survives that but
-    can stagnate for thousands of restarts elsewhere (``p = 0.1``, low
-    density), so it gets a bounded budget; power iteration always converges
-    on this aperiodic chain.  The iteration count adds all stages.
-    """
-    n = P.shape[0]
-    PT = P.T.tocsr()
-    x = np.full(n, 1.0 / n)
-    for _ in range(20):  # a few power steps give the Krylov methods a good start
-        x = PT @ x
-    total = 20
-    for name, solver, budget in (("bicgstab", spla.bicgstab, maxiter),
-                                 ("gmres", spla.gmres, min(maxiter, 2000))):
-        x, its, ok = _krylov(solver, P, tol, budget, x)
-        total += its
-        if ok:
-            return x, total, name
-    x, its = _power(P, tol, maxiter, x)
-    return x, total + its, "power"
+    stages = ("bicgstab", "gmres", "power") if method == "iterative" else (method,)
+    res = np.inf
+    for stage in stages:
+        if stage == "power":
+            y, r = _power_steps(counted, x, tol, maxiter, count)
+        else:
+            y, r = _krylov_steps(counted, n, x, tol, maxiter, stage, count)
+        if y is not None and r <= res:
+            x, res = y, r
+        if res <= tol:
+            return x, res, count[0], stage
+    return x, res, count[0], stage
 
 
-_SOLVE = {"direct": _direct, "eigs": _eigs, "iterative": _iterative, "power": _power}
+def _by_product(method):
+    def solve(P, tol, maxiter):
+        PT = P.T.tocsr()
+        x, res, products, stage = iterate(lambda v: PT @ v, P.shape[0], method, tol, maxiter)
+        if res > tol:
+            raise ConvergenceError(f"{method} reached ||pi P - pi||_1 = {res:.3e} after"
+                                   f" {products} products, not {tol:g}", products, res, x)
+        return x, products, stage
+
+    return solve
+
+
+_SOLVE = {"direct": _direct, "eigs": _eigs,
+          **{name: _by_product(name) for name in PRODUCT_METHODS}}
 
 
 def stationary(P: sp.csr_array, method: str = "auto", tol: float = 1e-13,
@@ -233,7 +297,7 @@ def stationary(P: sp.csr_array, method: str = "auto", tol: float = 1e-13,
                                    x) from None
         x, iterations, *stage = _SOLVE["iterative"](P, tol, maxiter)
         method = "iterative"
-    if stage:
+    if stage and stage[0] != method:
         method = f"{method}:{stage[0]}"
     pi = _normalise(x)
     seconds = time.perf_counter() - start
