@@ -23,9 +23,15 @@ def main():
     """Exact stationary states of the Nagel-Schreckenberg model on small rings.
 
     \b
-    Example:
-      nasch solve --length 12 --cars 6 --vmax 2 --p 0.5
-      nasch solve -L 10 -N 5 --vmax 1 --p 0.25 --json
+    Examples:
+      nasch solve -L 12 -N 6 --vmax 2 --p 0.5             exact flux, c_v, residual
+      nasch approx --method pmf --vmax 2 --p 0.5 -c 0.25    an analytic approximation
+      nasch derive --method mf --vmax 2 --latex            its equations
+      nasch goe --vmax 2 --max-cells 12                    Garden of Eden patterns
+      nasch goe --census -L 12 -N 6 --vmax 2               GoE census of one ring
+      nasch table --vmax 2 --p 0.5 --lengths 8,10,12 --density 0.5 --format md
+      nasch simulate --length 100000 --density 0.2 --vmax 2 --p 0.5 --steps 1000
+      nasch plot fundamental --vmax 2 --p 0.5 --output fig.png
     """
 
 
