@@ -40,7 +40,7 @@ from .model import PARALLEL, Ring
 from .rules import deterministic_velocity, randomize
 from .space import all_keys
 from .states import check_encodable, encode, from_text
-from .transition import successors
+from .transition import _cars_of, successors
 
 __all__ = [
     # ring configurations (this module)
@@ -62,19 +62,6 @@ __all__ = [
 
 
 @njit(cache=True)
-def _cars(key, length, b, pos, vel):
-    n = 0
-    for x in range(length):
-        d = key % b
-        key //= b
-        if d > 0:
-            pos[n] = x
-            vel[n] = d - 1
-            n += 1
-    return n
-
-
-@njit(cache=True)
 def _reachable_velocity(v, g, vmax):
     """Some old velocity ``u`` gives ``v`` under R1-R3 with old gap ``g``."""
     if g < 0:
@@ -91,7 +78,7 @@ def _goe_kernel(keys, length, vmax, out):
     pos = np.empty(length, dtype=np.int64)
     vel = np.empty(length, dtype=np.int64)
     for i in range(keys.shape[0]):
-        n = _cars(keys[i], length, vmax + 2, pos, vel)
+        n = _cars_of(keys[i], length, vmax + 2, pos, vel)
         goe = False
         for j in range(n):
             k = j + 1 if j + 1 < n else 0

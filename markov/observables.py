@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .model import PARALLEL, Ring
+from .model import Ring
 from .rules import deterministic_velocity
 from .transition import _cars_of, _gap
 

@@ -62,7 +62,7 @@ from numba.extending import intrinsic
 from .model import PARALLEL, Ring
 from .rules import deterministic_velocity, randomize
 from .states import base, canonical, check_encodable, powers
-from .transition import _cars_of, _gap
+from .transition import _cars_of, _deterministic_move, _gap, _term
 
 __all__ = ["KeyIndex", "TransitionOperator", "CompactOperator", "rank_keys", "canonical_keys",
            "successor_keys"]
@@ -259,18 +259,12 @@ def _coin_weights(ncars, p):
     return w
 
 
-@njit(cache=True, inline="always")
-def _term(x, w, length, pw):
-    return (w + 1) * pw[(x + w) % length]
-
-
 @njit(cache=True, parallel=True)
 def _apply_parallel_update(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, lump,
                            weights, bad):
     """``acc[thread] += x_i P[i, :]`` for every state ``i`` (parallel update)."""
     n = keys.shape[0]
     nblocks = (n + _BLOCK - 1) // _BLOCK
-    b = vmax + 2
     for blk in prange(nblocks):
         t = numba.get_thread_id()
         pos = np.empty(length, np.int64)
@@ -281,16 +275,7 @@ def _apply_parallel_update(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, 
             xi = x[i]
             if xi == 0.0:
                 continue  # early power iterates and warm starts have many zeros
-            ncar = _cars_of(keys[i], length, b, pos, vel)
-            moved = 0
-            k = 0
-            for j in range(ncar):
-                u = deterministic_velocity(vel[j], _gap(pos, ncar, j, length), vmax)
-                go = _term(pos[j], u, length, pw)
-                moved += go
-                if u > 0:
-                    deltas[k] = _term(pos[j], randomize(u), length, pw) - go
-                    k += 1
+            moved, k = _deterministic_move(keys[i], length, vmax, pw, pos, vel, deltas)
             # Gray code over the coins: step m flips the coin of car tz(m)
             new = moved
             gray = 0
@@ -368,17 +353,8 @@ def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, parallel_update,
         for i in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
             key = keys[i]
             at = indptr[i]
-            ncar = _cars_of(key, length, b, pos, vel)
             if parallel_update:
-                new = 0
-                k = 0
-                for j in range(ncar):
-                    u = deterministic_velocity(vel[j], _gap(pos, ncar, j, length), vmax)
-                    go = _term(pos[j], u, length, pw)
-                    new += go
-                    if u > 0:
-                        deltas[k] = _term(pos[j], randomize(u), length, pw) - go
-                        k += 1
+                new, k = _deterministic_move(key, length, vmax, pw, pos, vel, deltas)
                 gray = 0
                 for m in range(1 << k):
                     if m > 0:
@@ -388,6 +364,7 @@ def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, parallel_update,
                     out[at] = _canon(new, length, pw, bits) if lump else new
                     at += 1
             else:
+                ncar = _cars_of(key, length, b, pos, vel)
                 if ncar < length:
                     out[at] = key
                     at += 1
@@ -558,23 +535,13 @@ def _compact_columns(keys, tkeys, tvals, hbits, indptr, length, vmax, pw, bits, 
     """Ranks of the successors of every state, Gray-code order, into ``cols`` (int32)."""
     n = keys.shape[0]
     nblocks = (n + _BLOCK - 1) // _BLOCK
-    b = vmax + 2
     for blk in prange(nblocks):
         t = numba.get_thread_id()
         pos = np.empty(length, np.int64)
         vel = np.empty(length, np.int64)
         deltas = np.empty(length, np.int64)
         for i in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
-            ncar = _cars_of(keys[i], length, b, pos, vel)
-            new = 0
-            k = 0
-            for j in range(ncar):
-                u = deterministic_velocity(vel[j], _gap(pos, ncar, j, length), vmax)
-                go = _term(pos[j], u, length, pw)
-                new += go
-                if u > 0:
-                    deltas[k] = _term(pos[j], randomize(u), length, pw) - go
-                    k += 1
+            new, k = _deterministic_move(keys[i], length, vmax, pw, pos, vel, deltas)
             movers[i] = k
             at = indptr[i]
             gray = 0

@@ -24,7 +24,7 @@ from numba import njit
 from .model import PARALLEL, Ring
 from .progress import progress_bar
 from .rules import deterministic_velocity, randomize
-from .states import base, canonical, powers
+from .states import canonical, powers
 
 __all__ = ["max_successors", "successor_counts", "successors", "transition_matrix"]
 
@@ -66,7 +66,14 @@ def _term(x, w, length, pw):
 
 
 @njit(cache=True)
-def _parallel_row(key, length, vmax, pw, p, lump, pos, vel, deltas, out_keys, out_probs):
+def _deterministic_move(key, length, vmax, pw, pos, vel, deltas):
+    """R1+R2 for every car of ``key``, then R4 without braking.
+
+    Returns ``(moved, k)``: the key after every car moved its ``u`` cells, and
+    the number ``k`` of cars with ``u > 0``; ``deltas[j]`` is the key change if
+    the ``j``-th of them brakes (R3).  ``pos``/``vel`` receive the cars.
+    Every parallel-update kernel (matrix rows, operators, enumeration) starts here.
+    """
     n = _cars_of(key, length, vmax + 2, pos, vel)
     moved = 0
     k = 0
@@ -77,6 +84,12 @@ def _parallel_row(key, length, vmax, pw, p, lump, pos, vel, deltas, out_keys, ou
         if u > 0:
             deltas[k] = _term(pos[i], randomize(u), length, pw) - go
             k += 1
+    return moved, k
+
+
+@njit(cache=True)
+def _parallel_row(key, length, vmax, pw, p, lump, pos, vel, deltas, out_keys, out_probs):
+    moved, k = _deterministic_move(key, length, vmax, pw, pos, vel, deltas)
     q = 1.0 - p
     for mask in range(1 << k):
         new = moved

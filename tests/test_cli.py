@@ -16,7 +16,9 @@ def run(*args):
 
 def test_help_shows_an_example():
     result = run("--help")
-    assert result.exit_code == 0 and "nasch solve --length" in result.output
+    assert result.exit_code == 0 and "nasch solve -L 12 -N 6" in result.output
+    for command in ("approx", "derive", "goe", "table", "simulate", "plot"):
+        assert f"nasch {command}" in result.output
     result = run("solve", "--help")
     assert result.exit_code == 0 and "Example" in result.output and "--method" in result.output
 

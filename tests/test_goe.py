@@ -23,10 +23,10 @@ from markov.errors import InvalidParameterError
 from markov.goe import goe_mask, image_keys, is_goe, is_pattern_free, pattern_free_mask
 from markov.goe_census import (census, frozen_count, pattern_free_count,
                                recurrent_class_count)
-from markov.goe_patterns import (elementary_patterns, order_automaton, word_allowed)
+from markov.goe_patterns import elementary_patterns, word_allowed
 from markov.model import Ring
 from markov.space import all_keys, recurrent_keys
-from markov.states import decode, encode, to_text
+from markov.states import decode, encode
 from markov.transition import successors
 
 # ---------------------------------------------------------------- naive oracle
