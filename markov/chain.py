@@ -15,6 +15,7 @@ import scipy.sparse as sp
 
 from . import observables
 from .errors import InvalidParameterError, NoUniqueStationaryStateError, StateSpaceTooLargeError
+from .goe_census import recurrent_class_count
 from .model import PARALLEL, Ring
 from .space import _memory_limit, bytes_per_state, count_all, recurrent_keys
 from .stationary import StationaryResult, stationary
@@ -84,14 +85,7 @@ def predicted_states(ring: Ring, lump: bool) -> int | None:
     """
     if ring.update != PARALLEL or ring.trivial or ring.vmax > _PREDICT_VMAX:
         return None
-    try:
-        from .goe import recurrent_class_count
-    except ImportError:
-        return None
-    try:
-        count = int(recurrent_class_count(ring.length, ring.cars, ring.vmax))
-    except Exception:  # a prediction is optional: the growing-BFS guard still applies
-        return None
+    count = recurrent_class_count(ring.length, ring.cars, ring.vmax)
     return -(-count // ring.length) if lump else count
 
 
