@@ -45,7 +45,6 @@ import platform  # noqa: E402
 import resource  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
-import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -94,54 +93,20 @@ def _warm_up() -> None:
         solve(Ring(6, 3, 2, 0.5), operator=operator)
 
 
-def _naive_chain(L, N, vmax, p):
-    """Plain Python: tuples in a dict, BFS from the compact jam (parallel update)."""
-    def successors(config):
-        cars = [x for x in range(L) if config[x] is not None]
-        options = []
-        for x in cars:
-            gap = 0
-            while gap < L - 1 and config[(x + gap + 1) % L] is None:
-                gap += 1
-            v = min(min(config[x] + 1, vmax), gap)                    # R1, R2
-            options.append([(x, v, 1.0)] if v == 0 else [(x, v, 1 - p), (x, v - 1, p)])  # R3
-        out = {}
-        partial = [((), 1.0)]
-        for opts in options:
-            partial = [(moves + ((x, w),), pr * q) for moves, pr in partial for x, w, q in opts]
-        for moves, pr in partial:
-            cells = [None] * L
-            for x, w in moves:                                          # R4
-                cells[(x + w) % L] = w
-            key = tuple(cells)
-            out[key] = out.get(key, 0.0) + pr
-        return out
-
-    jam = tuple([0] * N + [None] * (L - N))
-    index = {jam: 0}
-    rows = []
-    queue = [jam]
-    while queue:
-        nxt = []
-        for s in queue:
-            for t, pr in successors(s).items():
-                if t not in index:
-                    index[t] = len(index)
-                    nxt.append(t)
-                rows.append((index[s], index[t], pr))
-        queue = nxt
-    return index, rows
-
-
 def work_naive(L, N, vmax, p) -> dict:
     import numpy as np
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    import naive  # the tests' plain-Python oracle: tuples in a dict, BFS from the jam
+
     start = time.perf_counter()
-    index, rows = _naive_chain(L, N, vmax, p)
+    states, trans = naive.chain(L, N, vmax, p)
+    index = {s: k for k, s in enumerate(states)}
     n = len(index)
-    i, j, v = map(np.array, zip(*rows))
+    i, j, v = map(np.array, zip(*[(index[s], index[t], pr)
+                                  for s, row in trans.items() for t, pr in row.items()]))
     P = sp.csr_array((v, (i, j)), shape=(n, n))
     build = time.perf_counter() - start
     start = time.perf_counter()
@@ -249,14 +214,6 @@ def _fmt_row(row):
     return " | ".join(f"{c}={_fmt(row.get(c), c)}" for c in COLUMNS if row.get(c) is not None)
 
 
-def _atomic_write(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
-
-
 def _x(ratio: float) -> str:
     return f"{ratio:.2g}x" if ratio < 10 else f"{ratio:.0f}x"
 
@@ -288,12 +245,15 @@ def _ratios(rows):
 
 
 def write_results(rows, meta, out_dir: Path) -> None:
+    from markov.io import write_atomic
+
+    out_dir.mkdir(parents=True, exist_ok=True)
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=COLUMNS + ["process_s"], extrasaction="ignore")
     writer.writeheader()
     for r in rows:
         writer.writerow({c: r.get(c) for c in COLUMNS + ["process_s"]})
-    _atomic_write(out_dir / "large.csv", buf.getvalue())
+    write_atomic(out_dir / "large.csv", buf.getvalue())
     md = ["# Large-ring benchmark (issue 7)", ""]
     md += [f"- {k}: {v}" for k, v in meta.items()]
     md += ["", "peak MB is the subprocess's `ru_maxrss` (interpreter and libraries included, see"
@@ -311,7 +271,7 @@ def write_results(rows, meta, out_dir: Path) -> None:
     ratios = _ratios(rows)
     if ratios:
         md += ["## ratios (same chain, this run)", ""] + [f"- {x}" for x in ratios] + [""]
-    _atomic_write(out_dir / "large.md", "\n".join(md))
+    write_atomic(out_dir / "large.md", "\n".join(md))
 
 
 def main(argv=None) -> None:

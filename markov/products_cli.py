@@ -18,23 +18,14 @@ __all__ = ["simulate", "table", "plot"]
 _EXT_FORMAT = {".csv": "csv", ".md": "md", ".tex": "latex", ".json": "json", ".txt": "text"}
 
 
-def _float_list(name: str, text: str) -> list[float]:
+def _number_list(name: str, text: str, kind: type = float) -> list:
+    """Parse a comma-separated option value as ``kind`` (float or int)."""
+    what = "integers" if kind is int else "numbers"
     try:
-        values = [float(x) for x in text.split(",") if x.strip()]
+        values = [kind(x) for x in text.split(",") if x.strip()]
     except ValueError:
         raise InvalidParameterError(
-            f"{name} must be a comma-separated list of numbers, got {text!r}") from None
-    if not values:
-        raise InvalidParameterError(f"{name} must not be empty")
-    return values
-
-
-def _int_list(name: str, text: str) -> list[int]:
-    try:
-        values = [int(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise InvalidParameterError(
-            f"{name} must be a comma-separated list of integers, got {text!r}") from None
+            f"{name} must be a comma-separated list of {what}, got {text!r}") from None
     if not values:
         raise InvalidParameterError(f"{name} must not be empty")
     return values
@@ -139,14 +130,14 @@ def table(vmax, p_text, lengths_text, cars_text, density_text, update, fmt, outp
 
     if cars_text is not None and density_text is not None:
         raise InvalidParameterError("give either --cars or --density, not both")
-    ps = _float_list("--p", p_text)
+    ps = _number_list("--p", p_text)
     _ensure_p_open(ps)
     if fmt is None:
         fmt = _EXT_FORMAT.get(Path(output).suffix.lower(), "text") if output else "text"
     t = flux_table(
-        vmax, ps, _int_list("--lengths", lengths_text),
-        cars=None if cars_text is None else _int_list("--cars", cars_text),
-        densities=None if density_text is None else _float_list("--density", density_text),
+        vmax, ps, _number_list("--lengths", lengths_text, int),
+        cars=None if cars_text is None else _number_list("--cars", cars_text, int),
+        densities=None if density_text is None else _number_list("--density", density_text),
         update=update, mc_steps=mc_steps, mc_length=mc_length, seed=seed, order=order,
         extrapolation=not no_extrapolation, serial=True if serial else None,
         scheduler=scheduler, n_workers=workers)
@@ -201,14 +192,14 @@ def fundamental(vmax, p_text, lengths_text, ext_text, mc_length, mc_steps, seed,
     if Path(output).suffix.lower() not in FIGURE_FORMATS:
         raise InvalidParameterError(
             f"--output must end in {' or '.join(FIGURE_FORMATS)}, got {output!r}")
-    ps = _float_list("--p", p_text)
+    ps = _number_list("--p", p_text)
     _ensure_p_open(ps)
     import warnings
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
         panels = fundamental_data(
-            vmax, ps, lengths=_int_list("--lengths", lengths_text),
-            extrapolation_lengths=_int_list("--extrapolation-lengths", ext_text),
+            vmax, ps, lengths=_number_list("--lengths", lengths_text, int),
+            extrapolation_lengths=_number_list("--extrapolation-lengths", ext_text, int),
             mc_length=mc_length, mc_steps=mc_steps, seed=seed,
             serial=True if serial else None, scheduler=scheduler)
     for w in caught:
