@@ -1,8 +1,9 @@
-"""The user-facing objects: :class:`RingChain` (states and matrix) and :class:`Solution`.
+"""The user-facing objects: :class:`RingChain` (states and operator) and :class:`Solution`.
 
 ``RingChain`` builds lazily and caches: the recurrent class, the transition
-matrix, and its stationary state.  ``Solution`` is immutable; observables are
-cached properties.  :func:`solve` is the one-call entry point used by the CLI.
+matrix or the matrix-free operator, and its stationary state.  ``Solution``
+is immutable; observables are cached properties.  :func:`solve` is the
+one-call entry point used by the CLI.
 """
 from __future__ import annotations
 
@@ -13,40 +14,29 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from . import observables
-from .errors import InvalidParameterError, NoUniqueStationaryStateError, StateSpaceTooLargeError
+from . import memory, observables
+from .errors import InvalidParameterError, NoUniqueStationaryStateError
 from .goe_census import recurrent_class_count
 from .model import PARALLEL, Ring
-from .space import _memory_limit, bytes_per_state, count_all, recurrent_keys
-from .stationary import StationaryResult, stationary
+from .space import count_all, recurrent_keys
+from .stationary import (AUTO_OPERATOR_METHOD, DEFAULT_TOL, METHODS, PRODUCT_METHODS,
+                         StationaryResult, stationary)
 from .states import compact_jam_key
 from .transition import successor_counts, transition_matrix
 
 __all__ = ["RingChain", "Solution", "solve", "OPERATORS"]
 
 #: How ``x -> x P`` is applied (see :attr:`RingChain.operator_kind` for ``auto``):
-#: ``matrix`` the CSR matrix, ``compact`` the stored pattern at 4 bytes per
-#: transition (:class:`markov.operator.CompactOperator`, parallel update),
-#: ``matrix-free`` rows regenerated on the fly (:class:`markov.operator.TransitionOperator`).
-OPERATORS = ("auto", "matrix", "compact", "matrix-free")
+#: ``matrix`` the assembled CSR matrix (every solver); ``matrix-free`` nothing of
+#: size "transitions" stored: the per-car levels of
+#: :class:`markov.factored.FactoredOperator` for parallel update, rows
+#: regenerated per product (:class:`markov.operator.TransitionOperator`) for
+#: random-sequential update.
+OPERATORS = ("auto", "matrix", "matrix-free")
 
-#: ``auto`` keeps the assembled matrix (and every solver of markov.stationary)
-#: up to this many states when it fits.
-AUTO_MATRIX_STATES = 200_000
-
-# Peak bytes per nonzero of transition_matrix: value + int32 column in the CSR,
-# plus the unsummed int64 successor/column/value lists while assembling.
-_MATRIX_BYTES_PER_NONZERO = 40
-# Per state on the matrix path besides the nonzeros: key and about 62 vectors
-# (GMRES with restart 60 in markov.stationary).
-_MATRIX_BYTES_PER_STATE = 8 + 62 * 8
-# Methods of the matrix-free path, with the names of markov.stationary mapped on them.
-_MATRIX_FREE_METHODS = {"auto": "gmres", "iterative": "iterative", "gmres": "gmres",
-                        "bicgstab": "bicgstab", "power": "power"}
-
-
-def _gib(nbytes: float) -> str:
-    return f"{nbytes / 2**30:.3g} GiB"
+#: ``auto`` assembles the matrix (exact LU) up to this many states when it fits;
+#: above, matrix-free is faster (docs/performance.md).
+AUTO_MATRIX_STATES = 2_000
 
 
 def _ensure_operator(operator: str) -> str:
@@ -56,19 +46,16 @@ def _ensure_operator(operator: str) -> str:
     return operator
 
 
-def matrix_free_bytes_per_state(method: str = "gmres") -> float:
-    """Peak bytes per state of the matrix-free path (keys, operator, solver vectors).
+def _ensure_method(method: str) -> str:
+    if method not in METHODS:
+        raise InvalidParameterError(
+            f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    return method
 
-    Enumeration holds the sorted keys, the frontier and its successors (about
-    24 bytes per state); the solve holds the key index and per-thread
-    accumulators (:meth:`markov.operator.TransitionOperator.bytes_per_state`)
-    and the solver's work vectors (:func:`markov.large.solver_vectors`).
-    """
-    from .large import solver_vectors
-    from .operator import TransitionOperator
 
-    return TransitionOperator.bytes_per_state() + 8 * solver_vectors(method) + 16
-
+# the product method with the fewest work vectors: what the fit checks before
+# a method is chosen assume
+_LIGHTEST = "power"
 
 # the GoE automata behind the count grow fast with vmax (3.5 s at vmax = 6)
 _PREDICT_VMAX = 5
@@ -116,6 +103,8 @@ class RingChain:
         fewer states; exact for every translation-invariant observable).
     max_memory : float, optional
         Bytes allowed; default 75 % of physical memory.
+    operator : {"auto", "matrix", "matrix-free"}
+        How ``x -> x P`` is applied (:data:`OPERATORS`).
 
     Examples
     --------
@@ -125,6 +114,9 @@ class RingChain:
     >>> chain = RingChain(Ring(3, 2, 1, 0.5))
     >>> chain.n_states, round(chain.solution().flux, 12)
     (2, 0.166666666667)
+
+    A sweep over ``p`` reuses the states and the operator (they do not depend
+    on ``p``): ``chain.with_p(0.25).solution(x0=previous.pi)``.
     """
 
     def __init__(self, ring: Ring, lump: bool = True, max_memory: float | None = None,
@@ -132,31 +124,50 @@ class RingChain:
         self.ring = ring
         self.lump = lump
         self.max_memory = max_memory
+        self.limit = memory.memory_limit(max_memory)
         self.operator = _ensure_operator(operator)
         self.build_seconds = 0.0
 
+    def with_p(self, p) -> "RingChain":
+        """The same chain at another braking probability, sharing what is built.
+
+        The states, and the structure of the matrix-free operator, do not
+        depend on ``p``; the CSR matrix does and is rebuilt.
+        """
+        other = RingChain(self.ring.with_p(p), self.lump, self.max_memory, self.operator)
+        for name in ("keys", "transitions", "operator_kind", "aggregates"):
+            if name in self.__dict__:
+                other.__dict__[name] = self.__dict__[name]
+        if "transition_operator" in self.__dict__:
+            other.__dict__["transition_operator"] = self.transition_operator.with_p(p)
+        return other
+
+    def _matrix_free_bytes_per_state(self, method: str = "auto") -> float:
+        method = AUTO_OPERATOR_METHOD if method == "auto" else method
+        if self.ring.update == PARALLEL:
+            return memory.factored_bytes_per_state(method)
+        return memory.rows_bytes_per_state(method)
+
     def _guard_bytes_per_state(self) -> float:
-        # the BFS refuses as soon as the states found cost more than the limit
+        # the search refuses as soon as the states found cost more than the
+        # path needs with its lightest solver; solution() checks the method chosen
         if self.operator == "matrix":
-            return bytes_per_state(self.ring, self.lump)
-        return matrix_free_bytes_per_state()
+            return memory.matrix_bytes(1, memory.expected_row_length(self.ring), "eigs")
+        return self._matrix_free_bytes_per_state(_LIGHTEST)
 
     def _precheck(self) -> None:
         """Refuse before enumerating when a known lower bound already does not fit."""
         per_state = self._guard_bytes_per_state()
-        limit = _memory_limit(self.max_memory)
-        if count_all(self.ring) * per_state <= limit:
+        if count_all(self.ring) * per_state <= self.limit:
             return  # even every configuration would fit: no need to predict
         n = predicted_states(self.ring, self.lump)
         if n is None:
             return
-        if n * per_state > limit:
-            r = self.ring
-            raise StateSpaceTooLargeError(
-                f"the recurrent class has at least {n:,} states (L={r.length}, N={r.cars},"
-                f" vmax={r.vmax}, lump={self.lump}); at about {per_state:.0f} bytes per state"
-                f" that is {_gib(n * per_state)}, which exceeds the memory limit of"
-                f" {_gib(limit)}")
+        r = self.ring
+        memory.check_fits(
+            f"the recurrent class has at least {n:,} states (L={r.length}, N={r.cars},"
+            f" vmax={r.vmax}, lump={self.lump}); at about {per_state:.0f} bytes per state it",
+            n * per_state, self.limit)
 
     @cached_property
     def keys(self) -> np.ndarray:
@@ -178,80 +189,68 @@ class RingChain:
 
     @cached_property
     def transitions(self) -> int:
-        """Number of (state, successor) pairs generated per product: ``nnz`` before summing."""
+        """Number of (state, successor) pairs: the CSR matrix's ``nnz`` before summing."""
         if self.ring.trivial:
             return 1
         return int(successor_counts(self.ring, self.keys).sum())
 
-    def matrix_bytes(self) -> float:
-        """Estimated peak bytes of assembling and solving with the CSR matrix."""
-        return (self.transitions * _MATRIX_BYTES_PER_NONZERO
-                + self.n_states * _MATRIX_BYTES_PER_STATE)
+    def matrix_bytes(self, method: str = "auto") -> float:
+        """Estimated peak bytes of assembling the CSR matrix and solving with ``method``."""
+        method = "eigs" if method == "auto" else method
+        return memory.matrix_bytes(self.n_states, self.transitions, method)
 
-    def compact_bytes(self) -> float:
-        """Estimated peak bytes of the compact operator and the GMRES solve."""
-        from .operator import CompactOperator
-
-        return (self.transitions * CompactOperator.bytes_per_transition()
-                + self.n_states * (matrix_free_bytes_per_state() + 9))
-
-    def _refuse(self, kind: str, need: float, limit: float):
-        raise StateSpaceTooLargeError(
-            f"the {kind} needs about {_gib(need)} for {self.transitions:,}"
-            f" transitions on {self.n_states:,} states, which exceeds the memory limit of"
-            f" {_gib(limit)}; use operator='matrix-free'")
+    def matrix_free_bytes(self, method: str = "auto") -> float:
+        """Estimated peak bytes of the matrix-free operator and solving with ``method``."""
+        if "transition_operator" in self.__dict__:
+            op = self.transition_operator
+            return op.nbytes + 8 * self.n_states * memory.solver_vectors(
+                AUTO_OPERATOR_METHOD if method == "auto" else method)
+        return self.n_states * self._matrix_free_bytes_per_state(method)
 
     @cached_property
     def operator_kind(self) -> str:
-        """``"matrix"``, ``"compact"`` or ``"matrix-free"``: what :meth:`solution` uses.
+        """``"matrix"`` or ``"matrix-free"``: what :meth:`solution` uses.
 
-        ``auto`` resolves, in this order, to: the CSR matrix up to
-        :data:`AUTO_MATRIX_STATES` states if it fits in the memory limit (all
-        solvers available); the compact operator (parallel update) if it fits;
-        the CSR matrix (random-sequential update) if it fits; matrix-free.
+        ``auto`` resolves to the CSR matrix up to :data:`AUTO_MATRIX_STATES`
+        states if it fits in the memory limit, else to matrix-free if that
+        fits, else to the matrix if that fits.
 
         Raises
         ------
         StateSpaceTooLargeError
-            For ``operator="matrix"`` or ``"compact"`` when it would not fit.
+            When the requested path (or, for ``auto``, neither) would fit.
         """
-        limit = _memory_limit(self.max_memory)
         if self.ring.trivial:
             return "matrix"
-        if self.operator == "matrix-free":
-            return "matrix-free"
-        parallel = self.ring.update == PARALLEL
-        matrix_fits = self.matrix_bytes() <= limit
-        compact_fits = parallel and self.compact_bytes() <= limit
+        hint = "; try operator='matrix-free'"
         if self.operator == "matrix":
-            if not matrix_fits:
-                self._refuse("transition matrix", self.matrix_bytes(), limit)
+            memory.check_fits(f"the transition matrix ({self.transitions:,} transitions on"
+                              f" {self.n_states:,} states)", self.matrix_bytes(), self.limit,
+                              hint)
             return "matrix"
-        if self.operator == "compact":
-            if not parallel:
-                raise InvalidParameterError(
-                    "operator='compact' is for parallel update; random-sequential rows"
-                    " have several weights: use 'matrix' or 'matrix-free'")
-            if not compact_fits:
-                self._refuse("compact operator", self.compact_bytes(), limit)
-            return "compact"
-        if matrix_fits and self.n_states <= AUTO_MATRIX_STATES:
-            return "matrix"
-        if compact_fits:
-            return "compact"
-        return "matrix" if matrix_fits else "matrix-free"
+        free_fits = self.matrix_free_bytes(_LIGHTEST) <= self.limit
+        if self.operator == "auto":
+            matrix_fits = self.matrix_bytes() <= self.limit
+            if matrix_fits and (self.n_states <= AUTO_MATRIX_STATES or not free_fits):
+                return "matrix"
+        memory.check_fits(f"the matrix-free operator on {self.n_states:,} states",
+                          self.matrix_free_bytes(_LIGHTEST), self.limit)
+        return "matrix-free"
 
     @cached_property
     def transition_operator(self):
-        """``x -> x P`` without a CSR matrix: the compact operator when
-        :attr:`operator_kind` is ``"compact"``, else the matrix-free one."""
-        from .operator import CompactOperator, TransitionOperator
-
+        """``x -> x P`` without a CSR matrix: :class:`markov.factored.FactoredOperator`
+        for parallel update, :class:`markov.operator.TransitionOperator` otherwise."""
+        keys = self.keys
         start = time.perf_counter()
-        if self.operator_kind == "compact":
-            op = CompactOperator(self.ring, self.keys, self.lump)
+        if self.ring.update == PARALLEL:
+            from .factored import FactoredOperator
+
+            op = FactoredOperator(self.ring, keys, self.lump)
         else:
-            op = TransitionOperator(self.ring, self.keys, self.lump)
+            from .operator import TransitionOperator
+
+            op = TransitionOperator(self.ring, keys, self.lump)
         self.build_seconds += time.perf_counter() - start
         return op
 
@@ -264,33 +263,59 @@ class RingChain:
         self.build_seconds += time.perf_counter() - start
         return P
 
-    def solution(self, method: str = "auto", tol: float = 1e-13,
-                 x0: np.ndarray | None = None) -> "Solution":
-        """Solve for the stationary state.
+    @cached_property
+    def aggregates(self):
+        """Position configurations of the states (:func:`markov.aggregates.position_aggregates`)."""
+        from .aggregates import position_aggregates
 
-        On the matrix path see :func:`markov.stationary.stationary`; on the
-        matrix-free path :func:`markov.large.stationary_operator` (``auto``
-        means GMRES; ``iterative``, ``gmres``, ``bicgstab``, ``power`` are
-        accepted; ``direct`` and ``eigs`` need the matrix).  ``x0`` warm-starts
-        the matrix-free solvers, e.g. with ``pi`` at a nearby ``p`` on the same
-        keys (the keys do not depend on ``p``).
+        return position_aggregates(self.ring, self.keys, self.lump)
+
+    def solution(self, method: str = "auto", tol: float = DEFAULT_TOL,
+                 x0: np.ndarray | None = None) -> "Solution":
+        """Solve for the stationary state (:func:`markov.stationary.stationary`).
+
+        ``auto`` means LU or ARPACK on the matrix, and aggregation/disaggregation
+        (parallel update) or the BiCGSTAB -> GMRES -> power ladder
+        (random-sequential) matrix-free.  ``x0`` warm-starts the product
+        methods, e.g. with ``pi`` at a nearby ``p`` (:meth:`with_p`).
+
+        Raises
+        ------
+        InvalidParameterError
+            For a method the path does not offer (``direct``, ``eigs`` need the
+            matrix; ``aggregation`` needs parallel update).
+        StateSpaceTooLargeError
+            When the method's work vectors do not fit beside the operator.
         """
         _ensure_unique(self.ring)
-        if self.ring.trivial or self.operator_kind == "matrix":
-            result = stationary(self.matrix, method=method, tol=tol)
+        _ensure_method(method)
+        if method == "aggregation" and self.ring.update != PARALLEL:
+            raise InvalidParameterError(
+                "aggregation needs parallel update (the predecessors of a state share"
+                " their positions only there); use iterative, gmres, bicgstab or power")
+        matrix = self.ring.trivial or self.operator_kind == "matrix"
+        if not matrix and method in ("direct", "eigs") and self.operator == "auto" \
+                and self.matrix_bytes(method) <= self.limit:
+            matrix = True  # the method needs the matrix, and it fits
+        if not matrix and method in ("direct", "eigs"):
+            raise InvalidParameterError(
+                f"{method} needs the assembled matrix; the matrix-free path solves with"
+                f" {', '.join(('auto',) + PRODUCT_METHODS)}")
+        if not matrix:
+            memory.check_fits(f"solving with {method} on {self.n_states:,} states",
+                              self.matrix_free_bytes(method), self.limit,
+                              "; try method='aggregation', 'bicgstab' or 'power'")
+        P = self.matrix if matrix else self.transition_operator
+        parallel_free = not matrix and self.ring.update == PARALLEL
+        aggregates = self.aggregates if not self.ring.trivial and (
+            method == "aggregation" or (method == "auto" and parallel_free)) else None
+        result = stationary(P, method=method, tol=tol, x0=x0, aggregates=aggregates)
+        if matrix:
             return Solution(self.ring, self.keys, result, self.matrix.nnz, self.build_seconds,
                             self.lump, "matrix")
-        from .large import stationary_operator
-
-        if method not in _MATRIX_FREE_METHODS:
-            raise InvalidParameterError(
-                f"the matrix-free path solves with {', '.join(_MATRIX_FREE_METHODS)};"
-                f" got {method!r} (direct and eigs need the assembled matrix)")
-        op = self.transition_operator
-        result = stationary_operator(op, _MATRIX_FREE_METHODS[method], tol=tol, x0=x0)
-        stored = op.transitions if self.operator_kind == "compact" else None
-        return Solution(self.ring, self.keys, result, stored, self.build_seconds, self.lump,
-                        self.operator_kind)
+        levels = tuple(P.level_sizes) if parallel_free else None
+        return Solution(self.ring, self.keys, result, None, self.build_seconds, self.lump,
+                        "matrix-free", levels)
 
 
 @dataclass(frozen=True)
@@ -305,13 +330,15 @@ class Solution:
     result : StationaryResult
         The vector ``pi`` over ``keys`` and the solver diagnostics.
     nonzeros : int or None
-        Nonzeros of the transition matrix; for the compact operator its stored
-        transitions (duplicates not summed); ``None`` when matrix-free.
+        Nonzeros of the transition matrix; ``None`` when matrix-free.
     build_seconds : float
-        Time spent enumerating states and assembling the matrix.
+        Time spent enumerating states and building the matrix or operator.
     lumped : bool
-    operator : {"matrix", "compact", "matrix-free"}
+    operator : {"matrix", "matrix-free"}
         How ``x -> x P`` was applied.
+    level_sizes : tuple of int or None
+        Words per level ``0..N`` of the factored operator (parallel update,
+        matrix-free), else ``None``.
     """
 
     ring: Ring
@@ -321,6 +348,7 @@ class Solution:
     build_seconds: float
     lumped: bool
     operator: str = "matrix"
+    level_sizes: tuple | None = None
 
     @property
     def pi(self) -> np.ndarray:
@@ -371,6 +399,7 @@ class Solution:
             "length": r.length, "cars": r.cars, "vmax": r.vmax, "p": float(r.p),
             "update": r.update, "density": r.density, "lumped": self.lumped,
             "states": self.n_states, "nonzeros": self.nonzeros, "operator": self.operator,
+            "level_sizes": list(self.level_sizes) if self.level_sizes else None,
             "method": self.result.method,
             "residual": self.residual, "iterations": self.result.iterations,
             "flux": self.flux, "mean_velocity": self.mean_velocity,
@@ -381,7 +410,7 @@ class Solution:
         }
 
 
-def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = 1e-13,
+def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFAULT_TOL,
           max_memory: float | None = None, operator: str = "auto") -> Solution:
     """Exact stationary state of a NaSch ring.
 
@@ -389,17 +418,17 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = 1e-1
     ----------
     ring : Ring
         The system (validated on construction).
-    method : {"auto", "direct", "eigs", "iterative", "power"}
-        Stationary solver.
+    method : {"auto", "direct", "eigs", "iterative", "gmres", "bicgstab", "power", "aggregation"}
+        Stationary solver (:func:`markov.stationary.stationary`).
     lump : bool
         Lump rotations of the ring (default; exact for all reported observables).
     tol : float
         Residual target of iterative solvers.
     max_memory : float, optional
         Byte limit for the state space; refuse beyond it.
-    operator : {"auto", "matrix", "compact", "matrix-free"}
-        Assemble ``P``, store its pattern compactly, or apply it on the fly
-        (``auto``: see :attr:`RingChain.operator_kind`).
+    operator : {"auto", "matrix", "matrix-free"}
+        Assemble ``P`` or apply it without storing it (``auto``: see
+        :attr:`RingChain.operator_kind`).
 
     Returns
     -------

@@ -10,7 +10,9 @@ import click
 
 from symbolic.cli import approx, derive
 
+from .chain import OPERATORS
 from .cli_common import emit_json, handle_errors, quiet_option
+from .stationary import METHODS
 from .goe_cli import goe
 from .products_cli import plot, simulate, table
 
@@ -42,13 +44,12 @@ def main():
 @click.option("--p", "p", type=float, required=True, help="Braking probability, 0 < p < 1.")
 @click.option("--update", type=click.Choice(["parallel", "random-sequential"]),
               default="parallel", show_default=True, help="Update order.")
-@click.option("--method", type=click.Choice(["auto", "direct", "eigs", "iterative", "power",
-                                            "gmres", "bicgstab"]),
-              default="auto", show_default=True,
-              help="Stationary solver (matrix-free: auto/iterative/gmres, bicgstab, power).")
-@click.option("--operator", type=click.Choice(["auto", "matrix", "compact", "matrix-free"]),
-              default="auto", show_default=True,
-              help="Assemble P, store its pattern compactly, or apply x -> xP on the fly.")
+@click.option("--method", type=click.Choice(METHODS), default="auto", show_default=True,
+              help="Stationary solver; direct and eigs need the matrix, aggregation"
+                   " parallel update.")
+@click.option("--operator", type=click.Choice(OPERATORS), default="auto", show_default=True,
+              help="Assemble P, or apply x -> xP without storing it (parallel update:"
+                   " factored car by car).")
 @click.option("--tol", type=float, default=1e-13, show_default=True,
               help="Target ||pi P - pi||_1 of the iterative solvers.")
 @click.option("--no-lump", is_flag=True, help="Do not lump rotations of the ring.")
@@ -63,7 +64,7 @@ def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_mem
     \b
     Example:
       nasch solve --length 12 --cars 6 --vmax 2 --p 0.5
-      nasch solve -L 20 -N 10 --p 0.5 --operator matrix-free --tol 1e-10
+      nasch solve -L 22 -N 11 --p 0.5 --operator matrix-free --tol 1e-10
     """
     from .chain import solve as solve_ring
     from .model import Ring
@@ -81,6 +82,7 @@ def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_mem
     click.echo(f"  states {data['states']:,}{' (rotation classes)' if sol.lumped else ''},"
                + (f" nonzeros {data['nonzeros']:,}," if data["nonzeros"] is not None
                   else " matrix-free,")
+               + (f" level words {sum(sol.level_sizes):,}," if sol.level_sizes else "")
                + f" method {data['method']},"
                f" residual {data['residual']:.2e}, {data['seconds']:.3f} s")
     click.echo(f"  flux           {data['flux']:.15g}")

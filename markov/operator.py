@@ -1,52 +1,24 @@
-"""Matrix-free transition operator ``x -> x P`` of a NaSch ring chain.
+"""Canonical rotations, key ranking, and ``x -> x P`` of the random-sequential chain.
 
-For large rings the sparse matrix ``P`` does not fit in memory (about 128
-successors per state at ``L = 22``, ``vmax = 2``, half filling: 6e8
-nonzeros, 7 GB as CSR and about 24 GB while assembling it).
-:class:`TransitionOperator` applies ``x -> x P`` without storing it: a compiled
-kernel walks over the states, regenerates each row from the rules and scatters
-``x_i P_ij`` into the output.  :class:`CompactOperator` stores only the
-columns of the rows (4 bytes per transition, weights implied by the Gray-code
-order), for chains where that fits.
+* :func:`_canon` (and :func:`canonical_keys`): the smallest rotation of a key,
+  with bit rotations when ``B = vmax + 2`` is a power of two (``vmax = 2, 6``),
+  trying only the rotations that start a longest empty run; otherwise
+  :func:`markov.states.canonical`.
+* :class:`KeyIndex`: rank a key among the sorted states through a hash table.
+* :class:`TransitionOperator`: the row operator of the random-sequential
+  sub-step chain.  A sub-step has at most ``2 N + 1`` successors (an empty
+  cell drawn, or one car updated, braking or not), so the kernel regenerates
+  each row from the rules, canonicalises and ranks its successors and scatters
+  ``x_i P_ij``; nothing of size "transitions" is stored.  Parallel update is
+  applied by :class:`markov.factored.FactoredOperator`.
 
-What one row costs
-------------------
-The parallel step factorises into the deterministic R1+R2
-(:func:`markov.rules.deterministic_velocity`), one independent coin per car
-that can move (R3, :func:`markov.rules.randomize`) and the deterministic move
-R4.  The kernel does the deterministic part once per state (``O(L)``), then
-visits the ``2**k`` coin outcomes of the ``k`` movable cars in Gray-code order,
-so each successor key differs from the previous one by a single car's term and
-costs ``O(1)`` to form; with ``lump=True`` it is then mapped to its canonical
-rotation (bit rotations when ``B = vmax + 2`` is a power of two, e.g.
-``vmax = 2``, trying only the rotations that start a longest empty run) and
-ranked through a hash table (:class:`KeyIndex`, about one memory access
-instead of a binary search).  The
-weight of a successor depends only on the number ``c`` of braking cars,
-``p**c q**(k - c)``, read from a table.
+Memory: per state the key (8 bytes), the rank hash table (24 to 48, at most
+half full), one accumulator per thread (8 each), and the solver's work
+vectors (:mod:`markov.memory`).
 
-Why not the coin-by-coin product of operators?  Processing one car's coin at
-a time through intermediate arrays costs ``O(N)`` per state, but the
-intermediate configurations (some cars braked, others not) are not closed
-under rotation: they live in the *unlumped* space, ``L`` times larger than the
-lumped one.  At ``L = 22`` that is ``L * 1.05e8 = 2.3e9`` rank look-ups per
-product against ``4.8e6 * 128 = 6e8`` here, and 1e8-entry intermediate arrays
-instead of none; so on the lumped chain the per-successor kernel wins.
-Measured at ``L = 18`` (9.2e6 transitions, two threads) with the earlier
-bucket-and-bisect rank: forming the successors 0.07 s, canonical rotations
-0.10 s, ranking and scattering 0.21 s per product; the hash table ranks 4.4x
-faster than that bisection.
-
-Memory
-------
-Per state: the key (8 bytes), the rank hash table (24 to 48, at most half
-full), and one accumulator per thread (8 each); the solver adds its work
-vectors (:mod:`markov.large`).
-
-Parallelism
------------
-``numba`` ``prange`` over blocks of states; each thread scatters into its own
-accumulator row (no atomics, no races), the rows are summed at the end.
+Parallelism: ``numba`` ``prange`` over blocks of states; each thread scatters
+into its own accumulator row (no atomics, no races), the rows are summed at
+the end.
 """
 from __future__ import annotations
 
@@ -59,13 +31,13 @@ from numba import njit, prange
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
+from .errors import InvalidParameterError
 from .model import PARALLEL, Ring
 from .rules import deterministic_velocity, randomize
 from .states import base, canonical, check_encodable, powers
-from .transition import _cars_of, _deterministic_move, _gap, _term
+from .transition import _cars_of, _gap, _term
 
-__all__ = ["KeyIndex", "TransitionOperator", "CompactOperator", "rank_keys", "canonical_keys",
-           "successor_keys"]
+__all__ = ["KeyIndex", "TransitionOperator", "rank_keys", "canonical_keys", "successor_keys"]
 
 _BLOCK = 2048  # states per prange task: small enough to balance two threads
 
@@ -249,55 +221,6 @@ def canonical_keys(keys: np.ndarray, length: int, vmax: int) -> np.ndarray:
     return out
 
 
-@njit(cache=True)
-def _coin_weights(ncars, p):
-    """``w[k, c] = p**c (1 - p)**(k - c)``: weight of ``c`` brakes among ``k`` movers."""
-    w = np.zeros((ncars + 1, ncars + 1))
-    for k in range(ncars + 1):
-        for c in range(k + 1):
-            w[k, c] = p**c * (1.0 - p) ** (k - c)
-    return w
-
-
-@njit(cache=True, parallel=True)
-def _apply_parallel_update(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, lump,
-                           weights, bad):
-    """``acc[thread] += x_i P[i, :]`` for every state ``i`` (parallel update)."""
-    n = keys.shape[0]
-    nblocks = (n + _BLOCK - 1) // _BLOCK
-    for blk in prange(nblocks):
-        t = numba.get_thread_id()
-        pos = np.empty(length, np.int64)
-        vel = np.empty(length, np.int64)
-        deltas = np.empty(length, np.int64)
-        row = acc[t]
-        for i in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
-            xi = x[i]
-            if xi == 0.0:
-                continue  # early power iterates and warm starts have many zeros
-            moved, k = _deterministic_move(keys[i], length, vmax, pw, pos, vel, deltas)
-            # Gray code over the coins: step m flips the coin of car tz(m)
-            new = moved
-            gray = 0
-            c = 0
-            for m in range(1 << k):
-                if m > 0:
-                    j = _cttz(m)
-                    gray ^= 1 << j
-                    if (gray >> j) & 1:
-                        new += deltas[j]
-                        c += 1
-                    else:
-                        new -= deltas[j]
-                        c -= 1
-                target = _canon(new, length, pw, bits) if lump else new
-                col = _rank(tkeys, tvals, hbits, target)
-                if col < 0:
-                    bad[t] += 1
-                else:
-                    row[col] += xi * weights[k, c]
-
-
 @njit(cache=True, parallel=True)
 def _apply_random_sequential(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, lump,
                              p, bad):
@@ -337,11 +260,11 @@ def _apply_random_sequential(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw
 
 
 @njit(cache=True, parallel=True)
-def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, parallel_update, out):
-    """Successor keys of ``keys[i]`` into ``out[indptr[i]:indptr[i+1]]`` (the support only).
+def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, out):
+    """Random-sequential successors of ``keys[i]`` into ``out[indptr[i]:indptr[i+1]]``.
 
-    ``indptr`` comes from :func:`markov.transition.successor_counts`; the order
-    within a row is the Gray-code order (parallel) or car order (sequential).
+    ``indptr`` comes from :func:`markov.transition.successor_counts`; the
+    order within a row is the order of :func:`markov.transition.successors`.
     """
     n = keys.shape[0]
     nblocks = (n + _BLOCK - 1) // _BLOCK
@@ -349,43 +272,33 @@ def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, parallel_update,
     for blk in prange(nblocks):
         pos = np.empty(length, np.int64)
         vel = np.empty(length, np.int64)
-        deltas = np.empty(length, np.int64)
         for i in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
             key = keys[i]
             at = indptr[i]
-            if parallel_update:
-                new, k = _deterministic_move(key, length, vmax, pw, pos, vel, deltas)
-                gray = 0
-                for m in range(1 << k):
-                    if m > 0:
-                        j = _cttz(m)
-                        gray ^= 1 << j
-                        new += deltas[j] if (gray >> j) & 1 else -deltas[j]
+            ncar = _cars_of(key, length, b, pos, vel)
+            if ncar < length:
+                out[at] = key
+                at += 1
+            for j in range(ncar):
+                u = deterministic_velocity(vel[j], _gap(pos, ncar, j, length), vmax)
+                rest = key - (vel[j] + 1) * pw[pos[j]]
+                new = rest + _term(pos[j], u, length, pw)
+                out[at] = _canon(new, length, pw, bits) if lump else new
+                at += 1
+                if u > 0:
+                    new = rest + _term(pos[j], randomize(u), length, pw)
                     out[at] = _canon(new, length, pw, bits) if lump else new
                     at += 1
-            else:
-                ncar = _cars_of(key, length, b, pos, vel)
-                if ncar < length:
-                    out[at] = key
-                    at += 1
-                for j in range(ncar):
-                    u = deterministic_velocity(vel[j], _gap(pos, ncar, j, length), vmax)
-                    rest = key - (vel[j] + 1) * pw[pos[j]]
-                    new = rest + _term(pos[j], u, length, pw)
-                    out[at] = _canon(new, length, pw, bits) if lump else new
-                    at += 1
-                    if u > 0:
-                        new = rest + _term(pos[j], randomize(u), length, pw)
-                        out[at] = _canon(new, length, pw, bits) if lump else new
-                        at += 1
 
 
 def successor_keys(ring: Ring, keys: np.ndarray, lump: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Successor keys of every state (the support of its row of ``P``), threaded.
+    """Successor keys of every state of the random-sequential chain, threaded.
 
     Parameters
     ----------
     ring : Ring
+        Random-sequential update (parallel update:
+        :func:`markov.factored.frontier_successors`).
     keys : (n,) int64 array
     lump : bool
         Canonical rotations of the successors.
@@ -399,12 +312,14 @@ def successor_keys(ring: Ring, keys: np.ndarray, lump: bool) -> tuple[np.ndarray
     """
     from .transition import successor_counts
 
+    if ring.update == PARALLEL:
+        raise InvalidParameterError("successor_keys is for random-sequential update")
     keys = np.ascontiguousarray(keys, dtype=np.int64)
     indptr = np.zeros(keys.shape[0] + 1, dtype=np.int64)
     np.cumsum(successor_counts(ring, keys), out=indptr[1:])
     out = np.empty(int(indptr[-1]), dtype=np.int64)
     _successor_keys(keys, indptr, ring.length, ring.vmax, powers(ring.length, ring.vmax),
-                    _shift_bits(ring.vmax), bool(lump), ring.update == PARALLEL, out)
+                    _shift_bits(ring.vmax), bool(lump), out)
     return indptr, out
 
 
@@ -421,12 +336,12 @@ def _sum_rows(acc, out):
 
 
 class TransitionOperator:
-    """``x -> x P`` on the sorted state keys of a ring chain, without storing ``P``.
+    """``x -> x P`` of the random-sequential sub-step chain, without storing ``P``.
 
     Parameters
     ----------
     ring : Ring
-        The system; ``ring.p`` gives the weights.
+        The system (random-sequential update); ``ring.p`` gives the weights.
     keys : (n,) int64 array, sorted
         A closed set of (canonical, if ``lump``) keys, e.g. from
         :func:`markov.space.recurrent_keys`.
@@ -451,14 +366,18 @@ class TransitionOperator:
     Examples
     --------
     >>> from markov.space import recurrent_keys
-    >>> ring = Ring(3, 1, 1, 0.5)            # one car: 3 positions x v in {0, 1}
-    >>> keys = recurrent_keys(ring, lump=True)  # rotation classes: v = 0 and v = 1
+    >>> ring = Ring(3, 1, 1, 0.5, "random-sequential")   # one car: v = 0 or 1
+    >>> keys = recurrent_keys(ring, lump=True)
     >>> op = TransitionOperator(ring, keys, lump=True)
-    >>> op.apply(np.array([1.0, 0.0])).tolist()   # from v = 0: v' = 1 or 0, each 1/2
-    [0.5, 0.5]
+    >>> op.apply(np.array([1.0, 0.0])).tolist()   # the car is drawn with probability 1/3
+    [0.8333333333333333, 0.16666666666666666]
     """
 
     def __init__(self, ring: Ring, keys: np.ndarray, lump: bool):
+        if ring.update == PARALLEL:
+            raise InvalidParameterError(
+                "the row operator is for random-sequential update; parallel update is"
+                " applied by markov.factored.FactoredOperator")
         check_encodable(ring.length, ring.vmax)
         self.ring = ring
         self.lump = bool(lump)
@@ -470,19 +389,17 @@ class TransitionOperator:
         self._pw = powers(ring.length, ring.vmax)
         self._bits = _shift_bits(ring.vmax)
         self._acc = np.zeros((self.threads, self.n))
-        self._weights = _coin_weights(ring.cars, float(ring.p))
         self._bad = np.zeros(self.threads, dtype=np.int64)
         self.products = 0
         self.seconds = 0.0
 
-    @staticmethod
-    def bytes_per_state() -> int:
-        """Bytes per state held by the operator: key, hash table (worst case), thread rows."""
-        return 8 + 48 + 8 * max(2, numba.get_num_threads())
-
     @property
     def nbytes(self) -> int:
         return self.index.nbytes + self._acc.nbytes
+
+    def with_p(self, p: float) -> "TransitionOperator":
+        """The same states with another braking probability."""
+        return TransitionOperator(self.ring.with_p(p), self.keys, self.lump)
 
     def apply(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Return ``x P`` (a row vector times the transition matrix).
@@ -504,14 +421,9 @@ class TransitionOperator:
             self.threads = numba.get_num_threads()
             self._acc = np.zeros((self.threads, self.n))
             self._bad = np.zeros(self.threads, dtype=np.int64)
-        if r.update == PARALLEL:
-            _apply_parallel_update(idx.keys, idx.tkeys, idx.tvals, np.int64(idx.hbits),
-                                   x, self._acc, r.length, r.vmax, self._pw, self._bits,
-                                   self.lump, self._weights, self._bad)
-        else:
-            _apply_random_sequential(idx.keys, idx.tkeys, idx.tvals, np.int64(idx.hbits), x,
-                                     self._acc, r.length, r.vmax, self._pw, self._bits,
-                                     self.lump, float(r.p), self._bad)
+        _apply_random_sequential(idx.keys, idx.tkeys, idx.tvals, np.int64(idx.hbits), x,
+                                 self._acc, r.length, r.vmax, self._pw, self._bits,
+                                 self.lump, float(r.p), self._bad)
         _sum_rows(self._acc, out)
         self.products += 1
         self.seconds += time.perf_counter() - start
@@ -527,146 +439,3 @@ class TransitionOperator:
     def linear_operator(self) -> spla.LinearOperator:
         """``x -> P^T x`` (column convention) as a scipy ``LinearOperator``."""
         return spla.LinearOperator(self.shape, matvec=self.apply, dtype=np.float64)
-
-
-@njit(cache=True, parallel=True)
-def _compact_columns(keys, tkeys, tvals, hbits, indptr, length, vmax, pw, bits, lump,
-                     movers, cols, bad):
-    """Ranks of the successors of every state, Gray-code order, into ``cols`` (int32)."""
-    n = keys.shape[0]
-    nblocks = (n + _BLOCK - 1) // _BLOCK
-    for blk in prange(nblocks):
-        t = numba.get_thread_id()
-        pos = np.empty(length, np.int64)
-        vel = np.empty(length, np.int64)
-        deltas = np.empty(length, np.int64)
-        for i in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
-            new, k = _deterministic_move(keys[i], length, vmax, pw, pos, vel, deltas)
-            movers[i] = k
-            at = indptr[i]
-            gray = 0
-            for m in range(1 << k):
-                if m > 0:
-                    j = _cttz(m)
-                    gray ^= 1 << j
-                    new += deltas[j] if (gray >> j) & 1 else -deltas[j]
-                col = _rank(tkeys, tvals, hbits, _canon(new, length, pw, bits) if lump
-                            else new)
-                if col < 0:
-                    bad[t] += 1
-                cols[at] = col
-                at += 1
-
-
-@njit(cache=True, parallel=True)
-def _apply_compact(indptr, movers, cols, x, acc, weights):
-    """``acc[thread] += x_i P[i, :]`` from the stored columns; weights by brake count."""
-    n = x.shape[0]
-    nblocks = (n + _BLOCK - 1) // _BLOCK
-    for blk in prange(nblocks):
-        row = acc[numba.get_thread_id()]
-        for i in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
-            xi = x[i]
-            if xi == 0.0:
-                continue
-            k = movers[i]
-            w = weights[k]
-            at = indptr[i]
-            gray = 0
-            c = 0
-            for m in range(1 << k):
-                if m > 0:  # the Gray code of m flips coin tz(m): c moves by one
-                    j = _cttz(m)
-                    gray ^= 1 << j
-                    c += 1 if (gray >> j) & 1 else -1
-                row[cols[at + m]] += xi * w[c]
-
-
-class CompactOperator(TransitionOperator):
-    """``x -> x P`` from the stored sparsity pattern, 4 bytes per transition (parallel update).
-
-    A row of the parallel-update chain lists the ``2**k`` coin outcomes of its
-    ``k`` movable cars.  Stored in Gray-code order, the number of braking cars
-    of the ``m``-th entry is the popcount of ``m ^ (m >> 1)``, so the weight
-    ``p**c q**(k - c)`` needs no storage: only the int32 column of each
-    transition, ``k`` per state (1 byte) and the row offsets (8 bytes).  That
-    is 4 bytes per transition instead of the 12 of a CSR matrix (and the 40 of
-    assembling it), with no summing of duplicates; the pattern does not depend
-    on ``p`` (:meth:`with_p` reuses it).  Building it costs one pass of the
-    matrix-free kernel; each product then reads the columns instead of
-    regenerating and ranking the successors.
-
-    Parameters
-    ----------
-    ring, keys, lump
-        As for :class:`TransitionOperator`; ``ring.update`` must be parallel.
-
-    Examples
-    --------
-    >>> from markov.space import recurrent_keys
-    >>> ring = Ring(6, 3, 2, 0.5)
-    >>> keys = recurrent_keys(ring)
-    >>> x = np.full(len(keys), 1 / len(keys))
-    >>> bool(np.allclose(CompactOperator(ring, keys, True).apply(x),
-    ...                  TransitionOperator(ring, keys, True).apply(x)))
-    True
-    """
-
-    def __init__(self, ring: Ring, keys: np.ndarray, lump: bool, _pattern=None):
-        if ring.update != PARALLEL:
-            raise ValueError("the compact operator is for parallel update only")
-        super().__init__(ring, keys, lump)
-        if _pattern is not None:
-            self.indptr, self.movers, self.cols = _pattern
-            return
-        from .transition import successor_counts
-
-        counts = successor_counts(ring, self.keys)
-        self.indptr = np.zeros(self.n + 1, dtype=np.int64)
-        np.cumsum(counts, out=self.indptr[1:])
-        if self.n >= 2**31:
-            raise ValueError("the compact operator indexes states with int32")
-        self.movers = np.empty(self.n, dtype=np.int64)
-        self.cols = np.empty(int(self.indptr[-1]), dtype=np.int32)
-        idx = self.index
-        self._bad[:] = 0
-        _compact_columns(idx.keys, idx.tkeys, idx.tvals, np.int64(idx.hbits),
-                         self.indptr, ring.length, ring.vmax, self._pw, self._bits, self.lump,
-                         self.movers, self.cols, self._bad)
-        self.movers = self.movers.astype(np.uint8)
-        if self._bad.sum():
-            raise RuntimeError(f"{int(self._bad.sum())} successors lie outside the state set:"
-                               " it is not closed")
-
-    @staticmethod
-    def bytes_per_transition() -> int:
-        return 4
-
-    @property
-    def transitions(self) -> int:
-        return int(self.cols.shape[0])
-
-    @property
-    def nbytes(self) -> int:
-        return (super().nbytes + self.cols.nbytes + self.indptr.nbytes + self.movers.nbytes)
-
-    def with_p(self, p: float) -> "CompactOperator":
-        """The same pattern with another braking probability (no rebuild)."""
-        return CompactOperator(self.ring.with_p(p), self.keys, self.lump,
-                               _pattern=(self.indptr, self.movers, self.cols))
-
-    def apply(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """Return ``x P``."""
-        x = np.ascontiguousarray(x, dtype=np.float64)
-        if x.shape != (self.n,):
-            raise ValueError(f"x must have shape ({self.n},), got {x.shape}")
-        out = np.empty(self.n) if out is None else out
-        start = time.perf_counter()
-        if self.threads != numba.get_num_threads():
-            self.threads = numba.get_num_threads()
-            self._acc = np.zeros((self.threads, self.n))
-        _apply_compact(self.indptr, self.movers, self.cols, x, self._acc, self._weights)
-        _sum_rows(self._acc, out)
-        self.products += 1
-        self.seconds += time.perf_counter() - start
-        return out

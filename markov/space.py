@@ -13,50 +13,21 @@ from __future__ import annotations
 
 import itertools
 import math
-import os
 
 import numpy as np
 from numba import njit
 
 from .errors import StateSpaceTooLargeError
+from .memory import gib, memory_limit, search_bytes_per_state
 from .model import PARALLEL, Ring
 from .progress import progress_bar
-from .states import canonical, check_encodable, compact_jam_key, encode, powers
-from .operator import successor_keys
+from .states import canonical, check_encodable, compact_jam_key, encode, powers, unique_keys
 
-__all__ = [
-    "recurrent_keys",
-    "all_keys",
-    "count_all",
-    "available_memory",
-    "bytes_per_state",
-    "DEFAULT_MEMORY_FRACTION",
-]
+__all__ = ["recurrent_keys", "all_keys", "count_all"]
 
-DEFAULT_MEMORY_FRACTION = 0.75
-_CHUNK = 1 << 16
-
-
-def available_memory() -> int:
-    """Physical memory of this machine in bytes."""
-    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-
-
-def bytes_per_state(ring: Ring, lump: bool) -> float:
-    """Rough peak bytes per state of building and solving the chain.
-
-    Keys (8), the stationary vector and solver work vectors (about 12 x 8),
-    and the CSR row: ``(8 value + 4 index)`` bytes per nonzero plus the
-    unsummed successor list during assembly (``8 + 8 + 8``).  The mean row
-    length is bounded by ``2**(N/2)`` for parallel update (about half the cars
-    can move) and ``2N + 1`` for random-sequential update.
-    """
-    row = min(2.0 ** (ring.cars / 2), 4096.0) if ring.update == PARALLEL else 2 * ring.cars + 1
-    return 8 + 12 * 8 + row * (12 + 24)
-
-
-def _memory_limit(max_memory: float | None) -> float:
-    return DEFAULT_MEMORY_FRACTION * available_memory() if max_memory is None else max_memory
+# States per call of the successor kernels: bounds the frontier's transient
+# arrays (words of every level, successor keys) to a few hundred MB.
+_CHUNK = 1 << 22
 
 
 def count_all(ring: Ring) -> int:
@@ -76,6 +47,17 @@ def _not_in(sorted_set: np.ndarray, candidates: np.ndarray) -> np.ndarray:
     return candidates[sorted_set[idx] != candidates]
 
 
+def _successor_set(ring: Ring, frontier: np.ndarray, lump: bool) -> np.ndarray:
+    """Sorted distinct successors of the frontier states (the support of ``x P``)."""
+    if ring.update == PARALLEL:
+        from .factored import frontier_successors
+
+        return frontier_successors(ring, frontier, lump)
+    from .operator import successor_keys
+
+    return unique_keys(successor_keys(ring, frontier, lump)[1])
+
+
 def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = None,
                    per_state: float | None = None) -> np.ndarray:
     """Sorted keys of the recurrent class of the chain (``0 < p < 1`` support).
@@ -89,8 +71,8 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
     max_memory : float, optional
         Bytes allowed for the whole solve; default 75 % of physical memory.
     per_state : float, optional
-        Bytes per state the caller will need (default :func:`bytes_per_state`,
-        i.e. an assembled matrix); the matrix-free path passes its smaller figure.
+        Bytes per state the caller will need (:mod:`markov.memory`); default
+        and at least the search's own :func:`markov.memory.search_bytes_per_state`.
 
     Returns
     -------
@@ -99,8 +81,14 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
     Raises
     ------
     StateSpaceTooLargeError
-        As soon as the states found so far, times :func:`bytes_per_state`,
-        exceed the limit.
+        As soon as the states found so far, times ``per_state``, exceed the limit.
+
+    Notes
+    -----
+    Breadth-first search from the compact jam over the support of the
+    successor relation.  Parallel update walks the per-car levels of
+    :func:`markov.factored.frontier_successors` (successors merged at every
+    level, about three words per state) instead of ``2**k`` keys per state.
 
     Examples
     --------
@@ -109,8 +97,8 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
     6
     """
     check_encodable(ring.length, ring.vmax)
-    limit = _memory_limit(max_memory)
-    per_state = bytes_per_state(ring, lump) if per_state is None else per_state
+    limit = memory_limit(max_memory)
+    per_state = max(search_bytes_per_state(), per_state or 0.0)
     pw = powers(ring.length, ring.vmax)
     start = compact_jam_key(ring.length, ring.cars, ring.vmax)
     if ring.cars == 1:
@@ -125,12 +113,10 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
     frontier = visited
     with progress_bar(None, "recurrent class", "state") as bar:
         while frontier.size:
-            found = []
-            for lo in range(0, frontier.size, _CHUNK):
-                # threaded kernel with the Gray-code rows and bit-rotation canonical form
-                _, succ = successor_keys(ring, frontier[lo:lo + _CHUNK], lump)
-                found.append(np.unique(succ))
-            new = _not_in(visited, np.unique(np.concatenate(found)))
+            found = [_successor_set(ring, frontier[lo:lo + _CHUNK], lump)
+                     for lo in range(0, frontier.size, _CHUNK)]
+            new = _not_in(visited, found[0] if len(found) == 1
+                          else unique_keys(np.concatenate(found)))
             visited = _merge(visited, new)
             frontier = new
             bar.update(new.size)
@@ -139,7 +125,7 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
                     f"the recurrent class has more than {visited.size:,} states"
                     f" (L={ring.length}, N={ring.cars}, vmax={ring.vmax}, lump={lump});"
                     f" at about {per_state:.0f} bytes per state that exceeds the memory"
-                    f" limit of {limit / 2**30:.1f} GiB")
+                    f" limit of {gib(limit)}")
     return visited
 
 
@@ -159,11 +145,11 @@ def all_keys(ring: Ring, lump: bool = False, max_memory: float | None = None) ->
     """
     check_encodable(ring.length, ring.vmax)
     total = count_all(ring)
-    limit = _memory_limit(max_memory)
+    limit = memory_limit(max_memory)
     if total * 24 > limit:
         raise StateSpaceTooLargeError(
             f"{total:,} configurations (L={ring.length}, N={ring.cars}, vmax={ring.vmax})"
-            f" need about {total * 24 / 2**30:.1f} GiB, over the limit of {limit / 2**30:.1f} GiB")
+            f" need about {gib(total * 24)}, over the limit of {gib(limit)}")
     pw = powers(ring.length, ring.vmax)
     if ring.cars == 0:
         return np.zeros(1, dtype=np.int64)
@@ -175,4 +161,4 @@ def all_keys(ring: Ring, lump: bool = False, max_memory: float | None = None) ->
         else (place_pw[:, None, :] * digits[None, :, :]).sum(axis=2).ravel()
     if lump:
         keys = _canonicalise(keys, ring.length, pw)
-    return np.unique(keys)
+    return unique_keys(keys)

@@ -20,6 +20,10 @@ Methods (:data:`SOLVERS`)
 ``gmres``, ``bicgstab``  one Krylov method alone (see :func:`iterate`).
 ``power``     power iteration ``pi <- pi P`` (the chain is aperiodic: the
               compact jam has a self-loop), stopped at the residual tolerance.
+``aggregation`` two-level iterative aggregation/disaggregation
+              (Koury-McAllister-Stewart) over a partition of the states given
+              as :class:`Aggregates` (for the NaSch chain: the position
+              configurations, :func:`markov.aggregates.position_aggregates`).
 ``auto``      ``direct`` up to :data:`DIRECT_LIMIT` states, else ``eigs``
               (robust and fastest in ``make bench``), ``iterative`` if ARPACK
               does not converge.
@@ -36,13 +40,16 @@ from scipy.sparse.csgraph import connected_components
 
 from .errors import ConvergenceError, InvalidParameterError, NoUniqueStationaryStateError
 
-__all__ = ["SOLVERS", "METHODS", "PRODUCT_METHODS", "DIRECT_LIMIT", "StationaryResult",
-           "stationary", "iterate", "residual", "check_irreducible"]
+__all__ = ["SOLVERS", "METHODS", "PRODUCT_METHODS", "DIRECT_LIMIT", "GMRES_RESTART",
+           "Aggregates", "StationaryResult", "stationary", "iterate", "residual",
+           "check_irreducible"]
 
-SOLVERS = ("direct", "eigs", "iterative", "gmres", "bicgstab", "power")
+SOLVERS = ("direct", "eigs", "iterative", "gmres", "bicgstab", "power", "aggregation")
 METHODS = ("auto",) + SOLVERS
 DIRECT_LIMIT = 1_000
 DENSE_LIMIT = 3_000
+#: Krylov basis size of GMRES (its memory: GMRES_RESTART + 6 vectors).
+GMRES_RESTART = 60
 
 
 @dataclass(frozen=True)
@@ -123,7 +130,7 @@ def _power_steps(product, x, tol, maxiter, count):
     return x, res
 
 
-def _krylov_steps(product, n, x, tol, maxiter, method, count, restart=60):
+def _krylov_steps(product, n, x, tol, maxiter, method, count, restart=GMRES_RESTART):
     """BiCGSTAB or GMRES(restart) on ``(I - P^T + 1 1^T / n) pi = 1 / n``.
 
     The system is non-singular for an irreducible chain and its solution sums
@@ -158,12 +165,94 @@ def _krylov_steps(product, n, x, tol, maxiter, method, count, restart=60):
     return x, res
 
 
-#: Methods that need only the product ``x -> x P`` (:func:`iterate`).
-PRODUCT_METHODS = ("iterative", "gmres", "bicgstab", "power")
+@dataclass(frozen=True)
+class Aggregates:
+    """A partition of the states for aggregation/disaggregation.
+
+    Attributes
+    ----------
+    group : (n,) int32 array
+        The aggregate of each state, ``0 .. count - 1``.
+    source : (n,) int32 array
+        The aggregate that every transition *into* each state comes from.
+        Such a map exists when the aggregates are the position
+        configurations of a parallel update: R4 is one-to-one given the
+        velocities, so the predecessors of a state all have the positions
+        ``x - v``.  It makes the coarse matrix a by-product of ``x P``.
+    count : int
+        Number of aggregates.
+    """
+
+    group: np.ndarray
+    source: np.ndarray
+    count: int
+
+
+def _coarse_pattern(agg: Aggregates):
+    """Entries ``(source, group)`` of the coarse matrix and each state's entry."""
+    code = agg.source.astype(np.int64) * agg.count + agg.group
+    order = np.argsort(code, kind="stable")
+    sorted_code = code[order]
+    first = np.concatenate(([True], sorted_code[1:] != sorted_code[:-1]))
+    entry = np.empty(code.size, dtype=np.int64)
+    entry[order] = np.cumsum(first) - 1
+    pairs = sorted_code[first]
+    return pairs // agg.count, pairs % agg.count, entry
+
+
+def _aggregation_steps(product, x, tol, maxiter, count, agg: Aggregates):
+    """Iterative aggregation/disaggregation with one power step per cycle.
+
+    With ``y = x P``: the coarse matrix is ``A[I, J] = C[I, J] / X_I``,
+    ``C[I, J]`` = the mass of ``y`` on the states of ``J`` entered from ``I``
+    (each state's entry is fixed by ``agg.source``), ``X_I = sum_J C[I, J]``
+    = the mass of ``x`` on ``I``.  Its stationary vector ``xi`` (a Krylov
+    solve on ``count`` unknowns, warm-started from the previous cycle, to a
+    tenth of the current residual) rescales each aggregate:
+    ``z = x xi_I / X_I`` (disaggregation); and ``z P = y xi_{source} /
+    X_{source}`` because every product term stays in its source aggregate, so
+    one product per cycle gives both the coarse matrix and the smoothing step.
+    The iterate is accepted on a genuine product ``z P``.
+    """
+    import scipy.sparse as sp
+
+    rows, cols, entry = _coarse_pattern(agg)
+    m = agg.count
+    xi = None
+    res = np.inf
+    while count[0] < maxiter:
+        y = product(x)
+        C = np.bincount(entry, weights=y, minlength=rows.size)
+        X = np.maximum(np.bincount(rows, weights=C, minlength=m), np.finfo(float).tiny)
+        AT = sp.csr_array((C / X[rows], (cols, rows)), shape=(m, m))
+        if m <= DIRECT_LIMIT:
+            xi = _normalise(_direct(AT.T.tocsr(), tol, maxiter)[0])
+        else:
+            coarse_tol = max(0.01 * tol, 0.1 * min(res, 1.0))
+            xi, _, _, _ = iterate(lambda v: AT @ v, m, "iterative", coarse_tol, 100_000,
+                                  X if xi is None else xi)
+        scale = xi / X
+        z = _normalise(x * scale[agg.group])
+        zP = y * scale[agg.source]
+        if float(np.abs(zP - z).sum()) <= tol and count[0] < maxiter:
+            zP = product(z)  # accept on a genuine product, not on the rescaled one
+            res = float(np.abs(zP - z).sum())
+            if res <= tol:
+                return z, res
+        else:
+            res = float(np.abs(zP - z).sum())
+        x = _normalise(zP)
+    return x, res
+
+
+#: Methods that need only the product ``x -> x P`` (:func:`iterate`); ``aggregation``
+#: needs :class:`Aggregates` besides.
+PRODUCT_METHODS = ("iterative", "gmres", "bicgstab", "power", "aggregation")
 
 
 def iterate(product, n: int, method: str = "iterative", tol: float = 1e-13,
-            maxiter: int = 100_000, x0: np.ndarray | None = None):
+            maxiter: int = 100_000, x0: np.ndarray | None = None,
+            aggregates: Aggregates | None = None):
     """Stationary vector from the product ``x -> x P`` alone.
 
     Parameters
@@ -184,6 +273,8 @@ def iterate(product, n: int, method: str = "iterative", tol: float = 1e-13,
         Cap on the number of products (all stages together).
     x0 : (n,) array, optional
         Start vector (normalised here); default uniform.
+    aggregates : Aggregates, optional
+        The partition ``aggregation`` needs.
 
     Returns
     -------
@@ -206,11 +297,15 @@ def iterate(product, n: int, method: str = "iterative", tol: float = 1e-13,
         count[0] += 1
         return product(v)
 
+    if method == "aggregation" and aggregates is None:
+        raise InvalidParameterError("aggregation needs the aggregates of the states")
     stages = ("bicgstab", "gmres", "power") if method == "iterative" else (method,)
     res = np.inf
     for stage in stages:
         if stage == "power":
             y, r = _power_steps(counted, x, tol, maxiter, count)
+        elif stage == "aggregation":
+            y, r = _aggregation_steps(counted, x, tol, maxiter, count, aggregates)
         else:
             y, r = _krylov_steps(counted, n, x, tol, maxiter, stage, count)
         if y is not None and r <= res:
@@ -220,46 +315,63 @@ def iterate(product, n: int, method: str = "iterative", tol: float = 1e-13,
     return x, res, count[0], stage
 
 
-def _by_product(method):
-    def solve(P, tol, maxiter):
+def _product_of(P):
+    """``x -> x P`` and ``n`` of a CSR matrix or of an operator with ``apply``/``n``."""
+    if sp.issparse(P):
         PT = P.T.tocsr()
-        x, res, products, stage = iterate(lambda v: PT @ v, P.shape[0], method, tol, maxiter)
-        if res > tol:
-            raise ConvergenceError(f"{method} reached ||pi P - pi||_1 = {res:.3e} after"
-                                   f" {products} products, not {tol:g}", products, res, x)
-        return x, products, stage
-
-    return solve
+        return (lambda v: PT @ v), P.shape[0]
+    return P.apply, P.n
 
 
-_SOLVE = {"direct": _direct, "eigs": _eigs,
-          **{name: _by_product(name) for name in PRODUCT_METHODS}}
+#: Default target of ``||pi P - pi||_1`` and cap on products, for every path.
+DEFAULT_TOL = 1e-13
+DEFAULT_MAXITER = 20_000
+#: What ``auto`` runs on an operator, chosen by ``make bench-large``
+#: (docs/performance.md): aggregation when the aggregates are known, else the
+#: ladder BiCGSTAB -> GMRES -> power.
+AUTO_OPERATOR_METHOD = "aggregation"
 
 
-def stationary(P: sp.csr_array, method: str = "auto", tol: float = 1e-13,
-               maxiter: int = 100_000, check: bool = True) -> StationaryResult:
+def stationary(P, method: str = "auto", tol: float = DEFAULT_TOL,
+               maxiter: int = DEFAULT_MAXITER, check: bool = True,
+               x0: np.ndarray | None = None,
+               aggregates: Aggregates | None = None) -> StationaryResult:
     """Stationary distribution ``pi = pi P`` of an irreducible stochastic matrix.
 
     Parameters
     ----------
-    P : (n, n) csr_array
-        Row-stochastic matrix.
-    method : {"auto", "direct", "eigs", "iterative", "power"}
-        Solver (see the module docstring).
+    P : (n, n) sparse matrix or operator
+        Row-stochastic matrix, or an operator with ``n`` and ``apply(x) -> x P``
+        (:class:`markov.factored.FactoredOperator`,
+        :class:`markov.operator.TransitionOperator`): then only the methods of
+        :data:`PRODUCT_METHODS` apply.
+    method : {"auto", "direct", "eigs", "iterative", "gmres", "bicgstab", "power", "aggregation"}
+        Solver (see the module docstring).  ``auto``: ``direct`` up to
+        :data:`DIRECT_LIMIT` states, else ``eigs`` (``iterative`` if ARPACK
+        fails) on a matrix; :data:`AUTO_OPERATOR_METHOD` on an operator.
     tol : float
-        Target for the iterative solvers; the residual ``||pi P - pi||_1`` is
-        always measured and reported, whatever the method.
+        Target of ``||pi P - pi||_1`` for the iterative solvers; the residual
+        of the normalised result is always measured and reported.
     maxiter : int
-        Iteration cap for ``eigs``, ``iterative`` and ``power``.
+        Cap on iterations (``eigs``) or products ``x P`` (the others).
     check : bool
-        Verify irreducibility first (strongly connected components).
+        Verify irreducibility first (strongly connected components; matrices only).
+    x0 : (n,) array, optional
+        Warm start of the product methods (e.g. ``pi`` at a nearby ``p``).
+    aggregates : Aggregates, optional
+        The partition ``aggregation`` needs.
 
     Returns
     -------
     StationaryResult
+        ``iterations`` counts products ``x P`` for the product methods,
+        including the one that measures the final residual.
 
     Raises
     ------
+    InvalidParameterError
+        For an unknown method, a matrix-only method on an operator, or a bad
+        ``tol`` / ``maxiter``.
     NoUniqueStationaryStateError
         If ``P`` is reducible.
     ConvergenceError
@@ -278,27 +390,52 @@ def stationary(P: sp.csr_array, method: str = "auto", tol: float = 1e-13,
     """
     if method not in METHODS:
         raise InvalidParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-    n = P.shape[0]
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol < 1:
+        raise InvalidParameterError(f"tol must be a number in (0, 1), got {tol!r}")
+    if isinstance(maxiter, bool) or not isinstance(maxiter, (int, np.integer)) or maxiter < 1:
+        raise InvalidParameterError(f"maxiter must be a positive integer, got {maxiter!r}")
+    matrix = sp.issparse(P)
+    if not matrix and method in ("direct", "eigs"):
+        raise InvalidParameterError(
+            f"{method} needs the assembled matrix; an operator is solved with"
+            f" {', '.join(('auto',) + PRODUCT_METHODS)}")
+    product, n = _product_of(P)
     auto = method == "auto"
     start = time.perf_counter()
     if n == 1:
         return StationaryResult(np.ones(1), "direct" if auto else method, 0.0, 0, 0.0)
-    if check:
+    if matrix and check:
         check_irreducible(P)
-    if method == "auto":
-        method = "direct" if n <= DIRECT_LIMIT else "eigs"
-    try:
-        x, iterations, *stage = _SOLVE[method](P, tol, maxiter)
-    except spla.ArpackNoConvergence as exc:
-        if not auto:
-            x = _normalise(exc.eigenvectors[:, 0]) if exc.eigenvectors.size else None
-            raise ConvergenceError(f"ARPACK did not converge in {maxiter} iterations",
-                                   maxiter, residual(P, x) if x is not None else np.inf,
-                                   x) from None
-        x, iterations, *stage = _SOLVE["iterative"](P, tol, maxiter)
-        method = "iterative"
-    if stage and stage[0] != method:
-        method = f"{method}:{stage[0]}"
-    pi = _normalise(x)
-    seconds = time.perf_counter() - start
-    return StationaryResult(pi, method, residual(P, pi), iterations, seconds)
+    if auto:
+        if matrix:
+            method = "direct" if n <= DIRECT_LIMIT else "eigs"
+        else:
+            method = AUTO_OPERATOR_METHOD if aggregates is not None else "iterative"
+    if method in ("direct", "eigs"):
+        try:
+            x, iterations = (_direct if method == "direct" else _eigs)(P, tol, maxiter)
+        except spla.ArpackNoConvergence as exc:
+            if not auto:
+                x = _normalise(exc.eigenvectors[:, 0]) if exc.eigenvectors.size else None
+                raise ConvergenceError(f"ARPACK did not converge in {maxiter} iterations",
+                                       maxiter, residual(P, x) if x is not None else np.inf,
+                                       x) from None
+            method = "iterative"
+        else:
+            pi = _normalise(x)
+            return StationaryResult(pi, method, residual(P, pi), iterations,
+                                    time.perf_counter() - start)
+    from .progress import progress_bar
+
+    with progress_bar(None, f"{method} (x P products)", "product") as bar:
+
+        def counted(v):
+            bar.update(1)
+            return product(v)
+
+        x, res, products, stage = iterate(counted, n, method, tol, maxiter, x0, aggregates)
+    if not res <= tol:
+        raise ConvergenceError(f"{method} reached ||pi P - pi||_1 = {res:.3e} after"
+                               f" {products} products, not {tol:g}", products, res, x)
+    name = method if stage == method else f"{method}:{stage}"
+    return StationaryResult(x, name, res, products, time.perf_counter() - start)

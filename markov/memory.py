@@ -1,0 +1,147 @@
+"""The memory model of the exact solver: bytes per state of each path and method.
+
+Every figure the memory guard and the choice of path use lives here, so that
+the refusal before enumeration (:func:`markov.space.recurrent_keys`), the
+choice of ``operator="auto"`` (:attr:`markov.chain.RingChain.operator_kind`)
+and ``docs/performance.md`` agree.  Figures are peak bytes of float64 vectors,
+int32/int64 index arrays and the state keys; the Python interpreter and the
+libraries (about 170 MB) come on top.
+
+Paths
+-----
+``matrix``
+    the assembled CSR matrix: 12 bytes per stored nonzero, 40 while
+    assembling (unsummed int64 successor, column and value lists).
+``factored``
+    :class:`markov.factored.FactoredOperator` (parallel update): the level
+    links (two int32 per word; words summed over the levels are 1.5 to 5.5
+    times the states, :data:`LEVEL_WORDS_PER_STATE` is the bound used before
+    the levels exist), the level-0 permutation and offsets, two level buffers.
+``rows``
+    :class:`markov.operator.TransitionOperator` (random-sequential update):
+    rows regenerated per product; a rank hash table and one accumulator per
+    thread.
+"""
+from __future__ import annotations
+
+import math
+import os
+
+from .errors import InvalidParameterError, StateSpaceTooLargeError
+from .stationary import GMRES_RESTART
+
+__all__ = ["DEFAULT_MEMORY_FRACTION", "LEVEL_WORDS_PER_STATE", "available_memory",
+           "memory_limit", "solver_vectors", "search_bytes_per_state",
+           "factored_bytes_per_state", "rows_bytes_per_state", "matrix_bytes", "check_fits",
+           "expected_row_length", "gib"]
+
+DEFAULT_MEMORY_FRACTION = 0.75
+
+#: Upper estimate of (words in levels 1..N) / states, used before the levels
+#: are built; measured 1.5 (one car) to 5.3 (N = 3L/4, unlumped), about 3 at
+#: half filling.
+LEVEL_WORDS_PER_STATE = 6.0
+
+# Matrix path: per stored nonzero while assembling, and per state besides (key).
+_MATRIX_BYTES_PER_NONZERO = 40
+_KEY = 8
+
+
+def available_memory() -> int:
+    """Physical memory of this machine in bytes."""
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def memory_limit(max_memory: float | None) -> float:
+    """Bytes allowed: ``max_memory``, or 75 % of physical memory when ``None``.
+
+    Raises
+    ------
+    InvalidParameterError
+        For a limit that is not a positive finite number.
+    """
+    if max_memory is None:
+        return DEFAULT_MEMORY_FRACTION * available_memory()
+    if isinstance(max_memory, bool) or not isinstance(max_memory, (int, float)) \
+            or not math.isfinite(max_memory) or max_memory <= 0:
+        raise InvalidParameterError(
+            f"the memory limit must be a positive number of bytes, got {max_memory!r}")
+    return float(max_memory)
+
+
+def gib(nbytes: float) -> str:
+    """``nbytes`` in GiB, three significant digits."""
+    return f"{nbytes / 2**30:.3g} GiB"
+
+
+def solver_vectors(method: str) -> int:
+    """Float64 vectors of length ``n`` a stationary solver holds at its peak.
+
+    ``gmres`` keeps its restart basis; ``aggregation`` keeps the iterate, its
+    product, the disaggregated vector and two int32 aggregate maps (counted as
+    one vector) and a coarse matrix with at most one entry per state (counted
+    as two); ``direct`` and ``eigs`` are counted by the matrix path.
+    """
+    return {"gmres": GMRES_RESTART + 6, "bicgstab": 10, "power": 4,
+            "iterative": GMRES_RESTART + 6, "aggregation": 7,
+            "direct": 4, "eigs": 24, "auto": GMRES_RESTART + 6}[method]
+
+
+def search_bytes_per_state() -> float:
+    """Peak bytes per state of the recurrent-class search (any path).
+
+    The sorted keys found so far and their merged copy, the frontier and its
+    successor words (about two keys more).
+    """
+    return 4 * _KEY
+
+
+def factored_bytes_per_state(method: str, words_per_state: float = LEVEL_WORDS_PER_STATE,
+                             first_level: float = 1.0) -> float:
+    """Peak bytes per state of the factored operator and a solver.
+
+    Parameters
+    ----------
+    method : str
+        Stationary solver (its work vectors, :func:`solver_vectors`).
+    words_per_state : float
+        Words of levels ``1..N`` per state (after building: the measured
+        figure, :attr:`markov.factored.FactoredOperator.edges` / n).
+    first_level : float
+        Level-0 words per state (at most 1).
+    """
+    links = 8 * words_per_state                # two int32 parents per word
+    level0 = 4 + 8 * first_level               # int32 permutation, int64 offsets
+    last = 8                                   # int64 offsets of the states
+    buffers = 2 * 8 * 1.05                     # the largest level, twice
+    return _KEY + links + level0 + last + buffers + 8 * solver_vectors(method)
+
+
+def rows_bytes_per_state(method: str, threads: int = 2) -> float:
+    """Peak bytes per state of the row operator (random-sequential) and a solver."""
+    return _KEY + 48 + 8 * max(2, threads) + 8 * solver_vectors(method)
+
+
+def expected_row_length(ring) -> float:
+    """Successors per state, estimated before the states are known.
+
+    Parallel update: ``2**k`` for ``k`` movable cars, about half of them
+    (capped at 4096); random-sequential: ``2 N + 1``.
+    """
+    if ring.update == "parallel":
+        return min(2.0 ** (ring.cars / 2), 4096.0)
+    return 2.0 * ring.cars + 1
+
+
+def matrix_bytes(states: int, transitions: int, method: str = "auto") -> float:
+    """Peak bytes of assembling the CSR matrix and solving with ``method``."""
+    return transitions * _MATRIX_BYTES_PER_NONZERO + states * (
+        _KEY + 8 * solver_vectors(method))
+
+
+def check_fits(what: str, need: float, limit: float, hint: str = "") -> None:
+    """Raise :class:`StateSpaceTooLargeError` when ``need`` bytes exceed ``limit``."""
+    if need > limit:
+        raise StateSpaceTooLargeError(
+            f"{what} needs about {gib(need)}, which exceeds the memory limit of"
+            f" {gib(limit)}{hint}")

@@ -1,0 +1,161 @@
+"""The factored (per-car levels) operator against the naive chain and the CSR matrix."""
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+import naive
+from markov import InvalidParameterError, Ring, RingChain, solve
+from markov.aggregates import position_aggregates
+from markov.factored import FactoredOperator, frontier_successors, word_bits
+from markov.space import recurrent_keys
+from markov.states import decode, encode
+from markov.transition import transition_matrix
+
+# vmax 1, 2, 3, 5; one car, one empty cell, low and high density; B = 3, 4, 5, 7
+CASES = [(3, 1, 1), (9, 4, 1), (8, 7, 1), (10, 5, 2), (12, 6, 2), (7, 6, 2), (12, 1, 2),
+         (12, 4, 2), (9, 3, 3), (8, 1, 3), (10, 3, 5), (9, 8, 5), (11, 2, 5)]
+
+
+def dense(op):
+    """The operator as a dense matrix, row by row: ``e_i P``."""
+    rows = []
+    for i in range(op.n):
+        e = np.zeros(op.n)
+        e[i] = 1.0
+        rows.append(op.apply(e))
+    return np.array(rows)
+
+
+@pytest.mark.parametrize("lump", [True, False])
+@pytest.mark.parametrize("L, N, vmax", CASES)
+def test_operator_equals_csr_entry_by_entry(L, N, vmax, lump):
+    ring = Ring(L, N, vmax, 0.3)
+    keys = recurrent_keys(ring, lump=lump)
+    op = FactoredOperator(ring, keys, lump)
+    x = np.random.default_rng(L).random((3, op.n))
+    for p, factored in ((0.3, op), (0.85, op.with_p(0.85))):  # same levels, other weights
+        P = transition_matrix(ring.with_p(p), keys, lump=lump)
+        if op.n <= 1500:   # every entry
+            np.testing.assert_allclose(dense(factored), P.toarray(), rtol=0, atol=2e-16 * N)
+        for v in x:        # and products of dense vectors
+            np.testing.assert_allclose(factored.apply(v), P.T @ v, rtol=1e-13)
+    assert op.level_sizes[-1] >= op.n            # the last level covers every state
+    assert all(a <= b for a, b in zip(op.level_sizes, op.level_sizes[1:]))
+    if not lump:                                 # one word per successor state
+        assert op.level_sizes[-1] == op.n
+
+
+@pytest.mark.parametrize("L, N, vmax", [(5, 2, 1), (6, 3, 2), (6, 2, 3), (7, 6, 2), (6, 1, 5)])
+def test_operator_equals_naive_chain(L, N, vmax):
+    """Unlumped, against the plain-Python chain written from the rule text.
+
+    The naive search starts at the compact jam, which is transient for a lone
+    car with vmax >= 2: only the recurrent rows are compared.
+    """
+    p = Fraction(2, 7)
+    states, trans = naive.chain(L, N, vmax, p)
+    ring = Ring(L, N, vmax, float(p))
+    keys = recurrent_keys(ring, lump=False)
+    index = {k: i for i, k in enumerate(keys.tolist())}
+    expected = np.zeros((len(keys), len(keys)))
+    for s, row in trans.items():
+        i = index.get(encode([-1 if c is None else c for c in s], vmax))
+        if i is None:
+            continue
+        for t, pr in row.items():
+            expected[i, index[encode([-1 if c is None else c for c in t], vmax)]] += float(pr)
+    np.testing.assert_allclose(dense(FactoredOperator(ring, keys, lump=False)), expected,
+                               rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("lump", [True, False])
+@pytest.mark.parametrize("L, N, vmax", [(9, 4, 1), (10, 5, 2), (9, 3, 3), (8, 7, 1)])
+def test_frontier_successors_are_the_support_of_the_rows(L, N, vmax, lump):
+    ring = Ring(L, N, vmax, 0.5)
+    keys = recurrent_keys(ring, lump=lump)
+    P = transition_matrix(ring, keys, lump=lump)
+    rng = np.random.default_rng(L)
+    for size in sorted({1, min(7, len(keys)), len(keys)}):
+        rows = np.sort(rng.choice(len(keys), size, replace=False))
+        support = np.unique(P[rows].nonzero()[1])
+        assert frontier_successors(ring, keys[rows], lump).tolist() == keys[support].tolist()
+
+
+def test_open_state_set_and_bad_input_are_refused():
+    ring = Ring(8, 4, 2, 0.5)
+    keys = recurrent_keys(ring)
+    with pytest.raises(RuntimeError, match="not closed"):
+        FactoredOperator(ring, keys[: len(keys) // 2], lump=True)
+    with pytest.raises(InvalidParameterError, match="parallel"):
+        FactoredOperator(Ring(8, 4, 2, 0.5, "random-sequential"), keys, lump=True)
+    with pytest.raises(InvalidParameterError, match="62"):
+        word_bits(Ring(40, 30, 1, 0.5))
+    op = FactoredOperator(ring, keys, lump=True)
+    with pytest.raises(ValueError, match="shape"):
+        op.apply(np.ones(op.n + 1))
+
+
+def _positions(key, L, vmax, shift=0):
+    """Occupied cells of a key, each moved back by ``shift`` x its velocity."""
+    cells = decode(key, L, vmax)
+    return frozenset((x - shift * int(v)) % L for x, v in enumerate(cells) if v >= 0)
+
+
+def _orbit(cells, L):
+    return min(tuple(sorted((x - r) % L for x in cells)) for r in range(L))
+
+
+@pytest.mark.parametrize("lump", [True, False])
+@pytest.mark.parametrize("L, N, vmax", [(9, 4, 1), (10, 5, 2), (9, 3, 3), (12, 6, 2)])
+def test_position_aggregates(L, N, vmax, lump):
+    ring = Ring(L, N, vmax, 0.5)
+    keys = recurrent_keys(ring, lump=lump)
+    agg = position_aggregates(ring, keys, lump)
+    # the groups are the position configurations (rotation classes when lumped)
+    label = (lambda cells: _orbit(cells, L)) if lump else (lambda cells: tuple(sorted(cells)))
+    here = [label(_positions(k, L, vmax)) for k in keys.tolist()]
+    assert agg.count == len(set(here))
+    # same label <=> same group: the (label, group) pairs are as many as the labels
+    assert len(set(zip(here, agg.group.tolist()))) == agg.count
+    # every transition into a state comes from its source group: the property
+    # that makes the coarse matrix a by-product of x P
+    P = transition_matrix(ring, keys, lump=lump).tocoo()
+    assert np.array_equal(agg.source[P.col], agg.group[P.row])
+
+
+def test_aggregation_needs_parallel_update():
+    ring = Ring(7, 3, 2, 0.5, "random-sequential")
+    with pytest.raises(InvalidParameterError, match="parallel"):
+        position_aggregates(ring, recurrent_keys(ring), lump=True)
+    with pytest.raises(InvalidParameterError, match="parallel"):
+        solve(ring, method="aggregation")
+
+
+@pytest.mark.parametrize("L, N, vmax, p", [(14, 7, 2, 0.5), (12, 6, 1, 0.1), (12, 4, 3, 0.9),
+                                           (13, 6, 5, 0.25)])
+def test_matrix_free_solutions_equal_the_lu_solution(L, N, vmax, p):
+    ring = Ring(L, N, vmax, p)
+    exact = solve(ring, operator="matrix", method="direct")
+    for method in ("auto", "aggregation", "bicgstab", "gmres", "power"):
+        if method == "power" and p > 0.5:
+            continue  # hundreds of products: slow mixing, tested at smaller p
+        sol = solve(ring, operator="matrix-free", method=method, tol=1e-13)
+        assert sol.operator == "matrix-free" and sol.residual <= 1e-13
+        assert sol.level_sizes is not None and sum(sol.level_sizes) > sol.n_states
+        assert sol.flux == pytest.approx(exact.flux, abs=1e-12)
+        np.testing.assert_allclose(sol.c_v, exact.c_v, atol=1e-12)
+        np.testing.assert_allclose(sol.gap_distribution, exact.gap_distribution, atol=1e-12)
+
+
+def test_p_sweep_reuses_states_and_levels():
+    chain = RingChain(Ring(14, 7, 2, 0.5), operator="matrix-free")
+    first = chain.solution()
+    other = chain.with_p(0.3)
+    assert other.keys is chain.keys
+    op, other_op = chain.transition_operator, other.transition_operator
+    assert other_op._links is op._links and other_op.ring.p == 0.3
+    warm = other.solution(x0=first.pi)
+    cold = RingChain(Ring(14, 7, 2, 0.3), operator="matrix").solution(method="direct")
+    assert warm.flux == pytest.approx(cold.flux, abs=1e-12)
+    assert chain.transition_operator.ring.p == 0.5  # the original keeps its p
