@@ -1,40 +1,43 @@
-"""`make bench-large`: the exact solver at scale, and side by side with generic tools.
+"""`make bench-large`: the exact solver at scale, beside its previous version and generic tools.
 
-Two tables, one run, every case in a fresh subprocess so that its peak
-resident memory (``ru_maxrss``, which includes the interpreter, numpy/scipy and
-the compiled kernels: see the ``baseline`` row) is its own:
+Every case runs in a fresh subprocess, so its peak resident memory
+(``ru_maxrss``: interpreter, libraries and compiled kernels included, see the
+``baseline`` row) is its own.  Tables, one run:
 
-* **large**: vmax = 2, N = L/2, p = 0.5 on growing rings, lumped by rotations,
-  ``operator="auto"`` under a memory limit (CSR matrix while it fits, then the
-  compact pattern, then matrix-free), plus forced matrix-free rows; GMRES to
-  ``||pi P - pi||_1 <= 1e-10``.
-* **compare**: the same chains on small rings solved by
-  - ``naive``: plain Python, configurations as tuples in a dict, BFS from the
-    compact jam, scipy sparse LU (``spsolve``) with a normalisation row;
-  - ``quantecon``: QuantEcon's ``MarkovChain(P).stationary_distributions``
-    (dense GTH elimination) on *our* assembled matrix (same states, same P);
-  - ``ours``: this package on the same unlumped chain, and lumped.
+* **large**: vmax = 2, N = L/2, p = 0.5 on growing rings, lumped, ``auto``
+  (matrix-free for these sizes: the factored operator), to
+  ``||pi P - pi||_1 <= tol``: classes, level words, products, seconds
+  (search, operator, solve), peak memory, residual, flux.
+* **previous**: the same rings solved by the previous version of the package
+  (a ``git worktree`` of ``--previous``, its ``auto`` path: the compact
+  operator) and by this one, both to ``--agree-tol``, in the same run: the
+  speed ratio and the flux and ``c_v`` differences.
+* **solvers**: every product method on the factored operator, L = 18..22,
+  p = 0.1, 0.5, 0.9: products and seconds (what ``auto`` is chosen from).
+* **vmax1**: vmax = 1, L = 24, N = 12, p = 0.5.
+* **psweep**: one ring solved at p = 0.5, then at further p reusing the
+  states and the levels (``RingChain.with_p``) with a warm start: seconds
+  per extra p.
+* **compare**: small rings, the same chains, by the naive reference
+  (``tests/naive.py``), QuantEcon (dense GTH on our matrix) and the Storm
+  model checker (``benchmarks/storm.py``: sound long-run average).
 
 Results go to ``benchmarks/results/large.csv`` and ``large.md``, rewritten
-atomically (temporary file, then ``os.replace``) after every case so that a
-stopped run keeps what it measured.
+atomically after every case so that a stopped run keeps what it measured.
 
 Usage::
 
-    python benchmarks/large.py                       # the default plan
-    python benchmarks/large.py --sizes 16 18 --compare 8 10
-    python benchmarks/large.py --sizes 22 --no-compare --max-memory 12
+    python benchmarks/large.py                      # the default plan (about 40 min)
+    python benchmarks/large.py --sizes 16 18 --only large previous
+    python benchmarks/large.py --sizes 26 --only large --max-memory 20
 """
 from __future__ import annotations
 
 import os
 
-# Before numpy/numba load: BLAS threads spinning next to numba's would fight for
-# the two cores (measured: GMRES bookkeeping 30x slower under load); numba's
-# workqueue layer does not spin between parallel regions.
+# One BLAS thread: the solvers' vector work runs beside numba's two threads.
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("MKL_NUM_THREADS", "1")
-os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
 
 import argparse  # noqa: E402
 import csv  # noqa: E402
@@ -50,9 +53,10 @@ from pathlib import Path  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
-COLUMNS = ["table", "tool", "L", "N", "vmax", "p", "lumped", "states", "nonzeros", "operator",
-           "method", "build_s", "solve_s", "total_s", "peak_MB", "residual", "iterations",
-           "flux", "note"]
+TABLES = ("baseline", "large", "previous", "solvers", "vmax1", "psweep", "compare")
+COLUMNS = ["table", "tool", "L", "N", "vmax", "p", "lumped", "states", "level_words",
+           "nonzeros", "operator", "method", "products", "search_s", "build_s", "solve_s",
+           "total_s", "per_p_s", "peak_MB", "residual", "flux", "note"]
 
 
 # --------------------------------------------------------------------------- workers
@@ -61,9 +65,18 @@ def _peak_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024  # Linux: kB
 
 
+def _warm_up() -> None:
+    """Load every compiled kernel (numba cache) on a tiny ring, outside the timings."""
+    from markov import Ring, solve
+
+    for operator in ("matrix", "matrix-free"):
+        solve(Ring(6, 3, 2, 0.5), operator=operator)
+    solve(Ring(6, 3, 2, 0.5), operator="matrix-free", method="aggregation")
+
+
 def work_ours(L, N, vmax, p, lump=True, operator="auto", method="auto", tol=1e-10,
-              max_memory_gib=12.0) -> dict:
-    """This package: enumerate, build (matrix / compact / nothing), solve."""
+              max_memory_gib=20.0) -> dict:
+    """This package: search, build (matrix or operator), solve."""
     from markov import Ring, RingChain
 
     _warm_up()
@@ -71,26 +84,68 @@ def work_ours(L, N, vmax, p, lump=True, operator="auto", method="auto", tol=1e-1
                       operator=operator)
     start = time.perf_counter()
     chain.keys
-    kind = chain.operator_kind
-    if kind == "matrix":
+    search = time.perf_counter() - start
+    if chain.operator_kind == "matrix":
         chain.matrix
     else:
         chain.transition_operator
     build = time.perf_counter() - start
     sol = chain.solution(method, tol=tol)
-    return {"states": sol.n_states,
-            "nonzeros": sol.nonzeros if sol.nonzeros is not None else "matrix-free",
-            "operator": sol.operator, "method": sol.result.method, "build_s": build,
-            "solve_s": sol.result.seconds, "residual": sol.residual,
-            "iterations": sol.result.iterations, "flux": sol.flux, "lumped": lump}
+    return {"states": sol.n_states, "level_words": sum(sol.level_sizes or ()) or None,
+            "nonzeros": sol.nonzeros, "operator": sol.operator, "method": sol.result.method,
+            "products": sol.result.iterations, "search_s": search, "build_s": build,
+            "solve_s": sol.result.seconds, "residual": sol.residual, "flux": sol.flux,
+            "c_v": sol.c_v.tolist(), "lumped": lump,
+            "note": "levels " + ",".join(map(str, sol.level_sizes)) if sol.level_sizes else None}
 
 
-def _warm_up() -> None:
-    """Load every compiled kernel (numba cache) on a tiny ring, outside the timings."""
-    from markov import Ring, solve
+def work_previous(tree, L, N, vmax, p, tol=1e-10, max_memory_gib=20.0) -> dict:
+    """The previous version (imported from ``tree``, first on ``sys.path``): its ``auto``."""
+    from markov import Ring, RingChain, solve
 
+    assert Path(sys.modules["markov"].__file__).resolve().is_relative_to(Path(tree).resolve())
     for operator in ("matrix", "compact", "matrix-free"):
         solve(Ring(6, 3, 2, 0.5), operator=operator)
+    chain = RingChain(Ring(L, N, vmax, p), max_memory=max_memory_gib * 2**30)
+    start = time.perf_counter()
+    chain.keys
+    search = time.perf_counter() - start
+    if chain.operator_kind == "matrix":
+        chain.matrix
+    else:
+        chain.transition_operator
+    build = time.perf_counter() - start
+    sol = chain.solution("auto", tol=tol)
+    return {"states": sol.n_states, "nonzeros": sol.nonzeros, "operator": sol.operator,
+            "method": sol.result.method, "products": sol.result.iterations,
+            "search_s": search, "build_s": build, "solve_s": sol.result.seconds,
+            "residual": sol.residual, "flux": sol.flux, "c_v": sol.c_v.tolist(),
+            "lumped": True}
+
+
+def work_psweep(L, N, vmax, ps, tol=1e-10, max_memory_gib=20.0) -> dict:
+    """One ring at ``ps[0]``, then every further ``p`` on the same states and levels."""
+    from markov import Ring, RingChain
+
+    _warm_up()
+    start = time.perf_counter()
+    chain = RingChain(Ring(L, N, vmax, ps[0]), max_memory=max_memory_gib * 2**30,
+                      operator="matrix-free")
+    sol = chain.solution(tol=tol)
+    first = time.perf_counter() - start
+    extra, fluxes, worst = [], [sol.flux], sol.residual
+    for p in ps[1:]:
+        start = time.perf_counter()
+        chain = chain.with_p(p)
+        sol = chain.solution(tol=tol, x0=sol.pi)
+        extra.append(time.perf_counter() - start)
+        fluxes.append(sol.flux)
+        worst = max(worst, sol.residual)
+    return {"states": sol.n_states, "operator": sol.operator, "method": sol.result.method,
+            "total_s": first + sum(extra), "build_s": first, "per_p_s": sum(extra) / len(extra),
+            "residual": worst, "flux": fluxes[0], "lumped": True,
+            "note": f"first p {first:.1f} s; extra p: " + ", ".join(
+                f"{p:g}: {t:.1f} s (flux {f:.10f})" for p, t, f in zip(ps[1:], extra, fluxes[1:]))}
 
 
 def work_naive(L, N, vmax, p) -> dict:
@@ -98,7 +153,7 @@ def work_naive(L, N, vmax, p) -> dict:
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+    sys.path.insert(0, str(ROOT / "tests"))
     import naive  # the tests' plain-Python oracle: tuples in a dict, BFS from the jam
 
     start = time.perf_counter()
@@ -119,8 +174,7 @@ def work_naive(L, N, vmax, p) -> dict:
     flux = sum(w * sum(c for c in s if c is not None) for s, w in zip(index, pi)) / L
     return {"states": n, "nonzeros": P.nnz, "operator": "dict", "method": "spsolve",
             "build_s": build, "solve_s": solve,
-            "residual": float(np.abs(P.T @ pi - pi).sum()), "iterations": 0, "flux": flux,
-            "lumped": False}
+            "residual": float(np.abs(P.T @ pi - pi).sum()), "flux": flux, "lumped": False}
 
 
 def work_quantecon(L, N, vmax, p, lump) -> dict:
@@ -132,6 +186,7 @@ def work_quantecon(L, N, vmax, p, lump) -> dict:
     except ImportError:
         return {"note": "quantecon not installed (pip install -e '.[bench]')"}
     from markov import Ring, RingChain
+    from markov.observables import velocity_densities
 
     qe.MarkovChain(sp.csr_matrix(np.array([[0.5, 0.5], [0.25, 0.75]]))).stationary_distributions
     _warm_up()  # both sides with their compiled code loaded before timing
@@ -140,27 +195,36 @@ def work_quantecon(L, N, vmax, p, lump) -> dict:
     P = chain.matrix
     build = time.perf_counter() - start
     start = time.perf_counter()
-    mc = qe.MarkovChain(sp.csr_matrix(P))  # the same matrix our solvers get
-    pi = mc.stationary_distributions[0]
+    pi = qe.MarkovChain(sp.csr_matrix(P)).stationary_distributions[0]  # the same matrix
     solve = time.perf_counter() - start
-    from markov.observables import velocity_densities
-
     flux = float(np.dot(np.arange(vmax + 1), velocity_densities(chain.ring, chain.keys, pi)))
     return {"states": P.shape[0], "nonzeros": P.nnz, "operator": "matrix",
             "method": "qe.gth_solve", "build_s": build, "solve_s": solve,
-            "residual": float(np.abs(P.T @ pi - pi).sum()), "iterations": 0, "flux": flux,
-            "lumped": lump, "note": f"quantecon {qe.__version__}"}
+            "residual": float(np.abs(P.T @ pi - pi).sum()), "flux": flux, "lumped": lump,
+            "note": f"quantecon {qe.__version__}"}
+
+
+def work_storm(L, N, vmax, p, route) -> dict:
+    try:
+        import stormpy  # noqa: F401
+    except ImportError:
+        return {"note": "stormpy not installed (pip install -e '.[bench]')"}
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    from storm import work_storm as storm_case
+
+    out = storm_case(L, N, vmax, p, route)
+    out.setdefault("lumped", False)
+    return out
 
 
 def work_baseline() -> dict:
-    """Interpreter, numpy/scipy and the compiled kernels on a 4-cell ring."""
-    from markov import Ring, solve
-
-    solve(Ring(4, 2, 2, 0.5), operator="compact")
+    """Interpreter, numpy/scipy and the compiled kernels on a small ring."""
+    _warm_up()
     return {"note": "process baseline: imports + kernels loaded"}
 
 
-WORKERS = {"ours": work_ours, "naive": work_naive, "quantecon": work_quantecon,
+WORKERS = {"ours": work_ours, "previous": work_previous, "psweep": work_psweep,
+           "naive": work_naive, "quantecon": work_quantecon, "storm": work_storm,
            "baseline": work_baseline}
 
 
@@ -173,13 +237,14 @@ def worker_main(spec: str) -> None:
 
 # --------------------------------------------------------------------------- driver
 
-def run_case(table: str, tool: str, timeout: float, **case) -> dict:
+def run_case(table: str, tool: str, timeout: float, env: dict | None = None, **case) -> dict:
     row = {"table": table, "tool": tool, **{k: case.get(k) for k in ("L", "N", "vmax", "p")}}
     start = time.perf_counter()
     try:
         proc = subprocess.run([sys.executable, __file__, "--worker",
                                json.dumps({"tool": tool, **case})],
-                              capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+                              capture_output=True, text=True, timeout=timeout, cwd=ROOT,
+                              env={**os.environ, **(env or {})})
         lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
         if lines:
             row.update(json.loads(lines[-1][7:]))
@@ -188,7 +253,8 @@ def run_case(table: str, tool: str, timeout: float, **case) -> dict:
             row["note"] = f"failed: {tail[:200]}"
     except subprocess.TimeoutExpired:
         row["note"] = f"stopped after {timeout:.0f} s"
-    row["total_s"] = (row["build_s"] + row["solve_s"]) if "build_s" in row else None
+    if row.get("total_s") is None and "build_s" in row:
+        row["total_s"] = row["build_s"] + row["solve_s"]
     row["process_s"] = time.perf_counter() - start
     print(_fmt_row(row), flush=True)
     return row
@@ -198,14 +264,15 @@ def _fmt(value, col):
     if value is None:
         return ""
     if isinstance(value, float):
-        if col in ("residual",):
+        if col == "residual":
             return f"{value:.1e}"
         if col == "flux":
             return f"{value:.12f}"
         if col == "p":
             return f"{value:g}"
         return f"{value:.2f}" if value < 100 else f"{value:.0f}"
-    if isinstance(value, int) and not isinstance(value, bool) and col in ("states", "nonzeros"):
+    if isinstance(value, int) and not isinstance(value, bool) \
+            and col in ("states", "nonzeros", "level_words"):
         return f"{value:,}"
     return str(value)
 
@@ -219,28 +286,33 @@ def _x(ratio: float) -> str:
 
 
 def _ratios(rows):
-    """Speed ratios on the same chain: naive / ours and quantecon / ours."""
+    """Speed ratios and agreement on the same chain, this run."""
     out = []
-    by = {}
+    new = {r["L"]: r for r in rows
+           if r["table"] == "previous" and r["tool"] == "ours" and r.get("total_s")}
     for r in rows:
-        if r.get("total_s") is not None and r["table"] == "compare":
-            by[(r["tool"], r["L"], r.get("lumped"))] = r
+        if r["table"] == "previous" and r["tool"] == "previous" and r.get("total_s") \
+                and r["L"] in new:
+            n = new[r["L"]]
+            dcv = max(abs(a - b) for a, b in zip(r["c_v"], n["c_v"]))
+            out.append(f"L={r['L']}: previous version {r['total_s']:.1f} s ({r['operator']},"
+                       f" {r['peak_MB']:.0f} MB) vs now {n['total_s']:.2f} s"
+                       f" ({n['peak_MB']:.0f} MB): {_x(r['total_s'] / n['total_s'])};"
+                       f" |flux difference| {abs(r['flux'] - n['flux']):.1e},"
+                       f" max |c_v difference| {dcv:.1e}")
+    by = {(r["tool"], r["L"], r.get("lumped")): r for r in rows
+          if r["table"] == "compare" and r.get("total_s") is not None}
     for (tool, L, lumped), r in sorted(by.items(), key=lambda kv: (kv[0][1], kv[0][0])):
-        ours_same = by.get(("ours", L, lumped))
-        ours_lumped = by.get(("ours", L, True))
-        if tool == "naive" and ours_same:
-            line = (f"L={L}: naive {r['total_s']:.2f} s vs ours (same unlumped chain)"
-                    f" {ours_same['total_s']:.3f} s: {_x(r['total_s'] / ours_same['total_s'])}")
-            if ours_lumped:
-                line += (f"; vs ours lumped {ours_lumped['total_s']:.3f} s:"
-                         f" {_x(r['total_s'] / ours_lumped['total_s'])}")
-            line += f"; |flux difference| {abs(r['flux'] - ours_same['flux']):.1e}"
-            out.append(line)
-        if tool == "quantecon" and ours_same:
+        ours = by.get(("ours", L, lumped))
+        if tool in ("naive", "storm") and ours:
+            out.append(f"L={L}: {tool} {r['total_s']:.2f} s vs ours on the same unlumped chain"
+                       f" {ours['total_s']:.3f} s: {_x(r['total_s'] / ours['total_s'])};"
+                       f" |flux difference| {abs(r['flux'] - ours['flux']):.1e}")
+        if tool == "quantecon" and ours:
             out.append(f"L={L} {'lumped' if lumped else 'unlumped'} ({r['states']:,} states):"
-                       f" QuantEcon solve {r['solve_s']:.3f} s vs ours {ours_same['solve_s']:.4f} s"
-                       f" on the same matrix: {_x(r['solve_s'] / ours_same['solve_s'])};"
-                       f" |flux difference| {abs(r['flux'] - ours_same['flux']):.1e}")
+                       f" QuantEcon solve {r['solve_s']:.3f} s vs ours {ours['solve_s']:.4f} s"
+                       f" on the same matrix: {_x(r['solve_s'] / ours['solve_s'])};"
+                       f" |flux difference| {abs(r['flux'] - ours['flux']):.1e}")
     return out
 
 
@@ -254,19 +326,20 @@ def write_results(rows, meta, out_dir: Path) -> None:
     for r in rows:
         writer.writerow({c: r.get(c) for c in COLUMNS + ["process_s"]})
     write_atomic(out_dir / "large.csv", buf.getvalue())
-    md = ["# Large-ring benchmark (issue 7)", ""]
+    md = ["# Large-ring benchmark (make bench-large)", ""]
     md += [f"- {k}: {v}" for k, v in meta.items()]
     md += ["", "peak MB is the subprocess's `ru_maxrss` (interpreter and libraries included, see"
-           " the baseline row); build s = recurrent class + matrix or operator; total s ="
-           " build + solve, compiled kernels loaded from the numba cache.", ""]
-    cols = [c for c in COLUMNS if c not in ("table",)]
-    for table in ("large", "compare", "baseline"):
+           " the baseline row); search s = recurrent class; build s = search + matrix or"
+           " operator; total s = build + solve, compiled kernels loaded from the numba cache.",
+           ""]
+    cols = [c for c in COLUMNS if c != "table"]
+    for table in TABLES:
         sub = [r for r in rows if r["table"] == table]
         if not sub:
             continue
-        md += [f"## {table}", "", "| " + " | ".join(cols) + " |",
-               "|" + "---|" * len(cols)]
-        md += ["| " + " | ".join(_fmt(r.get(c), c) for c in cols) + " |" for r in sub]
+        used = [c for c in cols if any(r.get(c) is not None for r in sub)]
+        md += [f"## {table}", "", "| " + " | ".join(used) + " |", "|" + "---|" * len(used)]
+        md += ["| " + " | ".join(_fmt(r.get(c), c) for c in used) + " |" for r in sub]
         md.append("")
     ratios = _ratios(rows)
     if ratios:
@@ -274,23 +347,40 @@ def write_results(rows, meta, out_dir: Path) -> None:
     write_atomic(out_dir / "large.md", "\n".join(md))
 
 
+def previous_tree(rev: str) -> Path:
+    """A detached worktree of ``rev`` beside the repository (created once)."""
+    sha = subprocess.run(["git", "rev-parse", "--short", rev], cwd=ROOT, check=True,
+                         capture_output=True, text=True).stdout.strip()
+    tree = Path(os.environ.get("TMPDIR", "/tmp")) / f"nasch-previous-{sha}"
+    if not (tree / "markov").is_dir():
+        subprocess.run(["git", "worktree", "add", "--detach", "--force", str(tree), sha],
+                       cwd=ROOT, check=True, capture_output=True)
+    return tree
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--worker", help=argparse.SUPPRESS)
-    ap.add_argument("--sizes", type=int, nargs="*", default=[16, 18, 20, 22],
+    ap.add_argument("--only", nargs="*", choices=TABLES, default=list(TABLES),
+                    help="tables to run")
+    ap.add_argument("--sizes", type=int, nargs="*", default=[16, 18, 20, 22, 24],
                     help="ring lengths of the large table (vmax=2, N=L/2, p=0.5)")
-    ap.add_argument("--matrix-free-sizes", type=int, nargs="*", default=[16, 18, 20, 22],
-                    help="also solve these forced matrix-free")
-    ap.add_argument("--compare", type=int, nargs="*", default=[8, 10, 12, 14],
-                    help="small ring lengths for naive / QuantEcon / ours")
-    ap.add_argument("--no-compare", action="store_true")
+    ap.add_argument("--previous", default="e33dd72",
+                    help="git revision of the previous version (before the factored operator)")
+    ap.add_argument("--previous-sizes", type=int, nargs="*", default=[16, 18, 20, 22])
+    ap.add_argument("--solver-sizes", type=int, nargs="*", default=[18, 20, 22])
+    ap.add_argument("--psweep-size", type=int, default=22)
+    ap.add_argument("--compare", type=int, nargs="*", default=[8, 10, 12, 14, 16, 18],
+                    help="small ring lengths for naive / QuantEcon / Storm / ours")
     ap.add_argument("--naive-max", type=int, default=12,
-                    help="largest L for the naive reference (measured: L=14 ran over 10 min"
-                         " and 4 GB in scipy's LU before it was stopped)")
+                    help="largest L for the naive reference (L=14 ran over 10 min and 4 GB"
+                         " in scipy's LU before it was stopped)")
     ap.add_argument("--quantecon-max-states", type=int, default=3000,
                     help="dense GTH is O(n^3): skip QuantEcon above this many states")
-    ap.add_argument("--max-memory", type=float, default=12.0, help="GiB for each large case")
+    ap.add_argument("--max-memory", type=float, default=20.0, help="GiB for each case")
     ap.add_argument("--tol", type=float, default=1e-10)
+    ap.add_argument("--agree-tol", type=float, default=1e-13,
+                    help="tolerance of both versions in the previous table")
     ap.add_argument("--timeout", type=float, default=1800.0, help="seconds per case")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
@@ -309,10 +399,11 @@ def main(argv=None) -> None:
         "load average at start": " ".join(f"{x:.2f}" for x in os.getloadavg()),
         "versions": f"python {platform.python_version()}, numpy {numpy.__version__},"
                     f" scipy {scipy.__version__}, numba {numba.__version__}",
-        "threads": f"numba {numba.config.NUMBA_NUM_THREADS}"
-                   f" ({os.environ.get('NUMBA_THREADING_LAYER')}),"
+        "threads": f"numba {numba.config.NUMBA_NUM_THREADS},"
                    f" OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}",
         "tolerance": f"||pi P - pi||_1 <= {args.tol:g}",
+        "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+                                 capture_output=True, text=True).stdout.strip(),
     }
     rows = []
 
@@ -321,31 +412,48 @@ def main(argv=None) -> None:
         meta["load average at end"] = " ".join(f"{x:.2f}" for x in os.getloadavg())
         write_results(rows, meta, args.out)
 
-    record(run_case("baseline", "baseline", args.timeout))
-    if not args.no_compare:
+    common = dict(tol=args.tol, max_memory_gib=args.max_memory)
+    half = lambda L: dict(L=L, N=L // 2, vmax=2, p=0.5)  # noqa: E731
+    if "baseline" in args.only:
+        record(run_case("baseline", "baseline", args.timeout))
+    if "large" in args.only:
+        for L in args.sizes:
+            record(run_case("large", "ours", args.timeout, **half(L), **common))
+    if "previous" in args.only:
+        tree = previous_tree(args.previous)
+        meta["previous"] = f"{args.previous} (worktree {tree})"
+        agree = dict(common, tol=args.agree_tol)
+        for L in args.previous_sizes:
+            record(run_case("previous", "previous", args.timeout, env={"PYTHONPATH": str(tree)},
+                            tree=str(tree), **half(L), **agree))
+            record(run_case("previous", "ours", args.timeout, **half(L), **agree))
+    if "solvers" in args.only:
+        for L in args.solver_sizes:
+            for p in (0.1, 0.5, 0.9):
+                for method in ("aggregation", "bicgstab", "gmres", "power"):
+                    record(run_case("solvers", "ours", args.timeout, L=L, N=L // 2, vmax=2,
+                                    p=p, operator="matrix-free", method=method, **common))
+    if "vmax1" in args.only:
+        record(run_case("vmax1", "ours", args.timeout, L=24, N=12, vmax=1, p=0.5, **common))
+    if "psweep" in args.only:
+        L = args.psweep_size
+        record(run_case("psweep", "psweep", args.timeout, L=L, N=L // 2, vmax=2,
+                        ps=[0.5, 0.45, 0.4, 0.35, 0.3, 0.25], **common))
+    if "compare" in args.only:
         for L in args.compare:
-            case = dict(L=L, N=L // 2, vmax=2, p=0.5)
-            ours_full = run_case("compare", "ours", args.timeout, **case, lump=False,
-                                 operator="matrix", tol=args.tol)
-            record(ours_full)
-            record(run_case("compare", "ours", args.timeout, **case, lump=True, tol=args.tol))
+            case = half(L)
+            unlumped = run_case("compare", "ours", args.timeout, **case, lump=False, **common)
+            record(unlumped)
+            record(run_case("compare", "ours", args.timeout, **case, **common))
             if L <= args.naive_max:
                 record(run_case("compare", "naive", args.timeout, **case))
             for lump in (False, True):
-                n = ours_full.get("states") or 0
-                if lump or n <= args.quantecon_max_states:
-                    if lump:
-                        n = next((r.get("states") for r in rows if r["tool"] == "ours"
-                                  and r["L"] == L and r.get("lumped")), 0) or 0
-                    if n <= args.quantecon_max_states:
-                        record(run_case("compare", "quantecon", args.timeout, **case, lump=lump))
-    for L in args.sizes:
-        record(run_case("large", "ours", args.timeout, L=L, N=L // 2, vmax=2, p=0.5,
-                        tol=args.tol, max_memory_gib=args.max_memory))
-        if L in args.matrix_free_sizes:
-            record(run_case("large", "ours", args.timeout, L=L, N=L // 2, vmax=2, p=0.5,
-                            operator="matrix-free", tol=args.tol,
-                            max_memory_gib=args.max_memory))
+                n = next(r.get("states") or 0 for r in rows[::-1] if r["tool"] == "ours"
+                         and r["L"] == L and r.get("lumped") == lump)
+                if n <= args.quantecon_max_states:
+                    record(run_case("compare", "quantecon", args.timeout, **case, lump=lump))
+            for route in ("matrix", "prism"):
+                record(run_case("compare", "storm", args.timeout, **case, route=route))
     for line in _ratios(rows):
         print(line)
     print(f"written: {args.out / 'large.csv'}, {args.out / 'large.md'}")

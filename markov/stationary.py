@@ -189,15 +189,32 @@ class Aggregates:
 
 
 def _coarse_pattern(agg: Aggregates):
-    """Entries ``(source, group)`` of the coarse matrix and each state's entry."""
-    code = agg.source.astype(np.int64) * agg.count + agg.group
+    """The coarse matrix's transpose as a CSR pattern, and where its entries come from.
+
+    Returns ``(AT, rows, entry)``: ``AT`` (``count x count``, data to be
+    filled) holds entry ``k`` at ``(group, source)``; ``rows[k]`` is the
+    source aggregate of entry ``k``; ``entry[s]`` the entry state ``s``
+    contributes to.  Entries are numbered in ``AT``'s storage order, so a
+    cycle fills ``AT.data`` in place.
+    """
+    import scipy.sparse as sp
+
+    code = agg.group.astype(np.int64) * agg.count + agg.source
     order = np.argsort(code, kind="stable")
     sorted_code = code[order]
     first = np.concatenate(([True], sorted_code[1:] != sorted_code[:-1]))
     entry = np.empty(code.size, dtype=np.int64)
     entry[order] = np.cumsum(first) - 1
     pairs = sorted_code[first]
-    return pairs // agg.count, pairs % agg.count, entry
+    group, source = pairs // agg.count, pairs % agg.count
+    indptr = np.searchsorted(group, np.arange(agg.count + 1))
+    AT = sp.csr_array((np.zeros(pairs.size), source, indptr), shape=(agg.count,) * 2)
+    return AT, source, entry
+
+
+# dense LU of the coarse matrix below this many aggregates; a warm-started Krylov
+# solve above (an 810-aggregate LU per cycle took longer than the fine product)
+_COARSE_DIRECT_LIMIT = 200
 
 
 def _aggregation_steps(product, x, tol, maxiter, count, agg: Aggregates):
@@ -214,9 +231,7 @@ def _aggregation_steps(product, x, tol, maxiter, count, agg: Aggregates):
     one product per cycle gives both the coarse matrix and the smoothing step.
     The iterate is accepted on a genuine product ``z P``.
     """
-    import scipy.sparse as sp
-
-    rows, cols, entry = _coarse_pattern(agg)
+    AT, rows, entry = _coarse_pattern(agg)
     m = agg.count
     xi = None
     res = np.inf
@@ -224,8 +239,8 @@ def _aggregation_steps(product, x, tol, maxiter, count, agg: Aggregates):
         y = product(x)
         C = np.bincount(entry, weights=y, minlength=rows.size)
         X = np.maximum(np.bincount(rows, weights=C, minlength=m), np.finfo(float).tiny)
-        AT = sp.csr_array((C / X[rows], (cols, rows)), shape=(m, m))
-        if m <= DIRECT_LIMIT:
+        np.divide(C, X[rows], out=AT.data)
+        if m <= _COARSE_DIRECT_LIMIT:
             xi = _normalise(_direct(AT.T.tocsr(), tol, maxiter)[0])
         else:
             coarse_tol = max(0.01 * tol, 0.1 * min(res, 1.0))
