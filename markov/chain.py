@@ -9,6 +9,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
@@ -21,6 +22,7 @@ from .space import _memory_limit, bytes_per_state, count_all, recurrent_keys
 from .stationary import StationaryResult, stationary
 from .states import compact_jam_key
 from .transition import successor_counts, transition_matrix
+from .validate import ensure_chain_arguments
 
 __all__ = ["RingChain", "Solution", "solve", "OPERATORS"]
 
@@ -129,6 +131,7 @@ class RingChain:
 
     def __init__(self, ring: Ring, lump: bool = True, max_memory: float | None = None,
                  operator: str = "auto"):
+        ensure_chain_arguments(ring, max_memory=max_memory)
         self.ring = ring
         self.lump = lump
         self.max_memory = max_memory
@@ -276,6 +279,7 @@ class RingChain:
         keys (the keys do not depend on ``p``).
         """
         _ensure_unique(self.ring)
+        ensure_chain_arguments(self.ring, method=method, tol=tol)
         if self.ring.trivial or self.operator_kind == "matrix":
             result = stationary(self.matrix, method=method, tol=tol)
             return Solution(self.ring, self.keys, result, self.matrix.nnz, self.build_seconds,
@@ -352,8 +356,8 @@ class Solution:
 
     @property
     def mean_velocity(self) -> float:
-        """Mean velocity of a car, ``flux / density`` (0 without cars)."""
-        return self.flux / self.ring.density if self.ring.cars else 0.0
+        """Mean velocity of a car, ``flux / density``; NaN (undefined) without cars."""
+        return self.flux / self.ring.density if self.ring.cars else float("nan")
 
     @cached_property
     def gap_distribution(self) -> np.ndarray:
@@ -373,12 +377,35 @@ class Solution:
             "states": self.n_states, "nonzeros": self.nonzeros, "operator": self.operator,
             "method": self.result.method,
             "residual": self.residual, "iterations": self.result.iterations,
-            "flux": self.flux, "mean_velocity": self.mean_velocity,
+            "flux": self.flux,
+            "mean_velocity": self.mean_velocity if r.cars else None,  # undefined: null
             "c_v": self.c_v.tolist(),
             "gap_distribution": self.gap_distribution.tolist() if r.cars else [],
             "build_seconds": self.build_seconds, "solve_seconds": self.result.seconds,
             "seconds": self.build_seconds + self.result.seconds,
         }
+
+    # -- the vector itself (markov.storage)
+
+    def save(self, path) -> Path:
+        """Write keys, probabilities and metadata to ``path`` (``.npz``), atomically.
+
+        See :mod:`markov.storage` for the layout and the key encoding; read it
+        back with :func:`markov.load_solution`.
+        """
+        from .storage import save_solution
+        return save_solution(self, path)
+
+    def top_configurations(self, k: int) -> list[dict]:
+        """The ``k`` most probable states in text notation (:func:`markov.storage.top_configurations`)."""
+        from .storage import top_configurations
+        return top_configurations(self, k)
+
+    def unlumped(self) -> "Solution":
+        """One state per configuration: a lumped solution's orbit sums spread over
+        their rotations (:func:`markov.storage.unlumped`); small rings only."""
+        from .storage import unlumped
+        return unlumped(self)
 
 
 def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = 1e-13,
@@ -411,6 +438,10 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = 1e-1
         For ``p = 0`` or ``p = 1`` with ``0 < N < L``.
     StateSpaceTooLargeError
         When the chain would not fit in ``max_memory``.
+    InvalidParameterError
+        For a ring beyond the 64-bit key, an unknown method, ``tol`` outside
+        :data:`markov.validate.TOL_RANGE` or a non-positive ``max_memory``;
+        checked before any work.
 
     Examples
     --------
@@ -421,5 +452,6 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = 1e-1
     0.25
     """
     _ensure_unique(ring)
+    ensure_chain_arguments(ring, method=method, tol=tol, max_memory=max_memory)
     return RingChain(ring, lump=lump, max_memory=max_memory,
                      operator=operator).solution(method=method, tol=tol)
