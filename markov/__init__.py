@@ -6,16 +6,43 @@ Quick start
 >>> sol = solve(Ring(length=10, cars=5, vmax=2, p=0.5))
 >>> 0 < sol.flux < 0.5
 True
+
+The names below are loaded on first use (PEP 562), so ``import markov`` and
+the ``nasch`` command start without numpy, scipy or numba until a
+subcommand needs them.
 """
-from .chain import RingChain, Solution, solve
-from .errors import (ConvergenceError, InvalidParameterError, NaschError,
-                     NoUniqueStationaryStateError, StateSpaceTooLargeError)
-from .model import PARALLEL, RANDOM_SEQUENTIAL, UPDATES, Ring
-from .stationary import METHODS, SOLVERS, StationaryResult, stationary
+from __future__ import annotations
+
+import importlib
 
 __all__ = [
-    "Ring", "RingChain", "Solution", "solve", "stationary", "StationaryResult",
-    "SOLVERS", "METHODS", "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL",
+    "Ring", "RingChain", "Solution", "solve", "load_solution", "stationary",
+    "StationaryResult", "SOLVERS", "METHODS", "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL",
     "NaschError", "InvalidParameterError", "NoUniqueStationaryStateError",
-    "StateSpaceTooLargeError", "ConvergenceError",
+    "StateSpaceTooLargeError", "ConvergenceError", "OutputError",
 ]
+
+# public name -> submodule that defines it
+_WHERE = {
+    "Ring": "model", "UPDATES": "model", "PARALLEL": "model", "RANDOM_SEQUENTIAL": "model",
+    "RingChain": "chain", "Solution": "chain", "solve": "chain",
+    "load_solution": "storage",
+    "stationary": "stationary", "StationaryResult": "stationary", "SOLVERS": "stationary",
+    "METHODS": "stationary",
+    **{name: "errors" for name in ("NaschError", "InvalidParameterError",
+                                    "NoUniqueStationaryStateError",
+                                    "StateSpaceTooLargeError", "ConvergenceError",
+                                    "OutputError")},
+}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+        globals()[name] = value   # later look-ups skip this function
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
