@@ -137,6 +137,9 @@ def table(vmax, p_text, lengths_text, cars_text, density_text, update, fmt, outp
     if cars_text is not None and density_text is not None:
         raise InvalidParameterError("give either --cars or --density, not both")
     _ensure_dask_options(serial, scheduler)
+    if workers is not None:
+        from .validate import ensure_int
+        workers = ensure_int("--workers", workers, 1)
     ps = _number_list("--p", p_text)
     _ensure_p_open(ps)
     if output is not None:

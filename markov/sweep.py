@@ -268,6 +268,7 @@ def _sigint_deferred():
 
 
 def _run_dask(func, jobs, scheduler, client, n_workers, desc) -> list:
+    import dask
     from dask.distributed import Client, LocalCluster, as_completed
 
     own_cluster = own_client = None
@@ -280,7 +281,8 @@ def _run_dask(func, jobs, scheduler, client, n_workers, desc) -> list:
                 else:
                     # the workers' scratch space, removed whatever happens
                     scratch = tempfile.mkdtemp(prefix="nasch-dask-")
-                    with _sigint_deferred(), _workers_ignore_sigint(scratch):
+                    with (_sigint_deferred(), _workers_ignore_sigint(scratch),
+                          dask.config.set({"temporary-directory": scratch})):
                         own_cluster = LocalCluster(
                             n_workers=n_workers or default_workers(), threads_per_worker=1,
                             processes=True, dashboard_address=None,

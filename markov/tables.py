@@ -418,6 +418,7 @@ def flux_table(vmax: int, p, lengths: Sequence[int], *, cars: Sequence[int] | No
     mc_replicas = ensure_int("mc_replicas", mc_replicas, 1)
     seed = ensure_int("seed", seed, 0)
     order = ensure_int("order", order, 1)
+    n_workers = None if n_workers is None else ensure_int("n_workers", n_workers, 1)
     Ring(mc_length, 1, vmax, ps[0], update)  # validates vmax
     rings = table_points(lengths, cars, densities)
 
