@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import click
 
-from .cli_common import NaschGroup, emit_json, handle_errors, quiet_option
+from .cli_common import NaschGroup, emit_json, handle_errors, quiet_option, run_console
 
-__all__ = ["main"]
+__all__ = ["main", "run"]
 
 # subcommand -> (module, attribute, summary for ``nasch --help``); the summaries
 # are checked against the commands' own docstrings in tests/test_cli.py
@@ -155,5 +155,10 @@ def _echo_top(rows: list[dict], lumped: bool, n_states: int) -> None:
         click.echo(line)
 
 
+def run() -> None:
+    """The ``nasch`` console script (``python -m markov.cli`` too)."""
+    run_console(main)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    main()
+    run()

@@ -16,8 +16,8 @@ import click
 
 from .errors import NaschError
 
-__all__ = ["handle_errors", "emit_json", "quiet_option", "NaschGroup", "EXIT_BAD_INPUT",
-           "EXIT_INTERRUPTED"]
+__all__ = ["handle_errors", "emit_json", "quiet_option", "NaschGroup", "run_console",
+           "EXIT_BAD_INPUT", "EXIT_INTERRUPTED"]
 
 #: Exit status of every refusal (bad option, bad value, too large): click's own.
 EXIT_BAD_INPUT = 2
@@ -74,10 +74,39 @@ def quiet_option(func):
                         help="No progress bars on stderr.")(func)
 
 
+_interrupt_reported = [False]
+
+
 def _echo_interrupted() -> None:
+    """Print ``interrupted`` once per command, however many places see the Ctrl-C."""
+    if _interrupt_reported[0]:
+        return
+    _interrupt_reported[0] = True
     # On a terminal the shell has echoed "^C" without a newline: close that line first.
     lead = "\n" if sys.stderr.isatty() else ""
     click.echo(f"{lead}interrupted", err=True)
+
+
+def run_console(group: click.Group) -> None:
+    """Entry point of the ``nasch`` program: ``group()`` with a clean Ctrl-C exit.
+
+    After an interrupt the command has cleaned up and reported it; a second
+    or late Ctrl-C (a signal Python handles only when the main thread runs
+    again) must not end the process by the signal or with a traceback while
+    the interpreter shuts down, so SIGINT is ignored from here on.  Only the
+    real program does this; click's test runner calls the group itself.
+    """
+    try:
+        group()
+        code = 0
+    except KeyboardInterrupt:
+        _echo_interrupted()
+        code = EXIT_INTERRUPTED
+    except SystemExit as exc:
+        code = exc.code
+    if code == EXIT_INTERRUPTED:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.exit(code)
 
 
 class NaschGroup(click.Group):
@@ -154,6 +183,7 @@ class NaschGroup(click.Group):
              **extra):
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+        _interrupt_reported[0] = False
         try:
             code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.exceptions.NoArgsIsHelpError as exc:

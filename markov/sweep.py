@@ -286,6 +286,9 @@ def _run_dask(func, jobs, scheduler, client, n_workers, desc) -> list:
                         own_cluster = LocalCluster(
                             n_workers=n_workers or default_workers(), threads_per_worker=1,
                             processes=True, dashboard_address=None,
+                            # the scheduler's HTTP routes on any free port, no dashboard:
+                            # no "port 8787 in use" warning when another cluster runs
+                            scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
                             silence_logs=logging.CRITICAL, local_directory=scratch,
                             env=dict(SINGLE_THREADED_ENV))
                         own_client = client = Client(own_cluster)
