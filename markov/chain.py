@@ -22,7 +22,7 @@ from .space import _memory_limit, bytes_per_state, count_all, recurrent_keys
 from .stationary import StationaryResult, stationary
 from .states import compact_jam_key
 from .transition import successor_counts, transition_matrix
-from .validate import ensure_chain_arguments
+from .validate import ensure_chain_arguments, format_count
 
 __all__ = ["RingChain", "Solution", "solve", "OPERATORS"]
 
@@ -156,7 +156,8 @@ class RingChain:
         if n * per_state > limit:
             r = self.ring
             raise StateSpaceTooLargeError(
-                f"the recurrent class has at least {n:,} states (L={r.length}, N={r.cars},"
+                f"the recurrent class has at least {format_count(n)} states"
+                f" (L={r.length}, N={r.cars},"
                 f" vmax={r.vmax}, lump={self.lump}); at about {per_state:.0f} bytes per state"
                 f" that is {_gib(n * per_state)}, which exceeds the memory limit of"
                 f" {_gib(limit)}")
@@ -397,7 +398,8 @@ class Solution:
         return save_solution(self, path)
 
     def top_configurations(self, k: int) -> list[dict]:
-        """The ``k`` most probable states in text notation (:func:`markov.storage.top_configurations`)."""
+        """The ``k`` most probable states in text notation
+        (:func:`markov.storage.top_configurations`)."""
         from .storage import top_configurations
         return top_configurations(self, k)
 

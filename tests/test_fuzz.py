@@ -220,7 +220,7 @@ PLOT = {"--vmax": integer(1, 2, 7), "--mc-steps": integer(32, 40, 0, 5),
         "--scheduler": st.sampled_from(["tcp://127.0.0.1:1", "nonsense"]), "--quiet": None}
 
 
-@_settings(15)
+@_settings(10)
 @given(lengths=int_list(2, 7), ext=int_list(4, 9), p=num_list(0.5, 0.25),
        rest=options(PLOT), out=output_path([".png", ".pdf", ".svg"]),
        cheap=st.booleans())
