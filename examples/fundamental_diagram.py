@@ -6,7 +6,9 @@ a ring of ~3000 cells (dots), exact stationary fluxes of rings with L = 8, 12,
 c = 1/4, 1/3, 1/2, 2/3, 3/4 (diamonds with the error estimate).
 
 Run:  python examples/fundamental_diagram.py [OUTPUT_DIR]   (about 20-40 s on 2 cores)
-Writes OUTPUT_DIR/fig2_fundamental_vmax2.png and .pdf (default docs/figures).
+Writes OUTPUT_DIR/fig2_fundamental_vmax2.png and .pdf; OUTPUT_DIR defaults to
+the current directory (the figure in docs/ was made with
+``python examples/fundamental_diagram.py docs/figures``).
 Same figure from the command line:
       nasch plot fundamental --vmax 2 --p 0.5,0.1 --output fig2.png
 """
@@ -24,10 +26,13 @@ from markov.plot import fundamental_data, fundamental_figure, save_figure  # noq
 
 
 def main(outdir: Path) -> None:
+    from markov.io import check_output_path
+
     start = time.perf_counter()
+    for ext in (".png", ".pdf"):   # a bad directory is reported before the work
+        check_output_path(outdir / f"fig2_fundamental_vmax2{ext}")
     panels = fundamental_data(2, [0.5, 0.1], seed=1)
     fig = fundamental_figure(panels)
-    outdir.mkdir(parents=True, exist_ok=True)
     for ext in (".png", ".pdf"):
         path = save_figure(fig, outdir / f"fig2_fundamental_vmax2{ext}")
         print(f"wrote {path}")
@@ -43,5 +48,4 @@ def main(outdir: Path) -> None:
 
 
 if __name__ == "__main__":  # Dask workers are spawned processes: keep the guard
-    root = Path(__file__).resolve().parent.parent
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else root / "docs" / "figures")
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path("."))

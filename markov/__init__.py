@@ -6,7 +6,14 @@ Quick start
 >>> sol = solve(Ring(length=10, cars=5, vmax=2, p=0.5))
 >>> 0 < sol.flux < 0.5
 True
+
+The names below are loaded on first use (PEP 562), so ``import markov`` and
+the ``nasch`` command start without numpy, scipy or numba until a
+subcommand needs them.
 """
+from __future__ import annotations
+
+import importlib
 import os
 
 # numba's OpenMP threads spin between parallel regions by default; next to
@@ -15,15 +22,34 @@ import os
 # must be chosen before the OpenMP runtime loads; a user's setting wins.
 os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
-from .chain import RingChain, Solution, solve  # noqa: E402
-from .errors import (ConvergenceError, InvalidParameterError, NaschError,  # noqa: E402
-                     NoUniqueStationaryStateError, StateSpaceTooLargeError)
-from .model import PARALLEL, RANDOM_SEQUENTIAL, UPDATES, Ring  # noqa: E402
-from .stationary import METHODS, SOLVERS, StationaryResult, stationary  # noqa: E402
-
 __all__ = [
-    "Ring", "RingChain", "Solution", "solve", "stationary", "StationaryResult",
-    "SOLVERS", "METHODS", "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL",
+    "Ring", "RingChain", "Solution", "solve", "load_solution", "stationary",
+    "StationaryResult", "SOLVERS", "METHODS", "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL",
     "NaschError", "InvalidParameterError", "NoUniqueStationaryStateError",
-    "StateSpaceTooLargeError", "ConvergenceError",
+    "StateSpaceTooLargeError", "ConvergenceError", "OutputError",
 ]
+
+# public name -> submodule that defines it
+_WHERE = {
+    "Ring": "model", "UPDATES": "model", "PARALLEL": "model", "RANDOM_SEQUENTIAL": "model",
+    "RingChain": "chain", "Solution": "chain", "solve": "chain",
+    "load_solution": "storage",
+    "stationary": "solvers", "StationaryResult": "solvers", "SOLVERS": "choices",
+    "METHODS": "choices",
+    **{name: "errors" for name in ("NaschError", "InvalidParameterError",
+                                    "NoUniqueStationaryStateError",
+                                    "StateSpaceTooLargeError", "ConvergenceError",
+                                    "OutputError")},
+}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+        globals()[name] = value   # later look-ups skip this function
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

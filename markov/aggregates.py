@@ -4,14 +4,14 @@ The slow modes of the NaSch chain are the motions of the cars (jams forming
 and dissolving); the velocities relax within a few steps.  Summing the
 velocities out leaves the *position configurations* (rotation classes of the
 occupied cells when the chain is lumped): about ``C(L, N) / L`` aggregates,
-the coarse chain of :func:`markov.stationary.stationary` with
+the coarse chain of :func:`markov.solvers.stationary` with
 ``method="aggregation"``.
 
 Under parallel update every state has a single *source* aggregate: R4 moves
 each car by its new velocity, so all predecessors of a configuration with cars
 at ``x_i`` and velocities ``v_i`` have their cars at ``x_i - v_i``.  That makes
 the coarse matrix a by-product of one product ``x P``
-(:class:`markov.stationary.Aggregates`).
+(:class:`markov.solvers.Aggregates`).
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from numba import njit, prange
 
 from .errors import InvalidParameterError
 from .model import PARALLEL, Ring
-from .stationary import Aggregates
+from .solvers import Aggregates
 from .states import unique_keys
 from .transition import _cars_of
 

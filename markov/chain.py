@@ -10,29 +10,30 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 from functools import cached_property
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
 from . import memory, observables
+from .choices import OPERATORS, PRODUCT_METHODS
 from .errors import InvalidParameterError, NoUniqueStationaryStateError
 from .goe_census import recurrent_class_count
 from .model import PARALLEL, Ring
 from .space import count_all, recurrent_keys
-from .stationary import (AUTO_OPERATOR_METHOD, DEFAULT_TOL, METHODS, PRODUCT_METHODS,
-                         StationaryResult, stationary)
+from .solvers import AUTO_OPERATOR_METHOD, DEFAULT_TOL, StationaryResult, stationary
 from .states import compact_jam_key
 from .transition import successor_counts, transition_matrix
+from .validate import ensure_chain_arguments, format_count
 
 __all__ = ["RingChain", "Solution", "solve", "OPERATORS"]
 
-#: How ``x -> x P`` is applied (see :attr:`RingChain.operator_kind` for ``auto``):
-#: ``matrix`` the assembled CSR matrix (every solver); ``matrix-free`` nothing of
-#: size "transitions" stored: the per-car levels of
-#: :class:`markov.factored.FactoredOperator` for parallel update, rows
-#: regenerated per product (:class:`markov.operator.TransitionOperator`) for
-#: random-sequential update.
-OPERATORS = ("auto", "matrix", "matrix-free")
+# OPERATORS (markov.choices): how ``x -> x P`` is applied (see
+# RingChain.operator_kind for ``auto``): ``matrix`` the assembled CSR matrix
+# (every solver); ``matrix-free`` nothing of size "transitions" stored: the
+# per-car levels of markov.factored.FactoredOperator for parallel update, rows
+# regenerated per product (markov.operator.TransitionOperator) for
+# random-sequential update.
 
 #: ``auto`` assembles the matrix (exact LU) up to this many states when it fits;
 #: above, matrix-free is faster (docs/performance.md).
@@ -44,13 +45,6 @@ def _ensure_operator(operator: str) -> str:
         raise InvalidParameterError(
             f"operator must be one of {', '.join(OPERATORS)}, got {operator!r}")
     return operator
-
-
-def _ensure_method(method: str) -> str:
-    if method not in METHODS:
-        raise InvalidParameterError(
-            f"method must be one of {', '.join(METHODS)}, got {method!r}")
-    return method
 
 
 # the product method with the fewest work vectors: what the fit checks before
@@ -121,6 +115,7 @@ class RingChain:
 
     def __init__(self, ring: Ring, lump: bool = True, max_memory: float | None = None,
                  operator: str = "auto"):
+        ensure_chain_arguments(ring, max_memory=max_memory)
         self.ring = ring
         self.lump = lump
         self.max_memory = max_memory
@@ -165,9 +160,9 @@ class RingChain:
             return
         r = self.ring
         memory.check_fits(
-            f"the recurrent class has at least {n:,} states (L={r.length}, N={r.cars},"
-            f" vmax={r.vmax}, lump={self.lump}); at about {per_state:.0f} bytes per state it",
-            n * per_state, self.limit)
+            f"the recurrent class has at least {format_count(n)} states (L={r.length},"
+            f" N={r.cars}, vmax={r.vmax}, lump={self.lump}); at about {per_state:.0f} bytes"
+            " per state it", n * per_state, self.limit)
 
     @cached_property
     def keys(self) -> np.ndarray:
@@ -272,7 +267,7 @@ class RingChain:
 
     def solution(self, method: str = "auto", tol: float = DEFAULT_TOL,
                  x0: np.ndarray | None = None) -> "Solution":
-        """Solve for the stationary state (:func:`markov.stationary.stationary`).
+        """Solve for the stationary state (:func:`markov.solvers.stationary`).
 
         ``auto`` means LU or ARPACK on the matrix, and aggregation/disaggregation
         (parallel update) or the BiCGSTAB -> GMRES -> power ladder
@@ -288,7 +283,7 @@ class RingChain:
             When the method's work vectors do not fit beside the operator.
         """
         _ensure_unique(self.ring)
-        _ensure_method(method)
+        ensure_chain_arguments(self.ring, method=method, tol=tol)
         if method == "aggregation" and self.ring.update != PARALLEL:
             raise InvalidParameterError(
                 "aggregation needs parallel update (the predecessors of a state share"
@@ -380,8 +375,8 @@ class Solution:
 
     @property
     def mean_velocity(self) -> float:
-        """Mean velocity of a car, ``flux / density`` (0 without cars)."""
-        return self.flux / self.ring.density if self.ring.cars else 0.0
+        """Mean velocity of a car, ``flux / density``; NaN (undefined) without cars."""
+        return self.flux / self.ring.density if self.ring.cars else float("nan")
 
     @cached_property
     def gap_distribution(self) -> np.ndarray:
@@ -402,12 +397,36 @@ class Solution:
             "level_sizes": list(self.level_sizes) if self.level_sizes else None,
             "method": self.result.method,
             "residual": self.residual, "iterations": self.result.iterations,
-            "flux": self.flux, "mean_velocity": self.mean_velocity,
+            "flux": self.flux,
+            "mean_velocity": self.mean_velocity if r.cars else None,  # undefined: null
             "c_v": self.c_v.tolist(),
             "gap_distribution": self.gap_distribution.tolist() if r.cars else [],
             "build_seconds": self.build_seconds, "solve_seconds": self.result.seconds,
             "seconds": self.build_seconds + self.result.seconds,
         }
+
+    # -- the vector itself (markov.storage)
+
+    def save(self, path) -> Path:
+        """Write keys, probabilities and metadata to ``path`` (``.npz``), atomically.
+
+        See :mod:`markov.storage` for the layout and the key encoding; read it
+        back with :func:`markov.load_solution`.
+        """
+        from .storage import save_solution
+        return save_solution(self, path)
+
+    def top_configurations(self, k: int) -> list[dict]:
+        """The ``k`` most probable states in text notation
+        (:func:`markov.storage.top_configurations`)."""
+        from .storage import top_configurations
+        return top_configurations(self, k)
+
+    def unlumped(self) -> "Solution":
+        """One state per configuration: a lumped solution's orbit sums spread over
+        their rotations (:func:`markov.storage.unlumped`); small rings only."""
+        from .storage import unlumped
+        return unlumped(self)
 
 
 def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFAULT_TOL,
@@ -419,7 +438,7 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     ring : Ring
         The system (validated on construction).
     method : {"auto", "direct", "eigs", "iterative", "gmres", "bicgstab", "power", "aggregation"}
-        Stationary solver (:func:`markov.stationary.stationary`).
+        Stationary solver (:func:`markov.solvers.stationary`).
     lump : bool
         Lump rotations of the ring (default; exact for all reported observables).
     tol : float
@@ -440,6 +459,10 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
         For ``p = 0`` or ``p = 1`` with ``0 < N < L``.
     StateSpaceTooLargeError
         When the chain would not fit in ``max_memory``.
+    InvalidParameterError
+        For a ring beyond the 64-bit key, an unknown method, ``tol`` outside
+        :data:`markov.validate.TOL_RANGE` or a non-positive ``max_memory``;
+        checked before any work.
 
     Examples
     --------
@@ -450,5 +473,6 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     0.25
     """
     _ensure_unique(ring)
+    ensure_chain_arguments(ring, method=method, tol=tol, max_memory=max_memory)
     return RingChain(ring, lump=lump, max_memory=max_memory,
                      operator=operator).solution(method=method, tol=tol)

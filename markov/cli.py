@@ -1,25 +1,45 @@
 """The ``nasch`` command line.
 
 Every subcommand validates through :class:`markov.model.Ring` and friends;
-errors of this package (:class:`markov.errors.NaschError`) are printed as one
-line ``error: ...`` with exit status 2, never as a traceback.
+errors of this package (:class:`markov.errors.NaschError`) and click's usage
+errors are printed as one line ``error: ...`` with exit status 2, never as a
+traceback; Ctrl-C gives one line and exit status 130.
+
+Start-up: this module imports only click and :mod:`markov.cli_common`.  The
+subcommands living in other modules are imported when they run
+(:class:`markov.cli_common.NaschGroup`), and each command imports numpy,
+the solver, sympy, Dask or matplotlib inside its body, so ``nasch --help``
+and a small ``nasch solve`` do not pay for the libraries they do not use.
 """
 from __future__ import annotations
 
 import click
 
-from symbolic.cli import approx, derive
+from .cli_common import NaschGroup, emit_json, handle_errors, quiet_option, run_console
 
-from .chain import OPERATORS
-from .cli_common import emit_json, handle_errors, quiet_option
-from .stationary import METHODS
-from .goe_cli import goe
-from .products_cli import plot, simulate, table
+from .choices import METHODS, OPERATORS
 
-__all__ = ["main"]
+__all__ = ["main", "run"]
+
+# subcommand -> (module, attribute, summary for ``nasch --help``); the summaries
+# are checked against the commands' own docstrings in tests/test_cli.py
+_LAZY = {
+    "approx": ("symbolic.cli", "approx",
+               "Stationary c_v and flux of an analytic approximation."),
+    "derive": ("symbolic.cli", "derive",
+               "Print the equations of an approximation, derived from the update rules."),
+    "goe": ("markov.goe_cli", "goe",
+            "Elementary Garden of Eden patterns (exhaustive) or a ring's GoE census."),
+    "plot": ("markov.products_cli", "plot", "Figures (PNG or PDF, by the file extension)."),
+    "simulate": ("markov.products_cli", "simulate",
+                 "Monte Carlo flux of a large ring, with a batch-means error bar."),
+    "table": ("markov.products_cli", "table",
+              "Exact finite-ring fluxes beside MF, pMF, 2-cluster and Monte Carlo."),
+}
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=NaschGroup, lazy=_LAZY,
+             context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="nasch-exact")
 def main():
     """Exact stationary states of the Nagel-Schreckenberg model on small rings.
@@ -27,6 +47,7 @@ def main():
     \b
     Examples:
       nasch solve -L 12 -N 6 --vmax 2 --p 0.5             exact flux, c_v, residual
+      nasch solve -L 10 -N 5 --p 0.5 --top 5 --save pi.npz  likeliest states; pi on disk
       nasch approx --method pmf --vmax 2 --p 0.5 -c 0.25    an analytic approximation
       nasch derive --method mf --vmax 2 --latex            its equations
       nasch goe --vmax 2 --max-cells 12                    Garden of Eden patterns
@@ -51,30 +72,55 @@ def main():
               help="Assemble P, or apply x -> xP without storing it (parallel update:"
                    " factored car by car).")
 @click.option("--tol", type=float, default=1e-13, show_default=True,
-              help="Target ||pi P - pi||_1 of the iterative solvers.")
+              help="Target ||pi P - pi||_1 of the iterative solvers, 1e-15..1e-3.")
 @click.option("--no-lump", is_flag=True, help="Do not lump rotations of the ring.")
 @click.option("--max-memory", type=float, default=None,
               help="Refuse chains needing more than this many GiB (default 75% of RAM).")
+@click.option("--top", type=int, default=None, metavar="K",
+              help="Also print the K most probable configurations ('.' empty, digit = velocity).")
+@click.option("--save", type=click.Path(dir_okay=False), default=None, metavar="FILE.npz",
+              help="Store configurations, probabilities and metadata (see docs/storage.md).")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @quiet_option
 @handle_errors
-def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_memory, as_json):
+def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_memory, top,
+          save, as_json):
     """Exact stationary state of one ring: flux, c_v, gap distribution.
+
+    With --no-lump off (the default) a state is a rotation class of the ring
+    and its probability is the sum over the class; --top and --save report
+    the classes by their canonical configuration.
 
     \b
     Example:
       nasch solve --length 12 --cars 6 --vmax 2 --p 0.5
+      nasch solve -L 10 -N 5 --p 0.25 --top 5 --save pi.npz
       nasch solve -L 22 -N 11 --p 0.5 --operator matrix-free --tol 1e-10
     """
+    # every check before the work: the solver's own up-front checks, then the options
     from .chain import solve as solve_ring
+    from .io import check_output_path
     from .model import Ring
+    from .validate import ensure_int, ensure_max_memory
 
     ring = Ring(length, cars, vmax, p, update)
+    max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
+    if top is not None:
+        top = ensure_int("--top", top, 1)
+    if save is not None:
+        save = check_output_path(save, suffixes=(".npz",))
     limit = None if max_memory is None else max_memory * 2**30
     sol = solve_ring(ring, method=method, lump=not no_lump, tol=tol, max_memory=limit,
                      operator=operator)
     data = sol.to_dict()
+    rows = sol.top_configurations(top) if top else None
+    if save is not None:
+        sol.save(save)
     if as_json:
+        if rows is not None:
+            data["top"] = rows
+        if save is not None:
+            data["saved"] = str(save)
         emit_json(data)
         return
     click.echo(f"NaSch ring L={length} N={cars} (c={ring.density:.4g}) vmax={vmax} p={p:g}"
@@ -86,15 +132,35 @@ def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_mem
                + f" method {data['method']},"
                f" residual {data['residual']:.2e}, {data['seconds']:.3f} s")
     click.echo(f"  flux           {data['flux']:.15g}")
-    click.echo(f"  mean velocity  {data['mean_velocity']:.15g}")
+    if data["mean_velocity"] is None:
+        click.echo("  mean velocity  undefined (no cars)")
+    else:
+        click.echo(f"  mean velocity  {data['mean_velocity']:.15g}")
     for v, c in enumerate(data["c_v"]):
         click.echo(f"  c_{v}            {c:.15g}")
+    if rows is not None:
+        _echo_top(rows, sol.lumped, len(sol.keys))
+    if save is not None:
+        click.echo(f"wrote {save} ({data['states']:,} states)", err=True)
 
 
-# subcommands that live beside the code they drive
-for _command in (goe, approx, derive, simulate, table, plot):
-    main.add_command(_command)
+def _echo_top(rows: list[dict], lumped: bool, n_states: int) -> None:
+    what = "rotation classes" if lumped else "configurations"
+    click.echo(f"  most probable {what} ({len(rows)} of {n_states:,};"
+               " '.' empty, digit = velocity, cars move right):")
+    width = max(len(r["configuration"]) for r in rows)
+    for r in rows:
+        line = f"    {r['configuration']:<{width}}  {r['probability']:.12g}"
+        if lumped:
+            line += (f"  (class of {r['rotations']} rotation{'s' if r['rotations'] > 1 else ''},"
+                     f" each {r['probability_each']:.6g})")
+        click.echo(line)
+
+
+def run() -> None:
+    """The ``nasch`` console script (``python -m markov.cli`` too)."""
+    run_console(main)
 
 
 if __name__ == "__main__":  # pragma: no cover
-    main()
+    run()

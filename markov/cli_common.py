@@ -1,23 +1,36 @@
 """Helpers shared by every ``nasch`` subcommand module.
 
-Kept apart from :mod:`markov.cli` (which imports the subcommand modules to
-register them) so that those modules can import these without a cycle.
+Kept apart from :mod:`markov.cli` (which registers the subcommand modules) so
+that those modules can import these without a cycle.  Nothing here imports
+numpy or another heavy library: ``nasch --help`` loads only click and this.
 """
 from __future__ import annotations
 
 import functools
+import importlib
 import json
+import signal
 import sys
 
 import click
 
 from .errors import NaschError
 
-__all__ = ["handle_errors", "emit_json", "quiet_option"]
+__all__ = ["handle_errors", "emit_json", "quiet_option", "NaschGroup", "run_console",
+           "EXIT_BAD_INPUT", "EXIT_INTERRUPTED"]
+
+#: Exit status of every refusal (bad option, bad value, too large): click's own.
+EXIT_BAD_INPUT = 2
+#: Exit status after Ctrl-C: 128 + SIGINT, as a shell reports it.
+EXIT_INTERRUPTED = 130
 
 
 def handle_errors(func):
-    """Turn :class:`NaschError` into ``error: message`` and exit status 2."""
+    """Turn :class:`NaschError` into ``error: message`` and exit status 2.
+
+    ``MemoryError`` gets the same treatment: the guards estimate memory before
+    the work, but an estimate can fall short, and a traceback would say less.
+    """
 
     @functools.wraps(func)
     def wrapper(*args, **kwargs):
@@ -25,14 +38,28 @@ def handle_errors(func):
             return func(*args, **kwargs)
         except NaschError as exc:
             click.echo(f"error: {exc}", err=True)
-            sys.exit(2)
+            sys.exit(EXIT_BAD_INPUT)
+        except MemoryError:
+            click.echo("error: out of memory; choose a smaller system or lower --max-memory"
+                       " so that the guard refuses it up front", err=True)
+            sys.exit(EXIT_BAD_INPUT)
 
     return wrapper
 
 
 def emit_json(obj) -> None:
-    """Print ``obj`` as indented JSON on stdout."""
-    click.echo(json.dumps(obj, indent=2))
+    """Print ``obj`` as indented JSON on stdout (NaN written as null: strict JSON)."""
+    click.echo(json.dumps(_nan_to_none(obj), indent=2, allow_nan=False))
+
+
+def _nan_to_none(obj):
+    if isinstance(obj, float) and obj != obj:
+        return None
+    if isinstance(obj, dict):
+        return {k: _nan_to_none(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_nan_to_none(v) for v in obj]
+    return obj
 
 
 def quiet_option(func):
@@ -45,3 +72,131 @@ def quiet_option(func):
 
     return click.option("--quiet", is_flag=True, expose_value=False, callback=callback,
                         help="No progress bars on stderr.")(func)
+
+
+_interrupt_reported = [False]
+
+
+def _echo_interrupted() -> None:
+    """Print ``interrupted`` once per command, however many places see the Ctrl-C."""
+    if _interrupt_reported[0]:
+        return
+    _interrupt_reported[0] = True
+    # On a terminal the shell has echoed "^C" without a newline: close that line first.
+    lead = "\n" if sys.stderr.isatty() else ""
+    click.echo(f"{lead}interrupted", err=True)
+
+
+def run_console(group: click.Group) -> None:
+    """Entry point of the ``nasch`` program: ``group()`` with a clean Ctrl-C exit.
+
+    After an interrupt the command has cleaned up and reported it; a second
+    or late Ctrl-C (a signal Python handles only when the main thread runs
+    again) must not end the process by the signal or with a traceback while
+    the interpreter shuts down, so SIGINT is ignored from here on.  Only the
+    real program does this; click's test runner calls the group itself.
+    """
+    try:
+        group()
+        code = 0
+    except KeyboardInterrupt:
+        _echo_interrupted()
+        code = EXIT_INTERRUPTED
+    except SystemExit as exc:
+        code = exc.code
+    if code == EXIT_INTERRUPTED:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.exit(code)
+
+
+class NaschGroup(click.Group):
+    """The ``nasch`` group: lazily imported subcommands and one-line errors.
+
+    * ``lazy`` maps a subcommand name to ``(module, attribute, summary)``; the
+      module is imported only when that subcommand runs (or shows its help),
+      and ``nasch --help`` lists the summary without importing anything.
+      ``tests/test_cli.py`` checks each summary against the command's own.
+    * Usage errors (unknown option, a value click cannot parse, a bad choice)
+      print ``error: ...`` on one line with exit status 2, like the package's
+      own refusals, instead of click's four-line block.
+    * Ctrl-C prints ``interrupted`` and exits with status 130, wherever it
+      lands (imports, work, clean-up), without a traceback.
+    """
+
+    def __init__(self, *args, lazy: dict[str, tuple[str, str, str]] | None = None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.lazy = dict(lazy or {})
+
+    def list_commands(self, ctx):
+        return sorted(set(super().list_commands(ctx)) | set(self.lazy))
+
+    def get_command(self, ctx, name):
+        if name in self.commands or name not in self.lazy:
+            return super().get_command(ctx, name)
+        module, attribute, _ = self.lazy[name]
+        command = getattr(importlib.import_module(module), attribute)
+        self.add_command(command, name)
+        return command
+
+    def format_commands(self, ctx, formatter):
+        rows = []
+        for name in self.list_commands(ctx):
+            if name in self.commands:
+                command = self.commands[name]
+                if command.hidden:
+                    continue
+                rows.append((name, command.get_short_help_str(limit=formatter.width)))
+            else:
+                rows.append((name, self.lazy[name][2]))
+        if rows:
+            with formatter.section("Commands"):
+                formatter.write_dl(rows)
+
+    def invoke(self, ctx):
+        # Python drops a KeyboardInterrupt raised inside a finaliser or a
+        # weakref callback ("Exception ignored in ..."): remember every Ctrl-C,
+        # so that one landing there still ends the command with 130.
+        seen = []
+
+        def on_sigint(signum, frame):
+            seen.append(signum)
+            raise KeyboardInterrupt
+
+        try:
+            previous = signal.signal(signal.SIGINT, on_sigint)
+        except ValueError:   # not the main thread: leave signals alone
+            previous = None
+        try:
+            result = super().invoke(ctx)
+        except KeyboardInterrupt:
+            result = None
+            seen.append(signal.SIGINT)
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGINT, previous)
+        if seen:
+            _echo_interrupted()
+            ctx.exit(EXIT_INTERRUPTED)
+        return result
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True,
+             **extra):
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+        _interrupt_reported[0] = False
+        try:
+            code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.exceptions.NoArgsIsHelpError as exc:
+            exc.show()   # bare ``nasch`` or ``nasch plot``: the help, as click does
+            sys.exit(exc.exit_code)
+        except click.ClickException as exc:
+            message = " ".join(exc.format_message().split())
+            hint = ""
+            if isinstance(exc, click.UsageError) and exc.ctx is not None:
+                hint = f" (see {exc.ctx.command_path} --help)"
+            click.echo(f"error: {message}{hint}", err=True)
+            sys.exit(EXIT_BAD_INPUT if isinstance(exc, click.UsageError) else exc.exit_code)
+        except (click.Abort, KeyboardInterrupt):
+            _echo_interrupted()   # Ctrl-C while click parsed the command line
+            sys.exit(EXIT_INTERRUPTED)
+        sys.exit(code if isinstance(code, int) else 0)

@@ -12,6 +12,7 @@ __all__ = [
     "NoUniqueStationaryStateError",
     "StateSpaceTooLargeError",
     "ConvergenceError",
+    "OutputError",
 ]
 
 
@@ -49,3 +50,7 @@ class ConvergenceError(NaschError):
         self.iterations = iterations
         self.residual = residual
         self.partial = partial
+
+
+class OutputError(NaschError):
+    """A result could not be written to the path the user named."""

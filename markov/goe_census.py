@@ -145,7 +145,7 @@ def pattern_free_count(length: int, cars: int, vmax: int) -> int:
     cars : int
         ``0 <= N <= L``.
     vmax : int
-        1..9.
+        1..6 (:data:`markov.goe_patterns.MAX_VMAX`).
 
     Examples
     --------

@@ -10,7 +10,8 @@ __all__ = ["goe"]
 
 
 @click.command()
-@click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity, 1..9.")
+@click.option("--vmax", type=int, default=2, show_default=True,
+              help="Maximal velocity, 1..6 (the automata grow about tenfold per velocity).")
 @click.option("--max-cells", "-K", "max_cells", type=int, default=12, show_default=True,
               help="Longest pattern searched (cells).")
 @click.option("--census", "do_census", is_flag=True,

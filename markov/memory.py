@@ -24,11 +24,10 @@ Paths
 """
 from __future__ import annotations
 
-import math
 import os
 
-from .errors import InvalidParameterError, StateSpaceTooLargeError
-from .stationary import GMRES_RESTART
+from .errors import StateSpaceTooLargeError
+from .choices import GMRES_RESTART
 
 __all__ = ["DEFAULT_MEMORY_FRACTION", "LEVEL_WORDS_PER_STATE", "available_memory",
            "memory_limit", "solver_vectors", "search_bytes_per_state",
@@ -60,13 +59,10 @@ def memory_limit(max_memory: float | None) -> float:
     InvalidParameterError
         For a limit that is not a positive finite number.
     """
-    if max_memory is None:
-        return DEFAULT_MEMORY_FRACTION * available_memory()
-    if isinstance(max_memory, bool) or not isinstance(max_memory, (int, float)) \
-            or not math.isfinite(max_memory) or max_memory <= 0:
-        raise InvalidParameterError(
-            f"the memory limit must be a positive number of bytes, got {max_memory!r}")
-    return float(max_memory)
+    from .validate import ensure_max_memory
+
+    max_memory = ensure_max_memory(max_memory)
+    return DEFAULT_MEMORY_FRACTION * available_memory() if max_memory is None else max_memory
 
 
 def gib(nbytes: float) -> str:

@@ -13,25 +13,13 @@ from dataclasses import dataclass
 from fractions import Fraction
 
 from .errors import InvalidParameterError
+from .validate import ensure_int as _ensure_int
 
 __all__ = ["Ring", "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL"]
 
 PARALLEL = "parallel"
 RANDOM_SEQUENTIAL = "random-sequential"
 UPDATES = (PARALLEL, RANDOM_SEQUENTIAL)
-
-
-def _ensure_int(name: str, value, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
-        if isinstance(value, float) and value.is_integer():
-            value = int(value)
-        else:
-            raise InvalidParameterError(
-                f"{name} must be an integer >= {minimum}, got {value!r}")
-    value = int(value)
-    if value < minimum:
-        raise InvalidParameterError(f"{name} must be an integer >= {minimum}, got {value}")
-    return value
 
 
 def _ensure_probability(value) -> float | Fraction:

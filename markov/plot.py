@@ -34,7 +34,8 @@ from .errors import InvalidParameterError, NaschError
 from .extrapolate import commensurate_lengths, extrapolate
 from .io import write_bytes_atomic
 from .sweep import run_jobs
-from .tables import _derived_seed, _task_cost, exact_job, mc_job, mc_ring
+from .tables import (_derived_seed, _task_cost, ensure_mc_steps, exact_job, mc_job, mc_ring,
+                     preflight)
 
 __all__ = ["fundamental_data", "fundamental_figure", "save_figure", "FIGURE_FORMATS",
            "EXTRAPOLATION_DENSITIES"]
@@ -110,11 +111,31 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     >>> [round(float(x), 6) for x in d["exact"][6][1]]
     [0.083333, 0.145833, 0.171053, 0.145833, 0.083333]
     """
+    from .states import max_length
+    from .validate import ensure_int
+
     single = np.ndim(p) == 0
     ps = [float(p)] if single else [float(x) for x in p]
     for x in ps:
         if not 0 < x < 1:
             raise InvalidParameterError(f"p must lie strictly between 0 and 1, got {x}")
+    vmax = ensure_int("vmax", vmax, 1)
+    order = ensure_int("order", order, 1)
+    seed = ensure_int("seed", seed, 0)
+    mc_steps = ensure_mc_steps(mc_steps)
+    mc_length = ensure_int("mc_length", mc_length, 2)
+    mc_points = ensure_int("mc_points", mc_points, 1)
+    lengths = [ensure_int("ring length", L, 2) for L in lengths]
+    extrapolation_lengths = [ensure_int("ring length", L, 2) for L in extrapolation_lengths]
+    # Rings beyond the exact solver's 64-bit key are dropped with a notice, at once.
+    longest = max_length(vmax)
+    too_long = sorted({L for L in [*lengths, *extrapolation_lengths] if L > longest})
+    if too_long:
+        warnings.warn(f"rings of L = {', '.join(map(str, too_long))} cells are left out: the"
+                      f" exact solver holds rings of up to {longest} cells for vmax = {vmax}",
+                      RuntimeWarning, stacklevel=2)
+        lengths = [L for L in lengths if L <= longest]
+        extrapolation_lengths = [L for L in extrapolation_lengths if L <= longest]
     exact_points = {(int(L), N) for L in lengths for N in range(1, int(L))}
     groups = {}
     for c in extrapolation_densities:
@@ -135,6 +156,7 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
             Lm, Nm = mc_ring(c, mc_length)
             s = _derived_seed(seed, c.numerator, c.denominator, vmax, round(x * 2**40))
             tasks.append(("mc", (Lm, Nm, vmax, x, "parallel", mc_steps, mc_steps // 2, s)))
+    preflight([t for t in tasks if t[0] == "mc"])
     results = run_jobs(_job, tasks, serial=serial, scheduler=scheduler, client=client,
                        cost=_task_cost, desc="fundamental diagram")
     per_panel = len(exact_points) + len(mc_c)
@@ -220,6 +242,8 @@ def fundamental_figure(panels: Sequence[dict], width: float = 4.6, height: float
                         label=f"Monte Carlo (L $\\approx$ {d['mc_length']})", zorder=4)
             top = max(top, float(np.max(f)))
         for i, (L, (c, f)) in enumerate(sorted(d["exact"].items())):
+            if not len(c):   # every ring of this L was refused by the solver
+                continue
             ax.plot(c, f, ls="none", marker=_MARKERS[i % len(_MARKERS)], ms=4.5, mfc="none",
                     mew=0.9, color=_EXACT_COLORS[i % len(_EXACT_COLORS)],
                     label=f"exact, L = {L}", zorder=3)

@@ -54,10 +54,13 @@ def _ensure_p_open(values: list[float]) -> None:
               help="Random seed; the same seed gives identical output.")
 @click.option("--update", type=click.Choice(["parallel", "random-sequential"]),
               default="parallel", show_default=True, help="Update order.")
+@click.option("--max-memory", type=float, default=None,
+              help="Refuse runs needing more than this many GiB (default 75% of RAM).")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @quiet_option
 @handle_errors
-def simulate(length, density, cars, vmax, p, steps, warmup, batches, seed, update, as_json):
+def simulate(length, density, cars, vmax, p, steps, warmup, batches, seed, update, max_memory,
+             as_json):
     """Monte Carlo flux of a large ring, with a batch-means error bar.
 
     \b
@@ -67,15 +70,17 @@ def simulate(length, density, cars, vmax, p, steps, warmup, batches, seed, updat
     """
     from .model import Ring
     from .simulate import simulate as run
+    from .validate import ensure_int, ensure_max_memory, ensure_real
 
     if (density is None) == (cars is None):
         raise InvalidParameterError("give exactly one of --density and --cars")
     if density is not None:
-        if not 0 <= density <= 1:
-            raise InvalidParameterError(f"--density must lie in [0, 1], got {density:g}")
-        cars = int(round(density * length))
+        density = ensure_real("--density", density, 0, 1)
+        cars = int(round(density * ensure_int("--length", length, 1)))
     ring = Ring(length, cars, vmax, p, update)
-    r = run(ring, steps=steps, warmup=warmup, seed=seed, batches=batches)
+    max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
+    r = run(ring, steps=steps, warmup=warmup, seed=seed, batches=batches,
+            max_memory=None if max_memory is None else max_memory * 2**30)
     if as_json:
         emit_json(r.to_dict())
         return
@@ -112,7 +117,8 @@ def simulate(length, density, cars, vmax, p, steps, warmup, batches, seed, updat
               help="Order of the 1/L series of the L -> infinity extrapolation.")
 @click.option("--no-extrapolation", is_flag=True, help="No L = infinity rows.")
 @click.option("--serial", is_flag=True, help="Run everything in this process (no Dask).")
-@click.option("--scheduler", default=None, help="Address of a running Dask scheduler.")
+@click.option("--scheduler", default=None,
+              help="Address of a running Dask scheduler, tcp://HOST:PORT.")
 @click.option("--workers", type=int, default=None, help="Local Dask workers [cores].")
 @quiet_option
 @handle_errors
@@ -125,13 +131,19 @@ def table(vmax, p_text, lengths_text, cars_text, density_text, update, fmt, outp
       nasch table --vmax 2 --p 0.5 --lengths 8,10,12,14 --density 0.5,0.25
       nasch table --vmax 1 --p 0.25,0.5 --lengths 8,12,16 --format latex -o flux.tex
     """
-    from .io import write_atomic
+    from .io import check_output_path, write_atomic
     from .tables import flux_table
 
     if cars_text is not None and density_text is not None:
         raise InvalidParameterError("give either --cars or --density, not both")
+    _ensure_dask_options(serial, scheduler)
+    if workers is not None:
+        from .validate import ensure_int
+        workers = ensure_int("--workers", workers, 1)
     ps = _number_list("--p", p_text)
     _ensure_p_open(ps)
+    if output is not None:
+        check_output_path(output)   # before the work, not after it
     if fmt is None:
         fmt = _EXT_FORMAT.get(Path(output).suffix.lower(), "text") if output else "text"
     t = flux_table(
@@ -149,6 +161,14 @@ def table(vmax, p_text, lengths_text, cars_text, density_text, update, fmt, outp
         click.echo(text, nl=False)
 
 
+def _ensure_dask_options(serial: bool, scheduler: str | None) -> None:
+    if serial and scheduler is not None:
+        raise InvalidParameterError("give either --serial or --scheduler, not both")
+    if scheduler is not None:
+        from .sweep import parse_scheduler_address
+        parse_scheduler_address(scheduler)
+
+
 @click.group()
 def plot():
     """Figures (PNG or PDF, by the file extension).
@@ -159,7 +179,7 @@ def plot():
     """
 
 
-@plot.command()
+@plot.command(short_help="Fundamental diagram as in the paper's Figure 2.")
 @click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity.")
 @click.option("--p", "p_text", default="0.5", show_default=True,
               help="Braking probability, or a comma-separated list (one panel each).")
@@ -175,23 +195,26 @@ def plot():
 @click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
               help="Figure file, .png or .pdf.")
 @click.option("--serial", is_flag=True, help="Run everything in this process (no Dask).")
-@click.option("--scheduler", default=None, help="Address of a running Dask scheduler.")
+@click.option("--scheduler", default=None,
+              help="Address of a running Dask scheduler, tcp://HOST:PORT.")
 @quiet_option
 @handle_errors
 def fundamental(vmax, p_text, lengths_text, ext_text, mc_length, mc_steps, seed, output,
                 serial, scheduler):
-    """Fundamental diagram (the paper's Fig. 2): approximations, Monte Carlo, exact rings.
+    """Fundamental diagram as in the paper's Figure 2: approximations, Monte Carlo, exact rings.
+
+    Rings too large for the exact solver are left out with a warning.
 
     \b
     Example:
       nasch plot fundamental --vmax 2 --p 0.5 --output fig.png
       nasch plot fundamental --vmax 2 --p 0.5,0.1 --output fig2.pdf
     """
+    from .io import check_output_path
     from .plot import FIGURE_FORMATS, fundamental_data, fundamental_figure, save_figure
 
-    if Path(output).suffix.lower() not in FIGURE_FORMATS:
-        raise InvalidParameterError(
-            f"--output must end in {' or '.join(FIGURE_FORMATS)}, got {output!r}")
+    check_output_path(output, suffixes=FIGURE_FORMATS)   # before the work
+    _ensure_dask_options(serial, scheduler)
     ps = _number_list("--p", p_text)
     _ensure_p_open(ps)
     import warnings

@@ -40,9 +40,18 @@ from .model import PARALLEL, Ring
 from .progress import progress_bar
 from .rules import deterministic_velocity, randomize
 
-__all__ = ["SimulationResult", "simulate", "evolve", "initial_configuration", "blocking_error"]
+__all__ = ["SimulationResult", "simulate", "evolve", "initial_configuration", "blocking_error",
+           "simulation_bytes", "DEFAULT_BATCHES"]
+
+#: Batches of the batch-means error bar; a run needs at least one step per batch.
+DEFAULT_BATCHES = 32
 
 _U53 = 1.0 / 9007199254740992.0  # 2**-53: uint64 >> 11 -> uniform double in [0, 1)
+# Car updates per kernel call: numba code does not see Ctrl-C, so long runs
+# return to Python about every 0.5 s (chunking does not change the stream).
+_CHUNK_UPDATES = 50_000_000
+# positions are int64 and a car may step past L before wrapping
+_MAX_LENGTH = 2**62
 
 
 # --- random numbers -----------------------------------------------------------
@@ -228,13 +237,47 @@ def _advance(ring: Ring, pos, vel, steps: int, rng, counts) -> int:
     p = float(ring.p)
     if ring.cars == 0 or steps == 0:
         return 0
+    work = ring.cars if ring.update == PARALLEL else ring.length
+    chunk = max(1, _CHUNK_UPDATES // work)
     if ring.update == PARALLEL:
         before = counts.copy()
-        _parallel_steps(pos, vel, ring.length, ring.vmax, p, steps, rng, counts)
+        for done in range(0, steps, chunk):
+            _parallel_steps(pos, vel, ring.length, ring.vmax, p, min(chunk, steps - done),
+                            rng, counts)
         return int(np.dot(np.arange(ring.vmax + 1), counts - before))
     moved = np.zeros(1, dtype=np.int64)
-    _random_sequential_steps(pos, vel, ring.length, ring.vmax, p, steps, rng, counts, moved)
+    for done in range(0, steps, chunk):
+        _random_sequential_steps(pos, vel, ring.length, ring.vmax, p, min(chunk, steps - done),
+                                 rng, counts, moved)
     return int(moved[0])
+
+
+def simulation_bytes(ring: Ring) -> int:
+    """Peak bytes of :func:`simulate` for this ring (a close upper estimate).
+
+    Drawing the random start with numpy's ``Generator.choice`` without
+    replacement permutes every cell index (``8 L`` bytes) when ``N > L / 50``
+    and keeps a set of ``N`` indices otherwise; sorting and the car arrays
+    (positions, velocities) add ``8 N`` each.  Measured: ``L = 10**9``,
+    ``N = 2 * 10**8`` peaked at 9.6 GB resident, this gives 9.6e9.
+    """
+    length, cars = int(ring.length), int(ring.cars)
+    draw = 8 * length + 8 * cars if cars > length // 50 else 24 * cars
+    return max(draw, 32 * cars) + 1_000_000
+
+
+def _ensure_memory(ring: Ring, max_memory: float | None) -> None:
+    from .memory import check_fits, memory_limit
+    from .validate import format_count
+
+    if ring.length > _MAX_LENGTH:
+        raise InvalidParameterError(
+            f"the simulator stores positions as 64-bit integers: L must be at most"
+            f" {format_count(_MAX_LENGTH)}, got {format_count(ring.length)}")
+    check_fits(f"a Monte Carlo run of L = {format_count(ring.length)} cells with"
+               f" N = {format_count(ring.cars)} cars", simulation_bytes(ring),
+               memory_limit(max_memory), "; use a smaller ring (or raise the limit with"
+               " --max-memory)")
 
 
 def evolve(ring: Ring, positions, velocities, steps: int, seed: int = 0):
@@ -328,7 +371,8 @@ class SimulationResult:
 
 
 def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
-             batches: int = 32, initial=None, replicas: int = 1) -> SimulationResult:
+             batches: int = DEFAULT_BATCHES, initial=None, replicas: int = 1,
+             max_memory: float | None = None) -> SimulationResult:
     """Monte Carlo estimate of the stationary flux of a (large) ring.
 
     Parameters
@@ -352,6 +396,9 @@ def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
         steps each); the error bar is the larger of the combined within-run
         error and the between-run standard error.  Use several near the flux
         maximum, where correlations outlive a run.
+    max_memory : float, optional
+        Bytes allowed (default 75 % of physical memory); a larger ring is
+        refused before anything is allocated (:func:`simulation_bytes`).
 
     Returns
     -------
@@ -380,6 +427,8 @@ def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
     if initial is not None and replicas > 1:
         raise InvalidParameterError("an initial configuration allows only replicas = 1")
     warmup = steps // 10 if warmup is None else _ensure_steps("warmup", warmup, 0)
+    _rng_state(seed)   # validates the seed before any work
+    _ensure_memory(ring, max_memory)
     start = time.perf_counter()
     fluxes, errors, all_batches = [], [], []
     counts = np.zeros(ring.vmax + 1, dtype=np.int64)

@@ -60,8 +60,9 @@ def check_encodable(length: int, vmax: int) -> None:
     limit = max_length(vmax)
     if length > limit:
         raise InvalidParameterError(
-            f"rings with vmax = {vmax} are encoded in 64-bit keys up to L = {limit} cells,"
-            f" got L = {length}")
+            f"the exact solver stores a configuration in a 64-bit key, which holds rings"
+            f" of up to L = {limit} cells for vmax = {vmax}; got L = {length}"
+            f" (nasch simulate has no such limit)")
 
 
 def powers(length: int, vmax: int) -> np.ndarray:

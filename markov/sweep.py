@@ -15,16 +15,43 @@ Three ways to run :func:`run_jobs`:
 
 ``serial=None`` decides by cost: tiny job lists run serially so that a demo
 does not pay the 2-5 s cluster start-up.
+
+Bit-identical results.  A job's floating-point result can depend on the
+number of threads it runs on (OpenBLAS splits the LU of the direct solver
+differently, numba's threaded kernels sum in another order), so both paths
+run every job the same way: one BLAS thread and one numba thread
+(:func:`single_threaded`).  ``tests/test_sweep.py`` compares a serial table
+with one from real worker processes bit for bit.
+
+Interruption.  Worker processes start with SIGINT ignored, so a Ctrl-C on
+the terminal (sent to the whole process group) reaches only this process:
+it closes the cluster, removes the workers' scratch directory and re-raises
+``KeyboardInterrupt`` (the CLI prints one line and exits with 130).  The
+workers also exit on their own when this process dies.
 """
 from __future__ import annotations
 
+import contextlib
 import functools
+import logging
 import os
+import shutil
+import signal
+import socket
+import shlex
+import tempfile
+import threading
 from typing import Any, Callable, Sequence
+from urllib.parse import urlsplit
 
+from .errors import InvalidParameterError, NaschError
 from .progress import progress_bar
 
-__all__ = ["run_jobs", "default_workers", "SINGLE_THREADED_ENV"]
+__all__ = ["run_jobs", "default_workers", "single_threaded", "parse_scheduler_address",
+           "SINGLE_THREADED_ENV", "CONNECT_TIMEOUT"]
+
+#: Seconds allowed to reach a scheduler (the whole connection, probe included).
+CONNECT_TIMEOUT = 10.0
 
 # One worker process per core: each must run its BLAS and numba kernels on one
 # thread.  Measured on the 2-core machine under load: a sweep of exact vmax=2
@@ -38,12 +65,30 @@ SINGLE_THREADED_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1",
                        "MKL_NUM_THREADS": "1"}
 
 
-def _single_threaded(func, job):
-    """Run ``func(job)`` with numba's parallel kernels on one thread (on a worker)."""
-    import numba
+@contextlib.contextmanager
+def single_threaded():
+    """Run the enclosed code with one BLAS thread and one numba thread.
 
+    BLAS through :func:`threadpoolctl.threadpool_limits` (it works on a
+    library already loaded, where the environment variables no longer do),
+    numba through :func:`numba.set_num_threads`; both restored on exit.
+    """
+    import numba
+    from threadpoolctl import threadpool_limits
+
+    before = numba.get_num_threads()
     numba.set_num_threads(1)
-    return func(job)
+    try:
+        with threadpool_limits(limits=1, user_api="blas"):
+            yield
+    finally:
+        numba.set_num_threads(before)
+
+
+def _single_threaded(func, job):
+    """``func(job)`` under :func:`single_threaded` (the same on a worker and here)."""
+    with single_threaded():
+        return func(job)
 
 
 def default_workers() -> int:
@@ -95,48 +140,175 @@ def run_jobs(func: Callable[[Any], Any], jobs: Sequence[Any], *, serial: bool | 
     """
     jobs = list(jobs)
     if serial is None:
-        if scheduler is not None or client is not None:
+        if scheduler is not None or client is not None or n_workers is not None:
             serial = False
         elif len(jobs) <= 1:
             serial = True
         else:
             serial = cost is not None and sum(cost(j) for j in jobs) < serial_below
+    if n_workers is not None:
+        from .validate import ensure_int
+        n_workers = ensure_int("n_workers", n_workers, 1)
+    if scheduler is not None:
+        parse_scheduler_address(scheduler)
     if serial:
         out = []
         with progress_bar(len(jobs), desc, "job") as bar:
             for job in jobs:
-                out.append(func(job))
+                out.append(_single_threaded(func, job))
                 bar.update(1)
         return out
     return _run_dask(func, jobs, scheduler, client, n_workers, desc)
 
 
+def parse_scheduler_address(address: str) -> tuple[str, str, int]:
+    """``(protocol, host, port)`` of a scheduler address, or a clear error.
+
+    Accepts ``tcp://HOST:PORT``, ``tls://HOST:PORT`` and ``HOST:PORT`` (tcp).
+
+    Examples
+    --------
+    >>> parse_scheduler_address("tcp://127.0.0.1:8786")
+    ('tcp', '127.0.0.1', 8786)
+    """
+    text = str(address).strip()
+    parts = urlsplit(text if "://" in text else f"tcp://{text}")
+    try:
+        port = parts.port
+    except ValueError:
+        port = None
+    if parts.scheme not in ("tcp", "tls") or not parts.hostname or port is None or not port:
+        raise InvalidParameterError(
+            f"the scheduler address must look like tcp://HOST:PORT (or tls://), got {address!r}")
+    return parts.scheme, parts.hostname, port
+
+
+def _connect(address: str):
+    """A Client of the scheduler at ``address``, or :class:`NaschError` within
+    :data:`CONNECT_TIMEOUT` seconds (distributed alone retries for 30 s and
+    then shows two chained tracebacks)."""
+    from dask.distributed import Client
+
+    _, host, port = parse_scheduler_address(address)
+    try:   # a plain socket first: "refused" and unknown hosts answer at once
+        socket.create_connection((host, port), timeout=CONNECT_TIMEOUT / 2).close()
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise NaschError(f"cannot reach the Dask scheduler at {address}: {reason}") from None
+    try:
+        return Client(address, timeout=CONNECT_TIMEOUT / 2)
+    except (OSError, TimeoutError) as exc:
+        raise NaschError(f"cannot connect to the Dask scheduler at {address}"
+                         f" within {CONNECT_TIMEOUT / 2:g} s: {exc}") from None
+    except Exception as exc:  # noqa: BLE001 - something answered, but not a scheduler
+        raise NaschError(f"{address} does not answer as a Dask scheduler"
+                         f" ({type(exc).__name__})") from None
+
+
+@contextlib.contextmanager
+def _quiet_distributed():
+    """distributed's own log lines (warnings at shutdown) stay off the terminal."""
+    loggers = [logging.getLogger(name) for name in ("distributed", "tornado", "asyncio")]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, levels):
+            lg.setLevel(level)
+
+
+@contextlib.contextmanager
+def _workers_ignore_sigint(scratch: str):
+    """Worker processes spawned inside this block start with SIGINT ignored.
+
+    A terminal's Ctrl-C goes to the whole process group; workers that saw it
+    would print their own tracebacks.  An ignored signal is the one signal
+    disposition that survives ``exec`` (and Python leaves an ignored SIGINT
+    alone at start-up), so the spawn start method is pointed at a two-line
+    shell wrapper that ignores SIGINT and execs the interpreter.  This process
+    keeps SIGINT and stops the workers itself; they also exit on their own
+    when it dies (distributed watches the parent).
+    """
+    import multiprocessing.spawn as spawn
+
+    python = spawn.get_executable()
+    wrapper = os.path.join(scratch, "python-ignoring-sigint")
+    with open(wrapper, "w") as fh:
+        fh.write(f"#!/bin/sh\ntrap '' INT\nexec {shlex.quote(os.fsdecode(python))} \"$@\"\n")
+    os.chmod(wrapper, 0o700)
+    spawn.set_executable(wrapper)
+    try:
+        yield
+    finally:
+        spawn.set_executable(python)
+
+
+@contextlib.contextmanager
+def _sigint_deferred():
+    """Hold a Ctrl-C that arrives inside the block until the block ends.
+
+    Starting and closing a cluster must not be cut in half: a half-started
+    LocalCluster cannot be closed cleanly (distributed then fails with an
+    AssertionError at exit), and a half-closed one leaves workers and files.
+    Only in the main thread (the only one Python delivers signals to).
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    hits = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: hits.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if hits:
+        raise KeyboardInterrupt
+
+
 def _run_dask(func, jobs, scheduler, client, n_workers, desc) -> list:
+    import dask
     from dask.distributed import Client, LocalCluster, as_completed
 
     own_cluster = own_client = None
-    try:
-        if client is None:
-            if scheduler is not None:
-                own_client = client = Client(scheduler)
-            else:
-                own_cluster = LocalCluster(n_workers=n_workers or default_workers(),
-                                           threads_per_worker=1, processes=True,
-                                           dashboard_address=None, silence_logs=40,
-                                           env=dict(SINGLE_THREADED_ENV))
-                own_client = client = Client(own_cluster)
-        # pure=False: identical arguments must still run (no result sharing
-        # across calls); ordering is restored through the index below.
-        futures = client.map(functools.partial(_single_threaded, func), jobs, pure=False)
-        index = {f.key: i for i, f in enumerate(futures)}
-        out = [None] * len(jobs)
-        with progress_bar(len(jobs), desc, "job") as bar:
-            for fut in as_completed(futures):
-                out[index[fut.key]] = fut.result()
-                bar.update(1)
-        return out
-    finally:
-        if own_client is not None:
-            own_client.close()
-        if own_cluster is not None:
-            own_cluster.close()
+    scratch = None
+    with _quiet_distributed():
+        try:
+            if client is None:
+                if scheduler is not None:
+                    own_client = client = _connect(scheduler)
+                else:
+                    # the workers' scratch space, removed whatever happens
+                    scratch = tempfile.mkdtemp(prefix="nasch-dask-")
+                    with (_sigint_deferred(), _workers_ignore_sigint(scratch),
+                          dask.config.set({"temporary-directory": scratch})):
+                        own_cluster = LocalCluster(
+                            n_workers=n_workers or default_workers(), threads_per_worker=1,
+                            processes=True, dashboard_address=None,
+                            # the scheduler's HTTP routes on any free port, no dashboard:
+                            # no "port 8787 in use" warning when another cluster runs
+                            scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
+                            silence_logs=logging.CRITICAL, local_directory=scratch,
+                            env=dict(SINGLE_THREADED_ENV))
+                        own_client = client = Client(own_cluster)
+            # pure=False: identical arguments must still run (no result sharing
+            # across calls); ordering is restored through the index below.
+            futures = client.map(functools.partial(_single_threaded, func), jobs, pure=False)
+            index = {f.key: i for i, f in enumerate(futures)}
+            out = [None] * len(jobs)
+            with progress_bar(len(jobs), desc, "job") as bar:
+                for fut in as_completed(futures):
+                    out[index[fut.key]] = fut.result()
+                    bar.update(1)
+            return out
+        finally:
+            with _sigint_deferred():
+                if own_client is not None:
+                    with contextlib.suppress(Exception):
+                        own_client.close()
+                if own_cluster is not None:
+                    with contextlib.suppress(Exception):
+                        own_cluster.close()
+                if scratch is not None:
+                    shutil.rmtree(scratch, ignore_errors=True)

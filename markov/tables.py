@@ -30,10 +30,12 @@ import numpy as np
 from .errors import InvalidParameterError
 from .extrapolate import commensurate_lengths, extrapolate
 from .model import PARALLEL, UPDATES, Ring
+from .simulate import DEFAULT_BATCHES
 from .sweep import run_jobs
+from .validate import ensure_int
 
 __all__ = ["FORMATS", "APPROXIMATIONS", "FluxTable", "flux_table", "table_points",
-           "exact_job", "mc_job", "mc_ring"]
+           "exact_job", "mc_job", "mc_ring", "ensure_mc_steps", "preflight"]
 
 FORMATS = ("text", "csv", "md", "latex", "json")
 APPROXIMATIONS = ("mf", "pmf", "pmf2", "cluster2")
@@ -98,6 +100,32 @@ def _exact_cost(length: int, cars: int, vmax: int) -> float:
         return 0.0
     a = _STATE_BASE.get(vmax, min(vmax + 1.0, 1.6 + 0.15 * (vmax - 2)))
     return 2e-5 * math.comb(length, cars) * a ** cars / length
+
+
+def ensure_mc_steps(mc_steps) -> int:
+    """Monte Carlo steps of a table or figure: 0 (none) or at least the batches of
+    :func:`markov.simulate.simulate` (:data:`markov.simulate.DEFAULT_BATCHES`)."""
+    mc_steps = ensure_int("mc_steps", mc_steps, 0)
+    if 0 < mc_steps < DEFAULT_BATCHES:
+        raise InvalidParameterError(
+            f"mc_steps must be 0 (no Monte Carlo) or at least {DEFAULT_BATCHES} (one step per"
+            f" batch of the error bar), got {mc_steps}")
+    return mc_steps
+
+
+def preflight(tasks) -> None:
+    """Instant checks of every job before any runs: a ring beyond the exact
+    solver's 64-bit key, or a Monte Carlo ring too large for memory, is refused
+    here rather than after the other jobs have been computed."""
+    from .simulate import _ensure_memory
+    from .validate import ensure_chain_arguments
+
+    for kind, point in tasks:
+        ring = Ring(*point[:5])
+        if kind == "exact":
+            ensure_chain_arguments(ring)
+        else:
+            _ensure_memory(ring, None)
 
 
 def _task_cost(task: tuple) -> float:
@@ -234,6 +262,7 @@ class FluxTable:
             head.append("Monte Carlo")
         align = ["r"] * len(head)
         body = []
+        shown = set()   # (p, density) groups whose Monte Carlo value is already in the table
         for r in self.rows:
             if r["kind"] == "extrapolated":
                 L = r"$\infty$" if latex else "inf"
@@ -244,8 +273,15 @@ class FluxTable:
             row = [f"{r['p']:g}", L, N, f"{r['density']:.4f}", exact]
             row += ["--" if r[m] is None else f"{r[m]:.6f}" for m in self.methods]
             if self.mc_steps:
-                row.append("--" if r["mc_flux"] is None
-                           else _pm(r["mc_flux"], r["mc_error"], latex))
+                # one simulation per (p, density): printed on the group's first row only
+                group = (r["p"], round(r["density"], 12))
+                if r["mc_flux"] is None:
+                    row.append("--")
+                elif group in shown:
+                    row.append("")
+                else:
+                    shown.add(group)
+                    row.append(_pm(r["mc_flux"], r["mc_error"], latex))
             body.append(row)
         return head, body, align
 
@@ -261,6 +297,7 @@ class FluxTable:
                 out.append("")
             prev = key if r["kind"] == "exact" else None
             out.append(line(cells))
+        out = [row.rstrip() for row in out]
         return "\n".join(out) + "\n" + textwrap.fill(self._footnote(), 100) + "\n"
 
     def to_md(self) -> str:
@@ -290,7 +327,8 @@ class FluxTable:
                  " error = max(|order change|, leave-one-out spread)"]
         if self.mc_steps:
             parts.append(f"Monte Carlo: {self.mc_steps} steps per replica on a ring of the same"
-                         " density (length in the JSON/CSV), 1-sigma error (batch means with"
+                         " density (length in the JSON/CSV), shown once per density,"
+                         " 1-sigma error (batch means with"
                          " blocking, and the spread of independent replicas)")
         return "; ".join(parts)
 
@@ -374,13 +412,14 @@ def flux_table(vmax: int, p, lengths: Sequence[int], *, cars: Sequence[int] | No
         if m not in APPROXIMATIONS:
             raise InvalidParameterError(
                 f"unknown approximation {m!r}; allowed: {', '.join(APPROXIMATIONS)}")
-    if isinstance(mc_steps, bool) or int(mc_steps) < 0:
-        raise InvalidParameterError(f"mc_steps must be >= 0, got {mc_steps}")
-    mc_steps = int(mc_steps)
-    if mc_steps and mc_steps < 20:
-        raise InvalidParameterError(f"mc_steps must be 0 or at least 20 (batches), got {mc_steps}")
-    mc_warmup = mc_steps // 2 if mc_warmup is None else int(mc_warmup)
-    Ring(max(2, int(mc_length)), 1, vmax, ps[0], update)  # validates vmax
+    mc_steps = ensure_mc_steps(mc_steps)
+    mc_warmup = mc_steps // 2 if mc_warmup is None else ensure_int("mc_warmup", mc_warmup, 0)
+    mc_length = ensure_int("mc_length", mc_length, 2)
+    mc_replicas = ensure_int("mc_replicas", mc_replicas, 1)
+    seed = ensure_int("seed", seed, 0)
+    order = ensure_int("order", order, 1)
+    n_workers = None if n_workers is None else ensure_int("n_workers", n_workers, 1)
+    Ring(mc_length, 1, vmax, ps[0], update)  # validates vmax
     rings = table_points(lengths, cars, densities)
 
     # Methods defined for this vmax only (when symbolic is available at all);
@@ -399,6 +438,7 @@ def flux_table(vmax: int, p, lengths: Sequence[int], *, cars: Sequence[int] | No
                 mc_tasks.append(("mc", (Lm, Nm, vmax, p_, update, mc_steps, mc_warmup, s,
                                         int(mc_replicas))))
     tasks = exact_tasks + mc_tasks
+    preflight(tasks)
     results = run_jobs(_job, tasks, serial=serial, scheduler=scheduler, client=client,
                        n_workers=n_workers, cost=_task_cost, desc="flux table")
     exact = {t[1][:2] + (t[1][3],): r for t, r in zip(exact_tasks, results)}

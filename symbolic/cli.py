@@ -13,8 +13,8 @@ __all__ = ["approx", "derive", "derived_equations"]
 
 
 @click.command()
-@click.option("--method", type=str, required=True,
-              help=f"Approximation: {', '.join(APPROXIMATIONS)}.")
+@click.option("--method", type=click.Choice(APPROXIMATIONS), required=True,
+              help="Approximation.")
 @click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity >= 1.")
 @click.option("--p", "p", type=float, required=True, help="Braking probability, 0 < p < 1.")
 @click.option("--density", "-c", type=float, required=True, help="Car density, 0 < c < 1.")
@@ -64,8 +64,8 @@ def derived_equations(method: str, vmax: int) -> list[sp.Eq]:
 
 
 @click.command()
-@click.option("--method", type=str, required=True,
-              help=f"Approximation: {', '.join(APPROXIMATIONS)}.")
+@click.option("--method", type=click.Choice(APPROXIMATIONS), required=True,
+              help="Approximation.")
 @click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity >= 1.")
 @click.option("--latex", is_flag=True, help="Print LaTeX instead of sympy syntax.")
 @handle_errors

@@ -12,7 +12,7 @@ from markov.factored import FactoredOperator
 from markov.memory import factored_bytes_per_state, memory_limit, solver_vectors
 from markov.operator import TransitionOperator
 from markov.space import recurrent_keys
-from markov.stationary import PRODUCT_METHODS
+from markov.solvers import PRODUCT_METHODS
 from markov.transition import transition_matrix
 
 SOLVER_CASES = [(m, *case) for m in PRODUCT_METHODS for case in [
@@ -104,7 +104,7 @@ def test_memory_guard_refuses_with_the_number():
     with pytest.raises(StateSpaceTooLargeError, match="gmres.*try method="):
         chain.solution(method="gmres")
     for bad in (-1.0, 0, float("nan"), float("inf"), "1"):
-        with pytest.raises(InvalidParameterError, match="memory limit"):
+        with pytest.raises(InvalidParameterError, match="max_memory"):
             memory_limit(bad)
 
 

@@ -53,5 +53,5 @@ def test_overflow_guard():
     limit = max_length(2)
     assert 2 * 4 ** limit <= np.iinfo(np.int64).max < 2 * 4 ** (limit + 1)
     check_encodable(limit, 2)
-    with pytest.raises(InvalidParameterError, match="64-bit keys up to L"):
+    with pytest.raises(InvalidParameterError, match="64-bit key, which holds rings of up to L"):
         check_encodable(limit + 1, 2)

@@ -12,14 +12,17 @@ distributed = pytest.importorskip("dask.distributed")
 
 
 @pytest.fixture(scope="module")
-def client():
+def client(tmp_path_factory):
     # Small and in-process (threads): no process start-up cost in the tests.
-    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
-                                       dashboard_address=None)
-    c = distributed.Client(cluster)
-    yield c
-    c.close()
-    cluster.close()
+    # Its scratch space goes to a pytest directory, not the shared /tmp.
+    import dask
+    with dask.config.set({"temporary-directory": str(tmp_path_factory.mktemp("dask"))}):
+        cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False,
+                                           dashboard_address=None)
+        c = distributed.Client(cluster)
+        yield c
+        c.close()
+        cluster.close()
 
 
 def _slow_square(x):
@@ -33,6 +36,7 @@ def test_order_is_input_order(client):
 
 
 def test_table_identical_serial_and_distributed(client):
+    # (worker processes against the serial path: tests/test_interrupt.py)
     kwargs = dict(vmax=2, p=[0.5, 0.25], lengths=[6, 8, 10], densities=[0.5],
                   mc_steps=200, mc_length=400, mc_replicas=2, seed=3)
     serial = flux_table(**kwargs, serial=True)

@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 import naive
-from markov import InvalidParameterError
+from markov import InvalidParameterError, OutputError
 from markov.cli import main
 from markov.extrapolate import exact_vmax1_flux
 from markov.io import write_atomic
@@ -143,7 +143,8 @@ def test_write_atomic(tmp_path, monkeypatch):
     def boom(src, dst):
         raise OSError("disk full")
     monkeypatch.setattr(os, "replace", boom)
-    with pytest.raises(OSError):
+    # reported as the package's error naming the user's file, not the temporary one
+    with pytest.raises(OutputError, match=r"cannot write .*t\.csv: disk full"):
         write_atomic(target, "half\n")
     assert target.read_text() == "new\n"              # old content intact
     assert os.listdir(tmp_path) == ["t.csv"]

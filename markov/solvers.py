@@ -38,18 +38,15 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
+from .choices import GMRES_RESTART, METHODS, PRODUCT_METHODS, SOLVERS
 from .errors import ConvergenceError, InvalidParameterError, NoUniqueStationaryStateError
 
 __all__ = ["SOLVERS", "METHODS", "PRODUCT_METHODS", "DIRECT_LIMIT", "GMRES_RESTART",
            "Aggregates", "StationaryResult", "stationary", "iterate", "residual",
            "check_irreducible"]
 
-SOLVERS = ("direct", "eigs", "iterative", "gmres", "bicgstab", "power", "aggregation")
-METHODS = ("auto",) + SOLVERS
 DIRECT_LIMIT = 1_000
 DENSE_LIMIT = 3_000
-#: Krylov basis size of GMRES (its memory: GMRES_RESTART + 6 vectors).
-GMRES_RESTART = 60
 
 
 @dataclass(frozen=True)
@@ -260,9 +257,6 @@ def _aggregation_steps(product, x, tol, maxiter, count, agg: Aggregates):
     return x, res
 
 
-#: Methods that need only the product ``x -> x P`` (:func:`iterate`); ``aggregation``
-#: needs :class:`Aggregates` besides.
-PRODUCT_METHODS = ("iterative", "gmres", "bicgstab", "power", "aggregation")
 
 
 def iterate(product, n: int, method: str = "iterative", tol: float = 1e-13,
@@ -405,10 +399,10 @@ def stationary(P, method: str = "auto", tol: float = DEFAULT_TOL,
     """
     if method not in METHODS:
         raise InvalidParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol < 1:
-        raise InvalidParameterError(f"tol must be a number in (0, 1), got {tol!r}")
-    if isinstance(maxiter, bool) or not isinstance(maxiter, (int, np.integer)) or maxiter < 1:
-        raise InvalidParameterError(f"maxiter must be a positive integer, got {maxiter!r}")
+    from .validate import ensure_int, ensure_tol
+
+    tol = ensure_tol(tol)
+    maxiter = ensure_int("maxiter", maxiter, 1)
     matrix = sp.issparse(P)
     if not matrix and method in ("direct", "eigs"):
         raise InvalidParameterError(

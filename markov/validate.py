@@ -1,0 +1,150 @@
+"""Checks of numeric arguments shared by the API and the command line.
+
+Every check raises :class:`markov.errors.InvalidParameterError` with a message
+that names the argument, what was received and what is allowed, so the API and
+``nasch`` refuse the same values in the same words, before any work starts.
+"""
+from __future__ import annotations
+
+import math
+import numbers
+from decimal import Decimal
+
+from .errors import InvalidParameterError
+
+__all__ = ["ensure_int", "ensure_real", "ensure_tol", "ensure_max_memory",
+           "ensure_chain_arguments", "format_count", "TOL_RANGE"]
+
+#: Allowed residual targets ``||pi P - pi||_1`` of the iterative solvers.  Below
+#: 1e-15 the target is under double-precision round-off of the residual itself
+#: (GMRES then restarts until its iteration cap: 35 s at L = 12 for 1e-16,
+#: measured); above 1e-3 the answer is too rough to be called exact (at
+#: ``tol = inf`` power iteration returned its uniform start vector).
+TOL_RANGE = (1e-15, 1e-3)
+
+
+def ensure_int(name: str, value, minimum: int | None = None, maximum: int | None = None) -> int:
+    """``value`` as an ``int`` in ``[minimum, maximum]``; integral floats are accepted.
+
+    Examples
+    --------
+    >>> ensure_int("steps", 10.0, 1)
+    10
+    >>> ensure_int("steps", 0, 1)
+    Traceback (most recent call last):
+    ...
+    markov.errors.InvalidParameterError: steps must be an integer >= 1, got 0
+    """
+    if maximum is None:
+        allowed = f">= {minimum}" if minimum is not None else ""
+    elif minimum is None:
+        allowed = f"<= {maximum}"
+    else:
+        allowed = f"in {minimum}..{maximum}"
+    what = f"{name} must be an integer {allowed}".rstrip()
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        if isinstance(value, float) and value.is_integer():
+            value = int(value)
+        else:
+            raise InvalidParameterError(f"{what}, got {value!r}")
+    value = int(value)
+    if (minimum is not None and value < minimum) or (maximum is not None and value > maximum):
+        raise InvalidParameterError(f"{what}, got {format_count(value)}")
+    return value
+
+
+def ensure_real(name: str, value, low: float | None = None, high: float | None = None,
+                low_open: bool = False, high_open: bool = False) -> float:
+    """``value`` as a finite ``float`` in the interval ``low..high``.
+
+    ``low_open``/``high_open`` exclude the end points.  NaN and infinities are
+    always refused: no numeric option of this package means anything there.
+
+    Examples
+    --------
+    >>> ensure_real("p", 0.5, 0, 1, low_open=True, high_open=True)
+    0.5
+    >>> ensure_real("tol", float("nan"), 0)
+    Traceback (most recent call last):
+    ...
+    markov.errors.InvalidParameterError: tol must be a finite number >= 0, got nan
+    """
+    parts = []
+    if low is not None and high is not None:
+        parts.append(f"in {'(' if low_open else '['}{low:g}, {high:g}{')' if high_open else ']'}")
+    elif low is not None:
+        parts.append(f"{'>' if low_open else '>='} {low:g}")
+    elif high is not None:
+        parts.append(f"{'<' if high_open else '<='} {high:g}")
+    what = f"{name} must be a finite number {' '.join(parts)}".rstrip()
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise InvalidParameterError(f"{what}, got {value!r}")
+    try:
+        x = float(value)
+    except OverflowError:   # an int beyond the float range
+        raise InvalidParameterError(f"{what}, got {format_count(value)}") from None
+    if not math.isfinite(x):
+        raise InvalidParameterError(f"{what}, got {x!r}")
+    if low is not None and (x < low or (low_open and x == low)):
+        raise InvalidParameterError(f"{what}, got {x:g}")
+    if high is not None and (x > high or (high_open and x == high)):
+        raise InvalidParameterError(f"{what}, got {x:g}")
+    return x
+
+
+def ensure_tol(tol, name: str = "tol") -> float:
+    """A residual target in :data:`TOL_RANGE`.
+
+    Examples
+    --------
+    >>> ensure_tol(1e-10)
+    1e-10
+    """
+    return ensure_real(name, tol, *TOL_RANGE)
+
+
+def ensure_max_memory(value, name: str = "max_memory", unit: str = "bytes") -> float | None:
+    """``None`` (the default limit) or a positive, finite amount of memory.
+
+    Examples
+    --------
+    >>> ensure_max_memory(None) is None, ensure_max_memory(2**30)
+    (True, 1073741824.0)
+    """
+    if value is None:
+        return None
+    x = ensure_real(f"{name} ({unit})", value, 0, low_open=True)
+    return x
+
+
+def ensure_chain_arguments(ring, method: str | None = None, tol=None,
+                           max_memory=None) -> None:
+    """The exact solver's up-front checks: all instant, all before enumerating.
+
+    The ring must fit the 64-bit key (:func:`markov.states.check_encodable`),
+    ``method`` be a solver name, ``tol`` lie in :data:`TOL_RANGE` and
+    ``max_memory`` (bytes) be ``None`` or positive and finite.
+    """
+    from .states import check_encodable
+    from .choices import METHODS
+
+    check_encodable(ring.length, ring.vmax)
+    if method is not None and method not in METHODS:
+        raise InvalidParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    if tol is not None:
+        ensure_tol(tol)
+    ensure_max_memory(max_memory)
+
+
+def format_count(n) -> str:
+    """An integer for a message: ``12,345`` up to 12 digits, else ``1.23e+64``.
+
+    Works for integers of any size (no conversion to float).
+
+    Examples
+    --------
+    >>> format_count(12345), format_count(10**64 + 2 * 10**62)
+    ('12,345', '1.02e+64')
+    """
+    n = int(n)
+    return f"{n:,}" if abs(n) < 10**12 else format(Decimal(n), ".2e")

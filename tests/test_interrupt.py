@@ -1,0 +1,100 @@
+"""Ctrl-C and Dask in real processes (issue 12, item 5).
+
+Ctrl-C on a terminal sends SIGINT to the whole foreground process group; the
+tests start ``nasch`` in a session of its own and send SIGINT to that group,
+as a terminal would.  Each checks: one line on stderr, exit status 130, no
+temporary file in the output directory or the temporary directory, and no
+process of the group still running.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+pytestmark = pytest.mark.slow
+
+NASCH = [sys.executable, "-m", "markov.cli"]
+
+
+def _live_processes(pgid: int) -> list[str]:
+    out = subprocess.run(["ps", "-o", "stat=,args=", "-g", str(pgid)], capture_output=True,
+                         text=True).stdout
+    return [line for line in out.splitlines() if line.strip() and not line.strip().startswith("Z")]
+
+
+def _interrupt(args, tmp_path, wait_for: str | None, delay: float):
+    """Start nasch, wait for ``wait_for`` on stderr (or ``delay`` s), send SIGINT."""
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    env = {**os.environ, "TMPDIR": str(scratch), "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen([*NASCH, *args], cwd=tmp_path, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    time.sleep(delay)
+    os.killpg(proc.pid, signal.SIGINT)
+    try:
+        out, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise
+    deadline = time.monotonic() + 15
+    while _live_processes(proc.pid) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    return proc, out, err, scratch
+
+
+def _check(proc, err, tmp_path, scratch, expected_files=("tmp",)):
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == ["interrupted"], err
+    assert _live_processes(proc.pid) == []
+    assert sorted(os.listdir(tmp_path)) == sorted(expected_files)     # no output, no temp file
+    assert os.listdir(scratch) == []                                   # no scratch left
+
+
+def test_ctrl_c_during_a_simulation(tmp_path):
+    proc, _, err, scratch = _interrupt(
+        ["simulate", "-L", "200000", "-c", "0.3", "--p", "0.5", "--steps", "1000000", "--json"],
+        tmp_path, None, 3.0)
+    _check(proc, err, tmp_path, scratch)
+
+
+@pytest.mark.parametrize("delay", [1.0, 4.5])   # while the cluster starts / while it works
+def test_ctrl_c_during_a_dask_table(tmp_path, delay):
+    proc, _, err, scratch = _interrupt(
+        ["table", "--lengths", "8,10,12,14,16", "--density", "0.5,0.25", "--p", "0.25,0.5",
+         "--mc-steps", "0", "--workers", "2", "-o", "t.csv"], tmp_path, None, delay)
+    _check(proc, err, tmp_path, scratch)
+
+
+def test_unreachable_scheduler_is_reported_within_ten_seconds():
+    from click.testing import CliRunner
+
+    from markov.cli import main
+
+    start = time.monotonic()
+    res = CliRunner().invoke(main, ["table", "--lengths", "8,10", "--mc-steps", "0",
+                                    "--scheduler", "tcp://127.0.0.1:1"])
+    assert time.monotonic() - start < 10
+    assert res.exit_code == 2
+    assert res.stderr.strip().splitlines() == [
+        "error: cannot reach the Dask scheduler at tcp://127.0.0.1:1: Connection refused"]
+
+
+def test_serial_table_equals_worker_processes_bit_for_bit():
+    # Serial jobs run single-threaded like the workers do: force two BLAS threads
+    # around the serial call, which must not change a bit of the result.
+    from threadpoolctl import threadpool_limits
+
+    from markov.tables import flux_table
+
+    kwargs = dict(vmax=2, p=[0.5, 0.25], lengths=[8, 10, 12], densities=[0.5, 0.25],
+                  mc_steps=64, mc_length=300, mc_replicas=2, seed=3)
+    with threadpool_limits(limits=2, user_api="blas"):
+        serial = flux_table(**kwargs, serial=True)
+    processes = flux_table(**kwargs, serial=False, n_workers=2)
+    assert serial.rows == processes.rows
+    assert serial.render("csv") == processes.render("csv")
