@@ -1,7 +1,9 @@
 """Flagship example (``make demo``): exact finite-ring fluxes beside the approximations.
 
-For vmax = 2 and p = 0.5 (the paper's case) it prints, for rings of 8..16
-cells at half filling and at quarter filling:
+For vmax = 2 and p = 0.5 (the paper's case) it prints, at half filling and at
+quarter filling, for the four largest rings whose exact solution fits a budget
+of 15 s each density (``markov.budget``: at half filling L = 16..22, at
+quarter filling L = 16..28):
 
 * the exact stationary flux of each finite ring (Markov chain, solved exactly),
 * the mean-field (MF), paradisical mean-field (pMF, pMF2) and 2-cluster fluxes
@@ -10,9 +12,9 @@ cells at half filling and at quarter filling:
 * an ``L = inf`` row: the exact fluxes extrapolated in 1/L, with the error
   estimate of ``markov.extrapolate``.
 
-Run:  python examples/flux_table.py         (about 10-30 s on 2 cores)
+Run:  python examples/flux_table.py         (about a minute on 2 cores)
 Same table from the command line:
-      nasch table --vmax 2 --p 0.5 --lengths 8,10,12,14,16 --density 0.5,0.25
+      nasch table --vmax 2 --p 0.5 --density 0.5,0.25 --budget 15s
 """
 import os
 
@@ -30,7 +32,7 @@ from markov.tables import flux_table  # noqa: E402
 
 def main() -> None:
     start = time.perf_counter()
-    table = flux_table(vmax=2, p=0.5, lengths=[8, 10, 12, 14, 16], densities=[0.5, 0.25],
+    table = flux_table(vmax=2, p=0.5, densities=[0.5, 0.25], budget=15.0,
                        mc_steps=3000, mc_length=10000, seed=2024)
     print(table.render("text"))
     # One line of reading help: how far each approximation is from the best

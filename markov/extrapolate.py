@@ -200,8 +200,9 @@ def commensurate_lengths(density, lengths: Sequence[int]) -> list[int]:
     return [int(L) for L in lengths if (c * int(L)).denominator == 1]
 
 
-def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int], order: int = 2,
-                     n_fit: int | None = None, update: str = PARALLEL) -> Extrapolation:
+def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int] | None = None,
+                     order: int = 2, n_fit: int | None = None, update: str = PARALLEL,
+                     budget: float | None = None) -> Extrapolation:
     """Exact fluxes at fixed density on the given rings, extrapolated to ``L = inf``.
 
     Parameters
@@ -211,10 +212,14 @@ def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int], order: int =
         Braking probability, ``0 < p < 1``.
     density : float or Fraction
         Car density; only the lengths with ``density * L`` integer are used.
-    lengths : sequence of int
+    lengths : sequence of int, optional
         Candidate ring lengths.
     order, n_fit : see :func:`extrapolate`.
     update : {"parallel", "random-sequential"}
+    budget : float, optional
+        Seconds for the exact rings instead of ``lengths``: the ``n_fit``
+        (default ``order + 2``) largest rings of this density that fit
+        (:func:`markov.budget.lengths_within_budget`).
 
     Returns
     -------
@@ -229,6 +234,13 @@ def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int], order: int =
     from .chain import solve
 
     c = Fraction(density).limit_denominator(1000)
+    if budget is not None:
+        from .budget import lengths_within_budget
+
+        lengths = lengths_within_budget(vmax, p, c, budget, count=n_fit or order + 2,
+                                        update=update)
+    elif lengths is None:
+        raise InvalidParameterError("give the ring lengths or a budget")
     Ls = commensurate_lengths(c, lengths)
     if len(Ls) < order + 1:
         raise InvalidParameterError(

@@ -69,7 +69,7 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
                      order: int = 2, methods: Sequence[str] = ("pmf", "mf", "cluster2"),
                      mc_length: int = 3000, mc_steps: int = 2000, mc_points: int = 39,
                      seed: int = 0, serial: bool | None = None, scheduler: str | None = None,
-                     client=None):
+                     client=None, budget: float | None = None):
     """All numbers of the fundamental diagram: one panel per braking probability.
 
     Parameters
@@ -82,7 +82,7 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
         Rings whose exact flux is shown for every ``0 < N < L``.
     extrapolation_lengths : sequence of int
         Candidate rings for the extrapolation (those commensurate with each
-        density are used).
+        density are used); ignored with ``budget``.
     extrapolation_densities : sequence of Fraction
         Densities to extrapolate (those with at least ``order + 1`` rings).
     order : int
@@ -96,6 +96,11 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     seed : int
     serial, scheduler, client
         See :func:`markov.sweep.run_jobs`.
+    budget : float, optional
+        Seconds of exact solving per extrapolated density and panel: the
+        ``order + 2`` largest rings of each density that fit
+        (:func:`markov.budget.lengths_within_budget`), instead of
+        ``extrapolation_lengths``.
 
     Returns
     -------
@@ -136,33 +141,39 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
                       RuntimeWarning, stacklevel=2)
         lengths = [L for L in lengths if L <= longest]
         extrapolation_lengths = [L for L in extrapolation_lengths if L <= longest]
-    exact_points = {(int(L), N) for L in lengths for N in range(1, int(L))}
-    groups = {}
-    for c in extrapolation_densities:
-        c = Fraction(c)
-        Ls = commensurate_lengths(c, extrapolation_lengths)
-        if len(Ls) >= order + 1:
-            groups[c] = Ls
-            exact_points |= {(L, int(c * L)) for L in Ls}
-    exact_points = sorted(exact_points)
+    shown = {(int(L), N) for L in lengths for N in range(1, int(L))}
+    groups = {}   # p -> {density: extrapolation lengths}
+    for x in ps:
+        groups[x] = {}
+        for c in map(Fraction, extrapolation_densities):
+            if budget is not None:
+                from .budget import lengths_within_budget
+
+                Ls = lengths_within_budget(vmax, x, c, budget, count=order + 2)
+            else:
+                Ls = commensurate_lengths(c, extrapolation_lengths)
+            if len(Ls) >= order + 1:
+                groups[x][c] = Ls
     # Monte Carlo on a uniform grid plus the extrapolated densities, so that
     # every extrapolated point has a simulation at exactly its density.
     mc_c = sorted({Fraction(k, mc_points + 1) for k in range(1, mc_points + 1)}
-                  | set(groups)) if mc_steps else []
-    tasks = []
+                  | {c for g in groups.values() for c in g}) if mc_steps else []
+    tasks, spans = [], []
     for x in ps:
-        tasks += [("exact", (L, N, vmax, x, "parallel")) for L, N in exact_points]
+        points = sorted(shown | {(L, int(c * L)) for c, Ls in groups[x].items() for L in Ls})
+        first = len(tasks)
+        tasks += [("exact", (L, N, vmax, x, "parallel")) for L, N in points]
         for c in mc_c:
             Lm, Nm = mc_ring(c, mc_length)
             s = _derived_seed(seed, c.numerator, c.denominator, vmax, round(x * 2**40))
             tasks.append(("mc", (Lm, Nm, vmax, x, "parallel", mc_steps, mc_steps // 2, s)))
+        spans.append((first, len(tasks), points))
     preflight([t for t in tasks if t[0] == "mc"])
     results = run_jobs(_job, tasks, serial=serial, scheduler=scheduler, client=client,
                        cost=_task_cost, desc="fundamental diagram")
-    per_panel = len(exact_points) + len(mc_c)
-    panels = [_panel(vmax, x, results[i * per_panel:(i + 1) * per_panel], exact_points,
-                     groups, mc_c, lengths, order, methods, mc_length, mc_steps)
-              for i, x in enumerate(ps)]
+    panels = [_panel(vmax, x, results[lo:hi], points, groups[x], mc_c, lengths, order,
+                     methods, mc_length, mc_steps)
+              for x, (lo, hi, points) in zip(ps, spans)]
     return panels[0] if single else panels
 
 

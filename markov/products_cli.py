@@ -97,8 +97,11 @@ def simulate(length, density, cars, vmax, p, steps, warmup, batches, seed, updat
 @click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity.")
 @click.option("--p", "p_text", default="0.5", show_default=True,
               help="Braking probability, or a comma-separated list.")
-@click.option("--lengths", "lengths_text", default="8,10,12,14", show_default=True,
-              help="Ring lengths, comma-separated.")
+@click.option("--lengths", "lengths_text", default=None,
+              help="Ring lengths, comma-separated [8,10,12,14, or chosen by --budget].")
+@click.option("--budget", "budget_text", default=None,
+              help="Time for the exact rings of each density and p, e.g. 60s or 5m: the"
+                   " largest rings that fit are chosen (instead of --lengths).")
 @click.option("--cars", "cars_text", default=None, help="Numbers of cars, comma-separated.")
 @click.option("--density", "density_text", default=None,
               help="Densities, comma-separated (rings with c L integer are used) [0.5].")
@@ -122,15 +125,17 @@ def simulate(length, density, cars, vmax, p, steps, warmup, batches, seed, updat
 @click.option("--workers", type=int, default=None, help="Local Dask workers [cores].")
 @quiet_option
 @handle_errors
-def table(vmax, p_text, lengths_text, cars_text, density_text, update, fmt, output, mc_steps,
-          mc_length, seed, order, no_extrapolation, serial, scheduler, workers):
+def table(vmax, p_text, lengths_text, budget_text, cars_text, density_text, update, fmt, output,
+          mc_steps, mc_length, seed, order, no_extrapolation, serial, scheduler, workers):
     """Exact finite-ring fluxes beside MF, pMF, 2-cluster and Monte Carlo.
 
     \b
     Example:
       nasch table --vmax 2 --p 0.5 --lengths 8,10,12,14 --density 0.5,0.25
+      nasch table --vmax 2 --p 0.5 --density 0.5,0.25 --budget 30s
       nasch table --vmax 1 --p 0.25,0.5 --lengths 8,12,16 --format latex -o flux.tex
     """
+    from .budget import parse_budget
     from .io import check_output_path, write_atomic
     from .tables import flux_table
 
@@ -146,8 +151,13 @@ def table(vmax, p_text, lengths_text, cars_text, density_text, update, fmt, outp
         check_output_path(output)   # before the work, not after it
     if fmt is None:
         fmt = _EXT_FORMAT.get(Path(output).suffix.lower(), "text") if output else "text"
+    if budget_text is not None and lengths_text is not None:
+        raise InvalidParameterError("give either --lengths or --budget, not both")
+    budget = None if budget_text is None else parse_budget(budget_text)
+    lengths = None if budget is not None else _number_list(
+        "--lengths", lengths_text or "8,10,12,14", int)
     t = flux_table(
-        vmax, ps, _number_list("--lengths", lengths_text, int),
+        vmax, ps, lengths, budget=budget,
         cars=None if cars_text is None else _number_list("--cars", cars_text, int),
         densities=None if density_text is None else _number_list("--density", density_text),
         update=update, mc_steps=mc_steps, mc_length=mc_length, seed=seed, order=order,
@@ -187,6 +197,9 @@ def plot():
               help="Rings drawn with their exact flux at every N.")
 @click.option("--extrapolation-lengths", "ext_text", default="8,9,10,11,12,13,14,15,16",
               show_default=True, help="Candidate rings of the L -> infinity extrapolation.")
+@click.option("--budget", "budget_text", default=None,
+              help="Time for the exact rings of each extrapolated density, e.g. 30s: the"
+                   " largest rings that fit (instead of --extrapolation-lengths).")
 @click.option("--mc-length", type=int, default=3000, show_default=True,
               help="Monte Carlo ring length.")
 @click.option("--mc-steps", type=int, default=2000, show_default=True,
@@ -199,8 +212,8 @@ def plot():
               help="Address of a running Dask scheduler, tcp://HOST:PORT.")
 @quiet_option
 @handle_errors
-def fundamental(vmax, p_text, lengths_text, ext_text, mc_length, mc_steps, seed, output,
-                serial, scheduler):
+def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc_steps, seed,
+                output, serial, scheduler):
     """Fundamental diagram as in the paper's Figure 2: approximations, Monte Carlo, exact rings.
 
     Rings too large for the exact solver are left out with a warning.
@@ -209,11 +222,14 @@ def fundamental(vmax, p_text, lengths_text, ext_text, mc_length, mc_steps, seed,
     Example:
       nasch plot fundamental --vmax 2 --p 0.5 --output fig.png
       nasch plot fundamental --vmax 2 --p 0.5,0.1 --output fig2.pdf
+      nasch plot fundamental --vmax 2 --p 0.5 --budget 20s --output fig.png
     """
+    from .budget import parse_budget
     from .io import check_output_path
     from .plot import FIGURE_FORMATS, fundamental_data, fundamental_figure, save_figure
 
     check_output_path(output, suffixes=FIGURE_FORMATS)   # before the work
+    budget = None if budget_text is None else parse_budget(budget_text)
     _ensure_dask_options(serial, scheduler)
     ps = _number_list("--p", p_text)
     _ensure_p_open(ps)
@@ -223,7 +239,7 @@ def fundamental(vmax, p_text, lengths_text, ext_text, mc_length, mc_steps, seed,
         panels = fundamental_data(
             vmax, ps, lengths=_number_list("--lengths", lengths_text, int),
             extrapolation_lengths=_number_list("--extrapolation-lengths", ext_text, int),
-            mc_length=mc_length, mc_steps=mc_steps, seed=seed,
+            mc_length=mc_length, mc_steps=mc_steps, seed=seed, budget=budget,
             serial=True if serial else None, scheduler=scheduler)
     for w in caught:
         click.echo(f"warning: {w.message}", err=True)

@@ -88,20 +88,6 @@ def _derived_seed(seed: int, *parts) -> int:
     return (int(state[0]) << 31) ^ int(state[1])
 
 
-# Recurrent states per car beyond the positions, fitted to measured class sizes
-# (n ~ C(L, N) a**N / L at half filling: vmax=1, L=18: a = 1.49; vmax=2,
-# L=12..16: a = 1.59-1.60); larger vmax extrapolated, generously.
-_STATE_BASE = {1: 1.5, 2: 1.6}
-
-
-def _exact_cost(length: int, cars: int, vmax: int) -> float:
-    """Rough seconds of one exact chain (~2e-5 s per recurrent state, measured)."""
-    if cars in (0, length):
-        return 0.0
-    a = _STATE_BASE.get(vmax, min(vmax + 1.0, 1.6 + 0.15 * (vmax - 2)))
-    return 2e-5 * math.comb(length, cars) * a ** cars / length
-
-
 def ensure_mc_steps(mc_steps) -> int:
     """Monte Carlo steps of a table or figure: 0 (none) or at least the batches of
     :func:`markov.simulate.simulate` (:data:`markov.simulate.DEFAULT_BATCHES`)."""
@@ -131,7 +117,9 @@ def preflight(tasks) -> None:
 def _task_cost(task: tuple) -> float:
     kind, point = task
     if kind == "exact":
-        return _exact_cost(*point[:3])
+        from .budget import predicted_seconds
+
+        return predicted_seconds(*point[:5])
     length, cars, _, _, update, steps, warmup, _, *rest = point
     rate = 1e8 if update == PARALLEL else 2e7  # car updates per second, measured
     return cars * (steps + warmup) * (rest[0] if rest else 1) / rate
@@ -346,8 +334,9 @@ def _pm(value: float, error: float, latex: bool) -> str:
     return f"{value:.{digits}f}{sep}{error:.{digits}f}"
 
 
-def flux_table(vmax: int, p, lengths: Sequence[int], *, cars: Sequence[int] | None = None,
-               densities: Sequence[float] | None = None, update: str = PARALLEL,
+def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
+               cars: Sequence[int] | None = None, densities: Sequence[float] | None = None,
+               budget: float | None = None, update: str = PARALLEL,
                mc_steps: int = 2000, mc_warmup: int | None = None, mc_length: int = 10000,
                mc_replicas: int = 4,
                seed: int = 0, methods: Sequence[str] = APPROXIMATIONS,
@@ -361,10 +350,15 @@ def flux_table(vmax: int, p, lengths: Sequence[int], *, cars: Sequence[int] | No
     vmax : int
     p : float or sequence of float
         Braking probabilities, each in ``(0, 1)``.
-    lengths : sequence of int
-        Ring lengths.
+    lengths : sequence of int, optional
+        Ring lengths (or give ``budget``).
     cars, densities : sequences, optional
         Numbers of cars, or densities (``N = round(c L)``); default half filling.
+    budget : float, optional
+        Seconds of exact solving per density and ``p``, instead of ``lengths``:
+        the ``order + 2`` largest rings of each density that fit
+        (:func:`markov.budget.lengths_within_budget`); needs ``densities``
+        (or the default half filling), not ``cars``.
     update : {"parallel", "random-sequential"}
     mc_steps : int
         Monte Carlo time steps per replica and (density, p); 0: no Monte Carlo.
@@ -420,14 +414,26 @@ def flux_table(vmax: int, p, lengths: Sequence[int], *, cars: Sequence[int] | No
     order = ensure_int("order", order, 1)
     n_workers = None if n_workers is None else ensure_int("n_workers", n_workers, 1)
     Ring(mc_length, 1, vmax, ps[0], update)  # validates vmax
-    rings = table_points(lengths, cars, densities)
+    if (lengths is None) == (budget is None):
+        raise InvalidParameterError("give either the ring lengths or a budget")
+    if budget is not None:
+        if cars is not None:
+            raise InvalidParameterError("a budget chooses rings per density: give densities")
+        from .budget import lengths_within_budget
+
+        rings_of = {p_: sorted({pt for c in (densities or [0.5]) for pt in table_points(
+            lengths_within_budget(vmax, p_, c, budget, count=order + 2, update=update),
+            densities=[c])}) for p_ in ps}
+    else:
+        rings = table_points(lengths, cars, densities)
+        rings_of = {p_: rings for p_ in ps}
 
     # Methods defined for this vmax only (when symbolic is available at all);
     # the approximations describe parallel update, so none for random-sequential.
     methods = tuple(m for m in methods if update == PARALLEL and _method_available(m, vmax))
 
-    exact_tasks = [("exact", (L, N, vmax, p_, update)) for p_ in ps for L, N in rings]
-    fractions = sorted({Fraction(N, L) for L, N in rings})
+    exact_tasks = [("exact", (L, N, vmax, p_, update)) for p_ in ps for L, N in rings_of[p_]]
+    fractions = sorted({Fraction(N, L) for p_ in ps for L, N in rings_of[p_]})
     mc_tasks = []
     if mc_steps:
         for p_ in ps:
@@ -448,7 +454,7 @@ def flux_table(vmax: int, p, lengths: Sequence[int], *, cars: Sequence[int] | No
     rows = []
     for p_ in ps:
         for c in fractions:
-            group = [(L, N) for L, N in rings if Fraction(N, L) == c]
+            group = [(L, N) for L, N in rings_of[p_] if Fraction(N, L) == c]
             base = _approx_cells(methods, vmax, p_, float(c))
             m = mc.get((c, p_))
             mc_cells = {"mc_flux": m and m["flux"], "mc_error": m and m["error"],

@@ -1,0 +1,171 @@
+"""Rings chosen by budget: the largest rings of a density whose exact solve fits.
+
+The exact finite-ring flux converges to the infinite road like a power series
+in ``1/L`` (:mod:`markov.extrapolate`), so the largest rings one can afford
+are worth most.  Which ones one can afford follows from the size of the
+recurrent class, known *before* enumerating it: the Garden of Eden transfer
+matrix counts the recurrent configurations exactly
+(:func:`markov.chain.predicted_states`, parallel update, vmax <= 5), and the
+exact solver's cost is close to linear in that count.
+
+Cost model (seconds, one core; measured by ``make bench-large``, see
+docs/performance.md)::
+
+    seconds = FIXED + states * (PER_STATE + PER_PRODUCT * products(p))
+
+with ``products(p)`` the products ``x P`` the default solver needs (about 30
+at ``p = 0.5``, rising as ``p -> 1`` where the chain mixes slowly).  The
+model errs on the slow side: a ring it admits finishes within its budget.
+"""
+from __future__ import annotations
+
+import math
+import re
+from fractions import Fraction
+
+from .errors import InvalidParameterError
+from .model import PARALLEL, Ring
+
+__all__ = ["parse_budget", "predicted_classes", "predicted_seconds", "lengths_within_budget",
+           "MAX_BUDGET_LENGTH"]
+
+#: Longest ring :func:`lengths_within_budget` considers (vmax = 1 reaches
+#: L = 24 at half filling in under a minute; beyond 40 no density fits).
+MAX_BUDGET_LENGTH = 40
+
+# Measured on the 2-core VM (docs/performance.md): per state, the search and
+# the level build; per state and product, the factored product with the
+# solver's vector work; the start-up of one solve.
+_FIXED = 0.02
+_PER_STATE = 1.5e-6
+_PER_PRODUCT = 6e-8
+# Random-sequential sub-steps move one car: rows of 2N + 1 entries, slow mixing.
+_SEQUENTIAL_FACTOR = 20.0
+
+
+def parse_budget(text) -> float:
+    """Seconds from ``"90"``, ``"90s"``, ``"2.5m"``, ``"1h"`` (or a number).
+
+    Raises
+    ------
+    InvalidParameterError
+        For anything else, or a budget that is not positive and finite.
+
+    Examples
+    --------
+    >>> parse_budget("2m"), parse_budget(45), parse_budget("1.5h")
+    (120.0, 45.0, 5400.0)
+    """
+    if isinstance(text, (int, float)) and not isinstance(text, bool):
+        seconds = float(text)
+    else:
+        match = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:e[+-]?[0-9]+)?)\s*([smh]?)\s*",
+                             str(text), re.IGNORECASE)
+        if not match:
+            raise InvalidParameterError(
+                f"a budget is a time such as 60s, 5m or 1h, got {text!r}")
+        seconds = float(match.group(1)) * {"": 1, "s": 1, "m": 60, "h": 3600}[
+            match.group(2).lower()]
+    if not math.isfinite(seconds) or seconds <= 0:
+        raise InvalidParameterError(f"a budget must be a positive time, got {text!r}")
+    return seconds
+
+
+def predicted_classes(length: int, cars: int, vmax: int, update: str = PARALLEL) -> int:
+    """Rotation classes of the recurrent class, predicted before enumerating.
+
+    Exact count / L (a lower bound by at most the periodic orbits) where the
+    transfer-matrix count exists; otherwise every configuration over ``L``.
+    """
+    from .chain import predicted_states
+    from .space import count_all
+
+    ring = Ring(length, cars, vmax, 0.5, update)
+    n = predicted_states(ring, lump=True)
+    return n if n is not None else -(-count_all(ring) // length)
+
+
+def _products(p: float) -> float:
+    """Products the default solver needs (measured: ~30 at p <= 0.5, ~130 at p = 0.9)."""
+    return 30.0 + 100.0 * max(0.0, float(p) - 0.5) / 0.4
+
+
+def predicted_seconds(length: int, cars: int, vmax: int, p: float,
+                      update: str = PARALLEL) -> float:
+    """Predicted seconds of one exact solve (search, operator, solver), one core."""
+    if cars in (0, length):
+        return 0.0
+    n = predicted_classes(length, cars, vmax, update)
+    seconds = _FIXED + n * (_PER_STATE + _PER_PRODUCT * _products(p))
+    return seconds * (_SEQUENTIAL_FACTOR if update != PARALLEL else 1.0)
+
+
+def _solvable(length: int, cars: int, vmax: int, update: str) -> bool:
+    """Whether the exact solver can represent the ring at all (64-bit keys and words)."""
+    from .factored import word_bits
+    from .states import max_length
+
+    if length > max_length(vmax):
+        return False
+    try:
+        word_bits(Ring(length, cars, vmax, 0.5, update))
+    except InvalidParameterError:
+        return update != PARALLEL
+    return True
+
+
+def lengths_within_budget(vmax: int, p: float, density, budget: float, count: int = 4,
+                          update: str = PARALLEL, shortest: int = 4,
+                          longest: int = MAX_BUDGET_LENGTH) -> list[int]:
+    """The ``count`` largest ring lengths of a density that together fit the budget.
+
+    Parameters
+    ----------
+    vmax, p, update
+        The model.
+    density : float or Fraction
+        ``N / L``; only lengths with ``density * L`` an integer qualify (a
+        float is read as the nearest fraction with denominator <= 1000).
+    budget : float
+        Seconds allowed for all the chosen rings together (:func:`predicted_seconds`).
+    count : int
+        How many rings (consecutive commensurate lengths, the largest that fit).
+    shortest, longest : int
+        Range of lengths considered.
+
+    Returns
+    -------
+    list of int
+        Increasing; fewer than ``count`` only when fewer commensurate lengths
+        exist in the range.
+
+    Raises
+    ------
+    InvalidParameterError
+        When not even the ``count`` smallest rings fit the budget.
+
+    Examples
+    --------
+    >>> lengths_within_budget(2, 0.5, 0.5, budget=1.0)   # doctest: +SKIP
+    [14, 16, 18, 20]
+    """
+    c = Fraction(density).limit_denominator(1000)
+    if not 0 < c < 1:
+        raise InvalidParameterError(f"density must lie strictly between 0 and 1, got {density}")
+    candidates = [L for L in range(max(shortest, c.denominator), longest + 1)
+                  if (c * L).denominator == 1 and _solvable(L, int(c * L), vmax, update)]
+    if len(candidates) <= count:
+        return candidates
+    cost = [predicted_seconds(L, int(c * L), vmax, p, update) for L in candidates]
+    best = None
+    for end in range(count, len(candidates) + 1):
+        if sum(cost[end - count:end]) <= budget:
+            best = end
+        elif best is not None and cost[end - 1] > budget:
+            break  # costs only grow from here
+    if best is None:
+        raise InvalidParameterError(
+            f"not even the {count} smallest rings of density {c} ({candidates[:count]}) fit"
+            f" a budget of {budget:g} s (predicted {sum(cost[:count]):.3g} s)")
+    return candidates[best - count:best]
+
