@@ -8,7 +8,7 @@ BENCH_STAMP := $(VENV)/.installed-bench
 # pytest-xdist runs one worker per core; BLAS threads on top would oversubscribe them
 SINGLE_THREADED := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
-.PHONY: demo test bench bench-large clean
+.PHONY: demo test bench bench-large bench-coverage clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -33,6 +33,9 @@ bench: $(BENCH_STAMP)
 
 bench-large: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/large.py
+
+bench-coverage: $(BENCH_STAMP)
+	$(BIN)/python benchmarks/error_coverage.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -312,7 +312,8 @@ class FluxTable:
     def _footnote(self) -> str:
         parts = ["exact: stationary state of the finite ring (L cells, N cars)",
                  f"inf: fit f(L) = f_inf + sum_(k<={self.order}) a_k / L^k to the largest rings,"
-                 " error = max(|order change|, leave-one-out spread)"]
+                 " error (a two-sigma bar) = max(|order lowered or raised by one|,"
+                 " leave-one-out spread)"]
         if self.mc_steps:
             parts.append(f"Monte Carlo: {self.mc_steps} steps per replica on a ring of the same"
                          " density (length in the JSON/CSV), shown once per density,"

@@ -28,6 +28,21 @@ def test_exact_series_is_recovered():
     assert e.predict(10) == pytest.approx(f[1])
 
 
+def test_raised_order_enters_the_error():
+    """A cubic term the order-2 fit cannot see: the order-3 fit through the same
+    four rings recovers it, and their difference is part of the error."""
+    L = np.array([10, 12, 14, 16])
+    f = 0.3 - 0.7 / L + 2.0 / L**2 + 40.0 / L**3
+    e = extrapolate(L, f, order=2)
+    assert e.higher_order == pytest.approx(0.3, abs=1e-10)   # interpolates exactly
+    by_hand = np.polyfit(1.0 / L, f, 2)[-1]                  # least-squares order 2
+    assert e.f_inf == pytest.approx(by_hand, abs=1e-12)
+    assert e.error >= abs(e.f_inf - 0.3) - 1e-12             # the bar covers the truth
+    assert e.error >= abs(e.higher_order - e.f_inf) > 1e-4
+    three = extrapolate(L[:3], f[:3], order=2)               # no spare ring: no raised order
+    assert three.higher_order is None and three.leave_one_out == ()
+
+
 def test_noisy_point_widens_error():
     L = [8, 10, 12, 14]
     f = [0.2 + 0.1 / x for x in L]
