@@ -18,6 +18,9 @@ Every case runs in a fresh subprocess, so its peak resident memory
 * **psweep**: one ring solved at p = 0.5, then at further p reusing the
   states and the levels (``RingChain.with_p``) with a warm start: seconds
   per extra p.
+* **budget**: rings of several sizes, densities, vmax and p solved on one
+  thread (as the table and figure jobs run), measured against the cost model
+  of ``markov.budget`` that chooses rings by budget.
 * **compare**: small rings, the same chains, by the naive reference
   (``tests/naive.py``), QuantEcon (dense GTH on our matrix) and the Storm
   model checker (``benchmarks/storm.py``: sound long-run average).
@@ -53,10 +56,14 @@ from pathlib import Path  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
-TABLES = ("baseline", "large", "previous", "solvers", "vmax1", "psweep", "compare")
+TABLES = ("baseline", "large", "previous", "solvers", "vmax1", "psweep", "budget", "compare")
+# (vmax, L, N, p) of the budget table: half filling, low and high density
+BUDGET_CASES = [(2, 16, 8, 0.5), (2, 20, 10, 0.5), (2, 22, 11, 0.1), (2, 22, 11, 0.5),
+                (2, 22, 11, 0.9), (2, 24, 6, 0.5), (2, 24, 18, 0.5), (1, 24, 12, 0.5),
+                (1, 28, 7, 0.25), (3, 18, 6, 0.5), (5, 16, 4, 0.5)]
 COLUMNS = ["table", "tool", "L", "N", "vmax", "p", "lumped", "states", "level_words",
            "nonzeros", "operator", "method", "products", "search_s", "build_s", "solve_s",
-           "total_s", "per_p_s", "peak_MB", "residual", "flux", "note"]
+           "total_s", "predicted_s", "per_p_s", "peak_MB", "residual", "flux", "note"]
 
 
 # --------------------------------------------------------------------------- workers
@@ -121,6 +128,19 @@ def work_previous(tree, L, N, vmax, p, tol=1e-10, max_memory_gib=20.0) -> dict:
             "search_s": search, "build_s": build, "solve_s": sol.result.seconds,
             "residual": sol.residual, "flux": sol.flux, "c_v": sol.c_v.tolist(),
             "lumped": True}
+
+
+def work_budget(L, N, vmax, p) -> dict:
+    """One ring on one thread, like a table job, beside the budget's prediction."""
+    import numba
+
+    from markov.budget import predicted_seconds
+
+    numba.set_num_threads(1)
+    out = work_ours(L, N, vmax, p, tol=1e-13)
+    out["total_s"] = out["build_s"] + out["solve_s"]
+    out["predicted_s"] = predicted_seconds(L, N, vmax, p)
+    return out
 
 
 def work_psweep(L, N, vmax, ps, tol=1e-10, max_memory_gib=20.0) -> dict:
@@ -224,6 +244,7 @@ def work_baseline() -> dict:
 
 
 WORKERS = {"ours": work_ours, "previous": work_previous, "psweep": work_psweep,
+           "budget": work_budget,
            "naive": work_naive, "quantecon": work_quantecon, "storm": work_storm,
            "baseline": work_baseline}
 
@@ -439,6 +460,9 @@ def main(argv=None) -> None:
         L = args.psweep_size
         record(run_case("psweep", "psweep", args.timeout, L=L, N=L // 2, vmax=2,
                         ps=[0.5, 0.45, 0.4, 0.35, 0.3, 0.25], **common))
+    if "budget" in args.only:
+        for vmax, L, N, p in BUDGET_CASES:
+            record(run_case("budget", "budget", args.timeout, L=L, N=N, vmax=vmax, p=p))
     if "compare" in args.only:
         for L in args.compare:
             case = half(L)

@@ -21,7 +21,7 @@ from .errors import InvalidParameterError, NoUniqueStationaryStateError
 from .goe_census import recurrent_class_count
 from .model import PARALLEL, Ring
 from .space import count_all, recurrent_keys
-from .solvers import AUTO_OPERATOR_METHOD, DEFAULT_TOL, StationaryResult, stationary
+from .solvers import AUTO_OPERATOR_METHODS, DEFAULT_TOL, StationaryResult, stationary
 from .states import compact_jam_key
 from .transition import successor_counts, transition_matrix
 from .validate import ensure_chain_arguments, format_count
@@ -137,8 +137,7 @@ class RingChain:
             other.__dict__["transition_operator"] = self.transition_operator.with_p(p)
         return other
 
-    def _matrix_free_bytes_per_state(self, method: str = "auto") -> float:
-        method = AUTO_OPERATOR_METHOD if method == "auto" else method
+    def _matrix_free_bytes_per_state(self, method: str) -> float:
         if self.ring.update == PARALLEL:
             return memory.factored_bytes_per_state(method)
         return memory.rows_bytes_per_state(method)
@@ -194,13 +193,21 @@ class RingChain:
         method = "eigs" if method == "auto" else method
         return memory.matrix_bytes(self.n_states, self.transitions, method)
 
-    def matrix_free_bytes(self, method: str = "auto") -> float:
+    def matrix_free_bytes(self, method: str) -> float:
         """Estimated peak bytes of the matrix-free operator and solving with ``method``."""
         if "transition_operator" in self.__dict__:
             op = self.transition_operator
-            return op.nbytes + 8 * self.n_states * memory.solver_vectors(
-                AUTO_OPERATOR_METHOD if method == "auto" else method)
+            return op.nbytes + 8 * self.n_states * memory.solver_vectors(method)
         return self.n_states * self._matrix_free_bytes_per_state(method)
+
+    def _auto_method(self) -> str:
+        """The first of :data:`markov.solvers.AUTO_OPERATOR_METHODS` that applies and fits."""
+        for method in AUTO_OPERATOR_METHODS:
+            if method == "aggregation" and self.ring.update != PARALLEL:
+                continue
+            if self.matrix_free_bytes(method) <= self.limit:
+                return method
+        return method  # the lightest; solution() reports that it does not fit
 
     @cached_property
     def operator_kind(self) -> str:
@@ -297,13 +304,15 @@ class RingChain:
                 f"{method} needs the assembled matrix; the matrix-free path solves with"
                 f" {', '.join(('auto',) + PRODUCT_METHODS)}")
         if not matrix:
+            if method == "auto":
+                method = self._auto_method()
             memory.check_fits(f"solving with {method} on {self.n_states:,} states",
                               self.matrix_free_bytes(method), self.limit,
                               "; try method='aggregation', 'bicgstab' or 'power'")
         P = self.matrix if matrix else self.transition_operator
         parallel_free = not matrix and self.ring.update == PARALLEL
-        aggregates = self.aggregates if not self.ring.trivial and (
-            method == "aggregation" or (method == "auto" and parallel_free)) else None
+        aggregates = self.aggregates if not matrix and method == "aggregation" \
+            or matrix and method == "aggregation" and not self.ring.trivial else None
         result = stationary(P, method=method, tol=tol, x0=x0, aggregates=aggregates)
         if matrix:
             return Solution(self.ring, self.keys, result, self.matrix.nnz, self.build_seconds,

@@ -74,12 +74,13 @@ def solver_vectors(method: str) -> int:
     """Float64 vectors of length ``n`` a stationary solver holds at its peak.
 
     ``gmres`` keeps its restart basis; ``aggregation`` keeps the iterate, its
-    product, the disaggregated vector and two int32 aggregate maps (counted as
-    one vector) and a coarse matrix with at most one entry per state (counted
-    as two); ``direct`` and ``eigs`` are counted by the matrix path.
+    product, the disaggregated vector and its product and a temporary (five),
+    three int32 maps of the states (group, source, coarse entry: 1.5) and the
+    coarse matrix, at most one entry per state (value, column, the entry's
+    mass: 2.5); ``direct`` and ``eigs`` are counted by the matrix path.
     """
     return {"gmres": GMRES_RESTART + 6, "bicgstab": 10, "power": 4,
-            "iterative": GMRES_RESTART + 6, "aggregation": 7,
+            "iterative": GMRES_RESTART + 6, "aggregation": 9,
             "direct": 4, "eigs": 24, "auto": GMRES_RESTART + 6}[method]
 
 

@@ -200,7 +200,7 @@ def _coarse_pattern(agg: Aggregates):
     order = np.argsort(code, kind="stable")
     sorted_code = code[order]
     first = np.concatenate(([True], sorted_code[1:] != sorted_code[:-1]))
-    entry = np.empty(code.size, dtype=np.int64)
+    entry = np.empty(code.size, dtype=np.int32)   # fewer entries than states
     entry[order] = np.cumsum(first) - 1
     pairs = sorted_code[first]
     group, source = pairs // agg.count, pairs % agg.count
@@ -335,10 +335,11 @@ def _product_of(P):
 #: Default target of ``||pi P - pi||_1`` and cap on products, for every path.
 DEFAULT_TOL = 1e-13
 DEFAULT_MAXITER = 20_000
-#: What ``auto`` runs on an operator, chosen by ``make bench-large``
-#: (docs/performance.md): aggregation when the aggregates are known, else the
-#: ladder BiCGSTAB -> GMRES -> power.
-AUTO_OPERATOR_METHOD = "aggregation"
+#: What ``auto`` runs on an operator, in order of preference (``make
+#: bench-large``, docs/performance.md): the first that applies (aggregation
+#: needs the aggregates) and, for :class:`markov.chain.RingChain`, fits in
+#: memory.
+AUTO_OPERATOR_METHODS = ("aggregation", "iterative", "bicgstab", "power")
 
 
 def stationary(P, method: str = "auto", tol: float = DEFAULT_TOL,
@@ -357,7 +358,8 @@ def stationary(P, method: str = "auto", tol: float = DEFAULT_TOL,
     method : {"auto", "direct", "eigs", "iterative", "gmres", "bicgstab", "power", "aggregation"}
         Solver (see the module docstring).  ``auto``: ``direct`` up to
         :data:`DIRECT_LIMIT` states, else ``eigs`` (``iterative`` if ARPACK
-        fails) on a matrix; :data:`AUTO_OPERATOR_METHOD` on an operator.
+        fails) on a matrix; on an operator the first of
+        :data:`AUTO_OPERATOR_METHODS` that applies.
     tol : float
         Target of ``||pi P - pi||_1`` for the iterative solvers; the residual
         of the normalised result is always measured and reported.
@@ -419,7 +421,8 @@ def stationary(P, method: str = "auto", tol: float = DEFAULT_TOL,
         if matrix:
             method = "direct" if n <= DIRECT_LIMIT else "eigs"
         else:
-            method = AUTO_OPERATOR_METHOD if aggregates is not None else "iterative"
+            method = next(m for m in AUTO_OPERATOR_METHODS
+                          if m != "aggregation" or aggregates is not None)
     if method in ("direct", "eigs"):
         try:
             x, iterations = (_direct if method == "direct" else _eigs)(P, tol, maxiter)

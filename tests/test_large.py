@@ -73,7 +73,7 @@ def test_auto_picks_the_matrix_for_small_chains_and_matrix_free_above():
     assert big.n_states > AUTO_MATRIX_STATES and big.operator_kind == "matrix-free"
     # a small chain whose matrix does not fit goes matrix-free
     tight = RingChain(Ring(10, 5, 2, 0.5), max_memory=small.matrix_bytes() / 2)
-    assert tight.matrix_free_bytes() < small.matrix_bytes() / 2
+    assert tight.matrix_free_bytes("power") < small.matrix_bytes() / 2
     assert tight.operator_kind == "matrix-free"
     assert tight.solution().flux == pytest.approx(small.solution().flux, abs=1e-12)
     with pytest.raises(StateSpaceTooLargeError, match=r"transition matrix.*GiB.*matrix-free"):
@@ -101,6 +101,10 @@ def test_memory_guard_refuses_with_the_number():
     limit = chain.matrix_free_bytes("power") * 1.01  # fits power, not GMRES's basis
     chain = RingChain(Ring(14, 7, 2, 0.5), operator="matrix-free", max_memory=limit)
     assert chain.solution(method="power", tol=1e-10).residual <= 1e-10
+    # auto takes the fastest method that fits: here only power does
+    assert chain.solution(tol=1e-10).result.method == "power"
+    roomy = RingChain(Ring(14, 7, 2, 0.5), operator="matrix-free")
+    assert roomy.solution(tol=1e-10).result.method.split(":")[0] == "aggregation"
     with pytest.raises(StateSpaceTooLargeError, match="gmres.*try method="):
         chain.solution(method="gmres")
     for bad in (-1.0, 0, float("nan"), float("inf"), "1"):
