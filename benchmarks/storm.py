@@ -208,18 +208,25 @@ def flux_rewards(keys: np.ndarray, L: int, vmax: int) -> np.ndarray:
     return total / L
 
 
-class _ArrayReader:
-    """File-like view of an array's bytes, so tarfile streams it without a copy."""
+_CHUNK = 1 << 22  # elements converted (or listed) at a time: no full-size copies
 
-    def __init__(self, array: np.ndarray):
-        self._bytes = memoryview(np.ascontiguousarray(array)).cast("B")
-        self._pos = 0
 
-    def read(self, size: int = -1) -> bytes:
-        end = len(self._bytes) if size < 0 else min(self._pos + size, len(self._bytes))
-        out = self._bytes[self._pos:end]
-        self._pos = end
-        return bytes(out)
+def _write_tar(path: Path, files: dict[str, tuple[np.ndarray, str]]) -> None:
+    """Uncompressed tar of arrays, each converted to its dtype chunk by chunk.
+
+    ``tarfile.addfile`` would need the converted bytes at once; a tar member
+    is only a 512-byte header, the data, and zero padding to 512 bytes.
+    """
+    block = tarfile.BLOCKSIZE
+    with open(path, "wb") as out:
+        for name, (array, dtype) in files.items():
+            info = tarfile.TarInfo(name)
+            info.size = array.size * np.dtype(dtype).itemsize
+            out.write(info.tobuf(tarfile.GNU_FORMAT, "utf-8", "surrogateescape"))
+            for lo in range(0, array.size, _CHUNK):
+                out.write(np.ascontiguousarray(array[lo:lo + _CHUNK], dtype=dtype).tobytes())
+            out.write(bytes(-info.size % block))
+        out.write(bytes(2 * block))  # end of archive
 
 
 def _umb_archive(path: Path, P, rewards: np.ndarray, init: int) -> None:
@@ -243,31 +250,43 @@ def _umb_archive(path: Path, P, rewards: np.ndarray, init: int) -> None:
             "alias": "flux", "applies-to": ["states"],
             "type": {"type": "double", "size": 64}}}},
     }
-    files = {
-        "index.json": np.frombuffer(json.dumps(index).encode(), dtype=np.uint8),
-        "state-is-initial.bin": initial,
-        "choice-to-branches.bin": P.indptr.astype("<u8"),
-        "branch-to-target.bin": P.indices.astype("<u8"),
-        "branch-to-probability.bin": P.data.astype("<f8"),
-        "annotations/rewards/flux/states/values.bin": rewards.astype("<f8"),
-    }
-    with tarfile.open(path, "w", format=tarfile.GNU_FORMAT) as tar:
-        for name, array in files.items():
-            info = tarfile.TarInfo(name)
-            info.size = array.nbytes
-            tar.addfile(info, _ArrayReader(array))
+    _write_tar(path, {
+        "index.json": (np.frombuffer(json.dumps(index).encode(), dtype=np.uint8), "u1"),
+        "state-is-initial.bin": (initial, "<u8"),
+        "choice-to-branches.bin": (P.indptr, "<u8"),
+        "branch-to-target.bin": (P.indices, "<u8"),
+        "branch-to-probability.bin": (P.data, "<f8"),
+        "annotations/rewards/flux/states/values.bin": (rewards, "<f8"),
+    })
 
 
-def _matrix_model(P, rewards: np.ndarray, init: int, handover: str):
-    """Hand our CSR matrix and the flux rewards to Storm as a sparse DTMC."""
+def _our_matrix(L: int, N: int, vmax: int, p: float):
+    """Our unlumped chain: transition matrix, flux per state, index of an initial state."""
+    from markov import Ring
+    from markov.space import recurrent_keys
+    from markov.states import compact_jam_key
+    from markov.transition import transition_matrix
+
+    ring = Ring(L, N, vmax, p)
+    keys = recurrent_keys(ring, lump=False)
+    P = transition_matrix(ring, keys, lump=False)
+    # N = 1 starts elsewhere (markov.space): any state of the class will do
+    init = int(np.searchsorted(keys, compact_jam_key(L, N, vmax))) if N > 1 else 0
+    return P, flux_rewards(keys, L, vmax), init
+
+
+def _matrix_model(L: int, N: int, vmax: int, p: float, handover: str):
+    """Build our matrix and hand it with the flux rewards to Storm as a sparse DTMC."""
     import stormpy
 
+    P, rewards, init = _our_matrix(L, N, vmax, p)
     if handover == "umb":
         options = stormpy.io.UmbImportOptions()
         options.build_state_valuations = False  # we have none to give
         with tempfile.TemporaryDirectory(prefix="nasch-storm-") as tmp:
             path = Path(tmp) / "nasch.umb"
             _umb_archive(path, P, rewards, init)
+            del P, rewards  # Storm's copy is the only one from here on
             return stormpy.build_model_from_umb(path, options=options)
     import stormpy.datastructures as ds
     import stormpy.models as sm
@@ -275,12 +294,14 @@ def _matrix_model(P, rewards: np.ndarray, init: int, handover: str):
     n = P.shape[0]
     builder = ds.SparseMatrixBuilder[float](rows=n, columns=n, entries=int(P.nnz),
                                            force_dimensions=True)
-    rows = np.repeat(np.arange(n), np.diff(P.indptr))
-    chunk = 1 << 22  # Python lists of a chunk, not of the whole matrix
-    for lo in range(0, P.nnz, chunk):
-        builder.add_next_values(rows[lo:lo + chunk].tolist(), P.indices[lo:lo + chunk].tolist(),
-                                P.data[lo:lo + chunk].tolist())
-    del rows
+    indptr = P.indptr
+    step = max(1, _CHUNK * n // max(int(P.nnz), 1))  # rows holding about _CHUNK entries
+    for lo in range(0, n, step):
+        hi = min(lo + step, n)
+        a, b = indptr[lo], indptr[hi]
+        rows = np.repeat(np.arange(lo, hi), np.diff(indptr[lo:hi + 1]))
+        builder.add_next_values(rows.tolist(), P.indices[a:b].tolist(), P.data[a:b].tolist())
+    del P
     labels = sm.StateLabeling(n)
     labels.add_label("init")
     labels.add_label_to_state("init", init)
@@ -341,18 +362,7 @@ def work_storm(L: int, N: int, vmax: int, p: float, route: str = "prism",
 
     start = time.perf_counter()
     if route == "matrix":
-        from markov import Ring
-        from markov.space import recurrent_keys
-        from markov.states import compact_jam_key
-        from markov.transition import transition_matrix
-
-        ring = Ring(L, N, vmax, p)
-        keys = recurrent_keys(ring, lump=False)
-        P = transition_matrix(ring, keys, lump=False)
-        # N = 1 starts elsewhere (markov.space): any state of the class will do
-        init = int(np.searchsorted(keys, compact_jam_key(L, N, vmax))) if N > 1 else 0
-        model = _matrix_model(P, flux_rewards(keys, L, vmax), init, handover)
-        del P, keys
+        model = _matrix_model(L, N, vmax, p, handover)
         prop = stormpy.parse_properties(PROPERTY)[0]
         detail = f"our unlumped matrix, hand-over {handover}"
     else:
