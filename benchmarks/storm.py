@@ -21,9 +21,10 @@ routes to the model:
 * ``matrix``: our unlumped transition matrix
   (:func:`markov.transition.transition_matrix`) and the flux per state handed
   to Storm as a UMB archive (Storm's binary explicit format: the CSR arrays
-  written as they are).  Measured on L = 16 (18.4 M transitions): UMB 2.0 s,
-  ``SparseMatrixBuilder.add_next_values`` 3.9 s, DRN text 27 s
-  (``handover="builder"`` keeps the in-memory alternative).
+  written as they are).  The hand-over alone on L = 16 (18.4 M transitions):
+  UMB 1.1 s, ``SparseMatrixBuilder.add_next_values`` 3.2 s, DRN text 27 s
+  (``benchmarks/results/storm.md``); ``handover="builder"`` keeps the
+  in-memory alternative.
 
 :func:`work_storm` has the worker signature of ``benchmarks/large.py`` and
 returns states, nonzeros (transitions), build s, solve s, flux and a note.
