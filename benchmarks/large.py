@@ -23,7 +23,9 @@ Every case runs in a fresh subprocess, so its peak resident memory
   of ``markov.budget`` that chooses rings by budget.
 * **compare**: small rings, the same chains, by the naive reference
   (``tests/naive.py``), QuantEcon (dense GTH on our matrix) and the Storm
-  model checker (``benchmarks/storm.py``: sound long-run average).
+  model checker (``benchmarks/storm.py``: sound long-run average at 1e-13,
+  from our unlumped matrix, from its own build of a headway model, and from
+  its own build of labelled car positions).
 
 Results go to ``benchmarks/results/large.csv`` and ``large.md``, rewritten
 atomically after every case so that a stopped run keeps what it measured.
@@ -325,7 +327,7 @@ def _ratios(rows):
           if r["table"] == "compare" and r.get("total_s") is not None}
     for (tool, L, lumped), r in sorted(by.items(), key=lambda kv: (kv[0][1], kv[0][0])):
         ours = by.get(("ours", L, lumped))
-        if tool in ("naive", "storm") and ours:
+        if (tool == "naive" or tool.startswith("storm")) and ours:
             out.append(f"L={L}: {tool} {r['total_s']:.2f} s vs ours on the same unlumped chain"
                        f" {ours['total_s']:.3f} s: {_x(r['total_s'] / ours['total_s'])};"
                        f" |flux difference| {abs(r['flux'] - ours['flux']):.1e}")
@@ -396,6 +398,12 @@ def main(argv=None) -> None:
     ap.add_argument("--naive-max", type=int, default=12,
                     help="largest L for the naive reference (L=14 ran over 10 min and 4 GB"
                          " in scipy's LU before it was stopped)")
+    ap.add_argument("--storm-max", type=int, default=18,
+                    help="largest L for Storm from our matrix and from the headway model"
+                         " (L=20 would need about 40-80 GB)")
+    ap.add_argument("--storm-prism-max", type=int, default=16,
+                    help="largest L for Storm's own build from labelled car positions"
+                         " (L=18: over 10 min and 9 GB still building)")
     ap.add_argument("--quantecon-max-states", type=int, default=3000,
                     help="dense GTH is O(n^3): skip QuantEcon above this many states")
     ap.add_argument("--max-memory", type=float, default=20.0, help="GiB for each case")
@@ -476,8 +484,11 @@ def main(argv=None) -> None:
                          and r["L"] == L and r.get("lumped") == lump)
                 if n <= args.quantecon_max_states:
                     record(run_case("compare", "quantecon", args.timeout, **case, lump=lump))
-            for route in ("matrix", "prism"):
-                record(run_case("compare", "storm", args.timeout, **case, route=route))
+            for route in ("matrix", "prism-gaps", "prism"):
+                if L <= (args.storm_prism_max if route == "prism" else args.storm_max):
+                    row = run_case("compare", "storm", args.timeout, **case, route=route)
+                    row["tool"] = f"storm {route}"
+                    record(row)
     for line in _ratios(rows):
         print(line)
     print(f"written: {args.out / 'large.csv'}, {args.out / 'large.md'}")
