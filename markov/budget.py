@@ -13,8 +13,9 @@ docs/performance.md)::
 
     seconds = FIXED + states * (PER_STATE + PER_PRODUCT * products(p))
 
-with ``products(p)`` the products ``x P`` the default solver needs (about 40
-at ``p = 0.5``, rising as ``p -> 1`` where the chain mixes slowly).  The
+with ``products(p)`` the products ``x P`` the default solver needs (about 25
+up to ``p = 0.3``, 60 at ``p = 0.5``, rising as ``p -> 1`` where the chain
+mixes slowly).  The
 model errs on the slow side: a ring it admits finishes within its budget.
 """
 from __future__ import annotations
@@ -86,9 +87,14 @@ def predicted_classes(length: int, cars: int, vmax: int, update: str = PARALLEL)
 
 
 def _products(p: float) -> float:
-    """Products the default solver needs (measured at L = 22: 22 at p = 0.1, 39 at
-    p = 0.5, 175 at p = 0.9)."""
-    return 40.0 + 135.0 * max(0.0, float(p) - 0.5) / 0.4
+    """Products ``x P`` of the solver ``auto`` picks, measured at L = 22: aggregation
+    18-22 up to p = 0.3 (:data:`markov.chain.AGGREGATION_MAX_P`), BiCGSTAB 59 at
+    p = 0.5 and 179 at p = 0.9."""
+    from .chain import AGGREGATION_MAX_P
+
+    if p <= AGGREGATION_MAX_P:
+        return 25.0
+    return max(50.0, 59.0 + 300.0 * (float(p) - 0.5))
 
 
 def predicted_seconds(length: int, cars: int, vmax: int, p: float,

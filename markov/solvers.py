@@ -335,11 +335,10 @@ def _product_of(P):
 #: Default target of ``||pi P - pi||_1`` and cap on products, for every path.
 DEFAULT_TOL = 1e-13
 DEFAULT_MAXITER = 20_000
-#: What ``auto`` runs on an operator, in order of preference (``make
-#: bench-large``, docs/performance.md): the first that applies (aggregation
-#: needs the aggregates) and, for :class:`markov.chain.RingChain`, fits in
-#: memory.
-AUTO_OPERATOR_METHODS = ("aggregation", "iterative", "bicgstab", "power")
+#: What ``auto`` runs on an operator: aggregation when the aggregates are
+#: given, else the BiCGSTAB -> GMRES -> power ladder
+#: (:class:`markov.chain.RingChain` also weighs ``p`` and memory).
+AUTO_OPERATOR_METHODS = ("aggregation", "iterative")
 
 
 def stationary(P, method: str = "auto", tol: float = DEFAULT_TOL,
