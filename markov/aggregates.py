@@ -21,21 +21,10 @@ from numba import njit, prange
 from .errors import InvalidParameterError
 from .model import PARALLEL, Ring
 from .solvers import Aggregates
-from .states import unique_keys
+from .states import smallest_rotation, unique_keys
 from .transition import _cars_of
 
 __all__ = ["position_aggregates"]
-
-
-@njit(cache=True, inline="always")
-def _smallest_rotation(mask, length):
-    full = (np.int64(1) << length) - 1
-    best = mask
-    for r in range(1, length):
-        rotated = ((mask >> r) | (mask << (length - r))) & full
-        if rotated < best:
-            best = rotated
-    return best
 
 
 @njit(cache=True, parallel=True)
@@ -50,8 +39,8 @@ def _occupancy_masks(keys, length, vmax, lump, here, before):
         for k in range(n):
             a |= np.int64(1) << pos[k]
             b |= np.int64(1) << ((pos[k] - vel[k]) % length)
-        here[i] = _smallest_rotation(a, length) if lump else a
-        before[i] = _smallest_rotation(b, length) if lump else b
+        here[i] = smallest_rotation(a, length) if lump else a
+        before[i] = smallest_rotation(b, length) if lump else b
 
 
 def position_aggregates(ring: Ring, keys: np.ndarray, lump: bool) -> Aggregates:

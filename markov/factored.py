@@ -57,7 +57,7 @@ from .errors import InvalidParameterError
 from .model import PARALLEL, Ring
 from .operator import _canon, _shift_bits
 from .rules import deterministic_velocity
-from .states import check_encodable, powers, unique_keys
+from .states import check_encodable, powers, rotate_mask, unique_keys
 from .transition import _cars_of, _gap
 
 __all__ = ["FactoredOperator", "word_bits", "frontier_successors"]
@@ -82,15 +82,6 @@ def word_bits(ring: Ring) -> tuple[int, int]:
     return w, total
 
 
-@njit(cache=True, inline="always")
-def _rotate_mask(mask, r, length):
-    """Occupancy mask rotated so that cell ``x`` goes to ``x - r (mod L)``."""
-    if r == 0:
-        return mask
-    full = (np.int64(1) << length) - 1
-    return ((mask >> r) | (mask << (length - r))) & full
-
-
 @njit(cache=True)
 def _frame_word(key, length, vmax, w, lump, pos, vel, u):
     """Level-0 word of a state: positions in its frame and the velocities after R1+R2."""
@@ -102,7 +93,7 @@ def _frame_word(key, length, vmax, w, lump, pos, vel, u):
     shift = n * w
     best = np.int64(-1)
     for r in range(length if lump else 1):
-        rotated = _rotate_mask(mask, r, length)
+        rotated = rotate_mask(mask, r, length)
         if best >= 0 and rotated > (best >> shift):
             continue
         # cars in the frame start with the first car at or above cell r

@@ -35,6 +35,8 @@ __all__ = [
     "canonical",
     "orbit_size",
     "compact_jam_key",
+    "rotate_mask",
+    "smallest_rotation",
     "unique_keys",
 ]
 
@@ -151,6 +153,27 @@ def orbit_size(key, length, pw):
         if length % r == 0 and key // pw[r] + (key % pw[r]) * pw[length - r] == key:
             return r
     return length
+
+
+@njit(cache=True, inline="always")
+def rotate_mask(mask, r, length):
+    """An occupancy bit mask (bit ``x`` = cell ``x``) rotated so that cell ``x``
+    goes to ``x - r (mod L)``, as :func:`canonical` rotates keys."""
+    if r == 0:
+        return mask
+    full = (np.int64(1) << length) - 1
+    return ((mask >> r) | (mask << (length - r))) & full
+
+
+@njit(cache=True, inline="always")
+def smallest_rotation(mask, length):
+    """The smallest of the ``L`` rotations of an occupancy bit mask."""
+    best = mask
+    for r in range(1, length):
+        rotated = rotate_mask(mask, r, length)
+        if rotated < best:
+            best = rotated
+    return best
 
 
 def compact_jam_key(length: int, cars: int, vmax: int) -> int:
