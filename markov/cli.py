@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import click
 
-from symbolic.cli import approx, derive
+from symbolic.cli import approx, derive, study
 
 from .cli_common import emit_json, handle_errors, quiet_option
 from .goe_cli import goe
@@ -26,12 +26,14 @@ def main():
     Examples:
       nasch solve -L 12 -N 6 --vmax 2 --p 0.5             exact flux, c_v, residual
       nasch approx --method pmf --vmax 2 --p 0.5 -c 0.25    an analytic approximation
+      nasch approx --method cluster --order 4 --p 0.5 -c 0.25   the 4-cluster approximation
       nasch derive --method mf --vmax 2 --latex            its equations
       nasch goe --vmax 2 --max-cells 12                    Garden of Eden patterns
       nasch goe --census -L 12 -N 6 --vmax 2               GoE census of one ring
       nasch table --vmax 2 --p 0.5 --lengths 8,10,12 --density 0.5 --format md
       nasch simulate --length 100000 --density 0.2 --vmax 2 --p 0.5 --steps 1000
       nasch plot fundamental --vmax 2 --p 0.5 --output fig.png
+      nasch study --vmax 2 --p 0.5 --density 0.25,0.5 --figure dev.png   which is best
     """
 
 
@@ -90,7 +92,7 @@ def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_mem
 
 
 # subcommands that live beside the code they drive
-for _command in (goe, approx, derive, simulate, table, plot):
+for _command in (goe, approx, derive, simulate, table, plot, study):
     main.add_command(_command)
 
 
