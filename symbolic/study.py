@@ -74,7 +74,8 @@ class StudyTable:
     rows : tuple of dict
         One per ``(vmax, p, c)``: ``vmax, p, density, mc_flux, mc_error,
         mc_length, exact_flux, exact_error, exact_lengths``, one flux per
-        method (None where not available), ``best``.
+        method (None where not available), ``best`` (closest to Monte Carlo)
+        and ``within_2sigma`` (the methods within two Monte Carlo errors of it).
     methods : tuple of str
     mc_steps, mc_replicas : int
     notes : tuple of str
@@ -113,7 +114,8 @@ class StudyTable:
         return {"methods": list(self.methods), "mc_steps": self.mc_steps,
                 "mc_replicas": self.mc_replicas, "notes": list(self.notes),
                 "seconds": self.seconds,
-                "rows": [{**r, "exact_lengths": list(r["exact_lengths"])} for r in self.rows]}
+                "rows": [{**r, "exact_lengths": list(r["exact_lengths"]),
+                          "within_2sigma": list(r["within_2sigma"])} for r in self.rows]}
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2) + "\n"
@@ -124,12 +126,14 @@ class StudyTable:
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(["vmax", "p", "density", "mc_length", "mc_flux", "mc_error", "exact_flux",
-                    "exact_error", "exact_lengths"] + list(self.methods) + ["best"])
+                    "exact_error", "exact_lengths"] + list(self.methods)
+                   + ["best", "within_2sigma"])
         for r in self.rows:
             w.writerow([r["vmax"], _g(r["p"]), _g(r["density"]), r["mc_length"],
                         _g(r["mc_flux"]), _g(r["mc_error"]), _g(r["exact_flux"]),
                         _g(r["exact_error"]), " ".join(map(str, r["exact_lengths"]))]
-                       + [_g(r[m]) for m in self.methods] + [r["best"] or ""])
+                       + [_g(r[m]) for m in self.methods]
+                       + [r["best"] or "", " ".join(r["within_2sigma"])])
         return buf.getvalue()
 
     def _cells(self, latex: bool) -> tuple[list[str], list[list[str]]]:
@@ -156,7 +160,8 @@ class StudyTable:
                 f" Monte Carlo ({self.mc_replicas} x {self.mc_steps} steps) and exact rings"
                 f" extrapolated to L = inf")
 
-    def _summary_lines(self) -> list[str]:
+    def summary(self) -> list[str]:
+        """One line per (vmax, p): the best method over runs of densities; then the notes."""
         lines = []
         for (vmax, p), items in sorted(self.winners().items()):
             runs = []
@@ -169,7 +174,22 @@ class StudyTable:
             parts = [f"{label(b)} for c = {lo:.2f}" + (f"-{hi:.2f}" if hi != lo else "")
                      + f" (|dev| <= {100 * d:.1f}%)" for b, lo, hi, d in runs]
             lines.append(f"vmax = {vmax}, p = {p:g}: best " + "; ".join(parts))
+            worst = self.largest_deviation(vmax, p)
+            lines.append(f"vmax = {vmax}, p = {p:g}: largest |dev| over c: " + ", ".join(
+                f"{label(m)} {100 * d:.1f}%" for m, d in worst.items()))
         return lines + list(self.notes)
+
+    def largest_deviation(self, vmax: int, p: float, low: float = 0.0,
+                          high: float = 1.0) -> dict:
+        """``{method: max_c |deviation|}`` over the densities in ``[low, high]``."""
+        out = {}
+        for r in self.rows:
+            if r["vmax"] == vmax and r["p"] == p and low <= r["density"] <= high:
+                for m in self.methods:
+                    dev = self.deviation(r, m)
+                    if dev is not None:
+                        out[m] = max(out.get(m, 0.0), abs(dev))
+        return out
 
     def to_text(self) -> str:
         head, body = self._cells(False)
@@ -177,14 +197,14 @@ class StudyTable:
         line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731
         out = [self._caption(), line(head), "  ".join("-" * w for w in widths)]
         out += [line(b) for b in body]
-        return "\n".join(out + [""] + self._summary_lines()) + "\n"
+        return "\n".join(out + [""] + self.summary()) + "\n"
 
     def to_md(self) -> str:
         head, body = self._cells(False)
         out = [f"*{self._caption()}*", "", "| " + " | ".join(head) + " |",
                "|" + "|".join("---:" for _ in head) + "|"]
         out += ["| " + " | ".join(b) + " |" for b in body]
-        return "\n".join(out + [""] + [f"* {x}" for x in self._summary_lines()]) + "\n"
+        return "\n".join(out + [""] + [f"* {x}" for x in self.summary()]) + "\n"
 
     def to_latex(self) -> str:
         head, body = self._cells(True)
@@ -192,7 +212,7 @@ class StudyTable:
                r"\toprule", " & ".join(head).replace("->", r"$\to$") + r" \\", r"\midrule"]
         out += [" & ".join(b) + r" \\" for b in body]
         return "\n".join(out + [r"\bottomrule", r"\end{tabular}"]
-                         + [f"% {x}" for x in self._summary_lines()]) + "\n"
+                         + [f"% {x}" for x in self.summary()]) + "\n"
 
 
 def _exact_rings(vmax: int, c: Fraction, lengths, max_states: int) -> list[tuple[int, int]]:
@@ -326,6 +346,9 @@ def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequen
                     row[name] = approx.get((v, x, c, name))
                 scored = {n: abs(row[n] - m["flux"]) for n in names if row[n] is not None}
                 row["best"] = min(scored, key=scored.get) if scored else None
+                # methods that Monte Carlo cannot tell apart from the truth
+                row["within_2sigma"] = tuple(n for n in names if n in scored
+                                             and scored[n] <= 2 * m["error"])
                 rows.append(row)
     return StudyTable(tuple(rows), tuple(names), int(mc_steps), int(mc_replicas), tuple(notes),
                       time.perf_counter() - start)
