@@ -326,9 +326,9 @@ def comf_state(vmax: int, p: float, c: float) -> ComfState:
     vmax, p, c = int(vmax), float(p), float(c)
     if not (0 < p < 1 and 0 < c < 1):
         raise InvalidParameterError(f"COMF needs 0 < p < 1 and 0 < c < 1, got p={p}, c={c}")
-    from .solve import solve_mf
-
-    shape = solve_mf(vmax, p, c) / c          # start: the MF velocity distribution
+    # start: all moves equally likely (converged from several starts to the same point;
+    # the MF solution would cost a sympy solve, 5 s for vmax 5)
+    shape = np.full(vmax + 1, 1.0 / (vmax + 1))
     cut = max(16 * vmax, int(np.ceil(40 * (1 - c) / c)))
     while True:
         shape, x = _solve_cut(vmax, p, c, cut, shape)

@@ -64,7 +64,7 @@ def test_supported_names_and_labels():
     (dict(method="cluster", vmax=2, p=0.5, density=0.5), "needs an order"),
     (dict(method="cluster4", vmax=2, p=0.5, density=0.5, order=3), "disagree"),
     (dict(method="mf", vmax=2, p=0.5, density=0.5, order=3), "only given for the cluster"),
-    (dict(method="cluster", vmax=5, p=0.5, density=0.5, order=9), "window words"),
+    (dict(method="cluster", vmax=2, p=0.5, density=0.5, order=12), "window words"),
 ])
 def test_bad_input_raises_invalid_parameter(kwargs, message):
     with pytest.raises(InvalidParameterError, match=message):
