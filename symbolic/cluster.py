@@ -76,7 +76,7 @@ from markov.rules import velocity_outcomes
 from .meanfield import gap_horizons, reach
 from .solve import solve_fixed_point
 
-__all__ = ["Transfer", "transfer", "window_count", "chain_weights", "push",
+__all__ = ["Transfer", "transfer", "window_count", "push",
            "cluster_fixed_point", "solve_cluster", "word_probability", "cluster_symbols",
            "cluster_equations", "MAX_WINDOWS"]
 
@@ -589,17 +589,6 @@ def _full(t: Transfer, x: np.ndarray) -> np.ndarray:
     return out
 
 
-def chain_weights(vmax: int, n: int, probs: np.ndarray) -> np.ndarray:
-    """Probabilities of the windows of :func:`transfer` from n-cluster probabilities.
-
-    ``probs`` has shape ``(k, B**n)``; returns ``(k, W)`` in the order of
-    ``transfer(vmax, n).windows``.  A vanishing ``(n-1)``-cluster probability
-    (a forbidden state) gives weight 0.
-    """
-    t = transfer(vmax, n)
-    return _reduced_chain_weights(t, np.asarray(probs, float)[:, t.support]).T
-
-
 def push(vmax: int, n: int, probs: np.ndarray, p_val) -> np.ndarray:
     """One update of n-cluster probabilities, shape ``(k, B**n)`` -> ``(k, B**n)``.
 
@@ -872,7 +861,7 @@ def cluster_equations(vmax: int, n: int = 2) -> list:
 
     One equation per n-cell word: ``P_s = 0`` for words outside the support
     (no fixed point gives them weight), otherwise the sum over the windows of
-    :func:`transfer`; ``Q`` is the Markov-chain product of :func:`chain_weights`
+    :func:`transfer`; ``Q`` is the Markov-chain product of the n-cluster probabilities
     and the ``(n-1)``-cluster marginals are the symbols ``P_<cells>`` with one
     cell fewer, defined by the extra equations ``P_<cells> = sum_s P_<cells s>``
     returned after the fixed-point equations (``n >= 2``).
