@@ -33,6 +33,8 @@ _LAZY = {
     "plot": ("markov.products_cli", "plot", "Figures (PNG or PDF, by the file extension)."),
     "simulate": ("markov.products_cli", "simulate",
                  "Monte Carlo flux of a large ring, with a batch-means error bar."),
+    "study": ("symbolic.cli", "study",
+              "Convergence study: every approximation against Monte Carlo and exact rings."),
     "table": ("markov.products_cli", "table",
               "Exact finite-ring fluxes beside MF, pMF, 2-cluster and Monte Carlo."),
 }
@@ -49,12 +51,14 @@ def main():
       nasch solve -L 12 -N 6 --vmax 2 --p 0.5             exact flux, c_v, residual
       nasch solve -L 10 -N 5 --p 0.5 --top 5 --save pi.npz  likeliest states; pi on disk
       nasch approx --method pmf --vmax 2 --p 0.5 -c 0.25    an analytic approximation
+      nasch approx --method cluster --order 4 --p 0.5 -c 0.25   the 4-cluster approximation
       nasch derive --method mf --vmax 2 --latex            its equations
       nasch goe --vmax 2 --max-cells 12                    Garden of Eden patterns
       nasch goe --census -L 12 -N 6 --vmax 2               GoE census of one ring
       nasch table --vmax 2 --p 0.5 --lengths 8,10,12 --density 0.5 --format md
       nasch simulate --length 100000 --density 0.2 --vmax 2 --p 0.5 --steps 1000
       nasch plot fundamental --vmax 2 --p 0.5 --output fig.png
+      nasch study --vmax 2 --p 0.5 --density 0.25,0.5 --figure dev.png   which is best
     """
 
 

@@ -2,7 +2,8 @@
 
 For each braking probability ``p`` one panel shows, against the density ``c``:
 
-* pMF (solid line), MF (dotted), 2-cluster (dash-dotted) from :mod:`symbolic`;
+* pMF (solid line), MF (dotted), 2-cluster (dash-dotted) from :mod:`symbolic`
+  (other approximations, e.g. the 4-cluster and COMF, on request);
 * Monte Carlo on a large ring (dots with 1-sigma error bars, mostly smaller
   than the dots);
 * exact stationary fluxes of finite rings, every ``N`` for a few ``L``
@@ -45,7 +46,9 @@ EXTRAPOLATION_DENSITIES = (Fraction(1, 4), Fraction(1, 3), Fraction(1, 2), Fract
                            Fraction(3, 4))
 _STYLE = {"pmf": ("pMF", "-", "C0"), "mf": ("MF", ":", "k"),
           "cluster2": ("2-cluster", "-.", "C2"), "pmf2": ("pMF2", "--", "C4"),
-          "cluster3": ("3-cluster", (0, (5, 1)), "C5")}
+          "cluster3": ("3-cluster", (0, (5, 1)), "C5"),
+          "cluster4": ("4-cluster", (0, (6, 2)), "teal"),
+          "comf": ("COMF", (0, (1, 1)), "saddlebrown")}
 # Colours of the finite rings: none shared with a curve, Monte Carlo or the extrapolation.
 _EXACT_COLORS = ("C1", "C7", "C5", "C8", "C9", "C6")
 _MARKERS = ("o", "s", "^", "v", "<", ">", "p", "h")
@@ -67,7 +70,8 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
                      extrapolation_lengths: Sequence[int] = tuple(range(8, 17)),
                      extrapolation_densities: Sequence[Fraction] = EXTRAPOLATION_DENSITIES,
                      order: int = 2, methods: Sequence[str] = ("pmf", "mf", "cluster2"),
-                     mc_length: int = 3000, mc_steps: int = 2000, mc_points: int = 39,
+                     curve_points: int = 120, mc_length: int = 3000, mc_steps: int = 2000,
+                     mc_points: int = 39,
                      seed: int = 0, serial: bool | None = None, scheduler: str | None = None,
                      client=None, budget: float | None = None):
     """All numbers of the fundamental diagram: one panel per braking probability.
@@ -88,7 +92,10 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     order : int
         Order of the ``1/L`` series.
     methods : sequence of str
-        Approximation curves (skipped where undefined for ``vmax``).
+        Approximation curves (skipped where undefined for ``vmax``): any name of
+        :data:`symbolic.APPROXIMATIONS`, e.g. ``cluster4`` and ``comf``.
+    curve_points : int
+        Densities per approximation curve (evenly spaced in ``[0.005, 0.995]``).
     mc_length, mc_steps, mc_points : int
         Monte Carlo ring (rounded to match each density exactly), time steps
         (plus half as many warm-up), and number of densities ``k / (mc_points + 1)``
@@ -172,13 +179,13 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     results = run_jobs(_job, tasks, serial=serial, scheduler=scheduler, client=client,
                        cost=_task_cost, desc="fundamental diagram")
     panels = [_panel(vmax, x, results[lo:hi], points, groups[x], mc_c, lengths, order,
-                     methods, mc_length, mc_steps)
+                     methods, mc_length, mc_steps, curve_points)
               for x, (lo, hi, points) in zip(ps, spans)]
     return panels[0] if single else panels
 
 
 def _panel(vmax, p, results, exact_points, groups, mc_c, lengths, order, methods,
-           mc_length, mc_steps) -> dict:
+           mc_length, mc_steps, curve_points) -> dict:
     exact_res = results[:len(exact_points)]
     flux = {pt: r["flux"] for pt, r in zip(exact_points, exact_res)}
     failed = [(pt, r["error"]) for pt, r in zip(exact_points, exact_res) if "error" in r]
@@ -211,10 +218,12 @@ def _panel(vmax, p, results, exact_points, groups, mc_c, lengths, order, methods
         from symbolic import approximate, supported
     except ImportError:  # the curves need the symbolic package; the rest does not
         methods = ()
-    # 120 points draw smooth curves; the 2-cluster solve costs ~20 ms per point.
-    grid = np.linspace(0.005, 0.995, 120)
+    # 120 points draw smooth curves: the n-cluster solves all at once (4-cluster: ~1 s),
+    # COMF one by one (~20 s for vmax 2, mostly the lowest densities).
+    grid = np.linspace(0.005, 0.995, int(curve_points))
     for m in methods:
         if supported(m, vmax):
+            # COMF solves each density alone (~0.2 s, several s below c = 0.02)
             f = np.asarray(approximate(m, vmax, p, grid).flux, dtype=float)
             # Close the curve at the end points, where every approximation has f = 0.
             data["curves"][m] = (np.r_[0.0, grid, 1.0], np.r_[0.0, f, 0.0])

@@ -205,6 +205,9 @@ def plot():
 @click.option("--mc-steps", type=int, default=2000, show_default=True,
               help="Monte Carlo time steps per density; 0 for none.")
 @click.option("--seed", type=int, default=0, show_default=True, help="Monte Carlo base seed.")
+@click.option("--methods", "methods_text", default="pmf,mf,cluster2", show_default=True,
+              help="Approximation curves, comma-separated (also pmf2, cluster3, cluster4,"
+                   " ..., comf).")
 @click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
               help="Figure file, .png or .pdf.")
 @click.option("--serial", is_flag=True, help="Run everything in this process (no Dask).")
@@ -213,8 +216,8 @@ def plot():
 @quiet_option
 @handle_errors
 def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc_steps, seed,
-                output, serial, scheduler):
-    """Fundamental diagram as in the paper's Figure 2: approximations, Monte Carlo, exact rings.
+                methods_text, output, serial, scheduler):
+    """Fundamental diagram (the paper's Fig. 2): approximations, Monte Carlo, exact rings.
 
     Rings too large for the exact solver are left out with a warning.
 
@@ -223,7 +226,10 @@ def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc
       nasch plot fundamental --vmax 2 --p 0.5 --output fig.png
       nasch plot fundamental --vmax 2 --p 0.5,0.1 --output fig2.pdf
       nasch plot fundamental --vmax 2 --p 0.5 --budget 20s --output fig.png
+      nasch plot fundamental --p 0.5 --methods pmf,mf,cluster2,cluster4,comf -o fig.png
     """
+    from symbolic import method_name
+
     from .budget import parse_budget
     from .io import check_output_path
     from .plot import FIGURE_FORMATS, fundamental_data, fundamental_figure, save_figure
@@ -233,13 +239,14 @@ def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc
     _ensure_dask_options(serial, scheduler)
     ps = _number_list("--p", p_text)
     _ensure_p_open(ps)
+    methods = tuple(method_name(m.strip()) for m in methods_text.split(",") if m.strip())
     import warnings
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
         panels = fundamental_data(
             vmax, ps, lengths=_number_list("--lengths", lengths_text, int),
             extrapolation_lengths=_number_list("--extrapolation-lengths", ext_text, int),
-            mc_length=mc_length, mc_steps=mc_steps, seed=seed, budget=budget,
+            mc_length=mc_length, mc_steps=mc_steps, seed=seed, budget=budget, methods=methods,
             serial=True if serial else None, scheduler=scheduler)
     for w in caught:
         click.echo(f"warning: {w.message}", err=True)

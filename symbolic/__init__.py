@@ -1,12 +1,14 @@
-"""Analytic approximations of the NaSch stationary state, derived with sympy from the rules.
+"""Analytic approximations of the NaSch stationary state, derived from the rules.
 
 Methods (see ``docs/symbolic.md``):
 
 * ``"mf"``       site-oriented mean field, any ``vmax``;
-* ``"pmf"``      paradisical MF: first-order Garden of Eden states removed (vmax 1, 2);
-* ``"pmf2"``     pMF also without the second-order pattern ``(0,•,•,2)`` (vmax 1, 2);
-* ``"cluster2"`` 2-cluster approximation (vmax 1, 2);
-* ``"cluster3"`` 3-cluster approximation (vmax 1, 2; slower).
+* ``"pmf"``      paradisical MF: Garden of Eden patterns of order 1 removed (vmax 1..6);
+* ``"pmf2"``     pMF also without the patterns of order 2 (vmax 2: ``(0,•,•,2)``);
+* ``"clusterN"`` N-cluster approximation, any ``N >= 1`` (``"cluster"`` with
+  ``order=N``); the size is limited by the windows it needs (vmax 2: N <= 11,
+  vmax 3: 9, vmax 4: 7, vmax 5: 6);
+* ``"comf"``     car-oriented mean field (independent (velocity, gap) of cars), any vmax.
 
 Quick start
 -----------
@@ -14,35 +16,97 @@ Quick start
 >>> a = approximate("pmf", vmax=1, p=0.5, density=0.5)
 >>> round(a.flux, 12)          # (1 - sqrt(1 - 4 q c d)) / 2, the exact vmax = 1 flux
 0.146446609407
+>>> approximate("cluster", 2, 0.5, 0.25, order=4).method
+'cluster4'
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from markov.errors import InvalidParameterError
 
-__all__ = ["APPROXIMATIONS", "Approximation", "approximate", "supported"]
+__all__ = ["APPROXIMATIONS", "METHODS", "MAX_PMF_VMAX", "Approximation", "approximate",
+           "supported", "method_name", "label"]
 
-APPROXIMATIONS = ("mf", "pmf", "pmf2", "cluster2", "cluster3")
+METHODS = ("mf", "pmf", "pmf2", "cluster", "comf")
+# the named methods offered in tables, figures and help texts
+APPROXIMATIONS = ("mf", "pmf", "pmf2", "cluster2", "cluster3", "cluster4", "cluster5",
+                  "cluster6", "comf")
+# Largest vmax for pMF: the automaton search for the GoE patterns takes 0.3-0.8 s up
+# to vmax 5 and 8 s for vmax 6 (docs/goe.md); vmax 7 does not finish in reasonable time.
+MAX_PMF_VMAX = 6
 
-# vmax values each method supports (None: any vmax >= 1)
-_SUPPORT = {"mf": None, "pmf": (1, 2), "pmf2": (1, 2), "cluster2": (1, 2), "cluster3": (1, 2)}
+
+def _split(method, order=None) -> tuple[str, int | None]:
+    """``("cluster4", None)`` or ``("cluster", 4)`` -> ``("cluster", 4)``; validates."""
+    if not isinstance(method, str):
+        raise InvalidParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    match = re.fullmatch(r"cluster(\d+)", method)
+    if match:
+        if order is not None and int(order) != int(match.group(1)):
+            raise InvalidParameterError(
+                f"method {method!r} and order {order} disagree; give one of them")
+        method, order = "cluster", int(match.group(1))
+    if method not in METHODS:
+        raise InvalidParameterError(
+            f"method must be one of {', '.join(METHODS)} (or clusterN), got {method!r}")
+    if method == "cluster":
+        if order is None:
+            raise InvalidParameterError("the cluster method needs an order (cluster size N >= 1)")
+        if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 1:
+            raise InvalidParameterError(f"the cluster order must be an integer >= 1, got {order!r}")
+        return method, int(order)
+    if order is not None:
+        raise InvalidParameterError(
+            f"an order is only given for the cluster method, not {method!r}")
+    return method, None
 
 
-def supported(method: str, vmax: int) -> bool:
-    """Whether ``approximate(method, vmax, ...)`` is available.
+def method_name(method: str, order: int | None = None) -> str:
+    """Canonical name: ``"cluster4"`` for ``("cluster", 4)``, else the method.
 
     Examples
     --------
-    >>> supported("mf", 5), supported("pmf", 3), supported("nope", 1)
-    (True, False, False)
+    >>> method_name("cluster", 4), method_name("cluster2"), method_name("comf")
+    ('cluster4', 'cluster2', 'comf')
     """
-    if method not in _SUPPORT or isinstance(vmax, bool) or not isinstance(vmax, (int, np.integer)):
+    base, order = _split(method, order)
+    return f"cluster{order}" if base == "cluster" else base
+
+
+def label(method: str) -> str:
+    """Human label: ``MF``, ``pMF``, ``pMF2``, ``4-cluster``, ``COMF``.
+
+    Examples
+    --------
+    >>> label("cluster4"), label("pmf2")
+    ('4-cluster', 'pMF2')
+    """
+    base, order = _split(method)
+    return {"mf": "MF", "pmf": "pMF", "pmf2": "pMF2", "comf": "COMF"}.get(base, f"{order}-cluster")
+
+
+def supported(method: str, vmax: int, order: int | None = None) -> bool:
+    """Whether ``approximate(method, vmax, ..., order=order)`` is offered.
+
+    Cluster sizes too large for the window enumeration are refused by
+    :func:`approximate` itself (:class:`InvalidParameterError`).
+
+    Examples
+    --------
+    >>> supported("mf", 5), supported("pmf", 3), supported("pmf", 7), supported("nope", 1)
+    (True, True, False, False)
+    """
+    try:
+        base, _ = _split(method, order)
+    except InvalidParameterError:
         return False
-    allowed = _SUPPORT[method]
-    return vmax >= 1 and (allowed is None or int(vmax) in allowed)
+    if isinstance(vmax, bool) or not isinstance(vmax, (int, np.integer)) or vmax < 1:
+        return False
+    return base not in ("pmf", "pmf2") or int(vmax) <= MAX_PMF_VMAX
 
 
 @dataclass(frozen=True)
@@ -52,6 +116,7 @@ class Approximation:
     Attributes
     ----------
     method : str
+        Canonical name (``"cluster4"``, ``"comf"``, ...).
     vmax : int
     p : float
     density : float or (k,) ndarray
@@ -76,30 +141,32 @@ class Approximation:
                 "c_v": np.asarray(self.c_v).tolist(), "flux": flux}
 
 
-def _ensure_method(method, vmax) -> int:
-    if method not in _SUPPORT:
-        raise InvalidParameterError(
-            f"method must be one of {', '.join(APPROXIMATIONS)}, got {method!r}")
+def _ensure_method(method, vmax, order) -> tuple[str, int | None, int]:
+    base, order = _split(method, order)
     if isinstance(vmax, bool) or not isinstance(vmax, (int, np.integer)) or vmax < 1:
         raise InvalidParameterError(f"vmax must be an integer >= 1, got {vmax!r}")
-    if not supported(method, vmax):
+    if not supported(base, vmax, order):
         raise InvalidParameterError(
-            f"method {method!r} is implemented for vmax in {_SUPPORT[method]}, got vmax = {vmax}")
-    return int(vmax)
+            f"method {base!r} needs the GoE patterns, found for vmax <= {MAX_PMF_VMAX};"
+            f" got vmax = {vmax}")
+    return base, order, int(vmax)
 
 
-def approximate(method: str, vmax: int, p: float, density) -> Approximation:
+def approximate(method: str, vmax: int, p: float, density, order: int | None = None
+                ) -> Approximation:
     """Stationary ``c_v`` and flux of an analytic approximation.
 
     Parameters
     ----------
-    method : {"mf", "pmf", "pmf2", "cluster2", "cluster3"}
+    method : {"mf", "pmf", "pmf2", "cluster", "comf"} or "clusterN"
     vmax : int
         Maximal velocity (see :func:`supported`).
     p : float
         Braking probability, ``0 < p < 1``.
     density : float or (k,) array_like
         Car density ``0 < c < 1``; an array gives ``c_v`` of shape ``(vmax + 1, k)``.
+    order : int, optional
+        Cluster size ``N`` for ``method="cluster"``.
 
     Returns
     -------
@@ -108,7 +175,8 @@ def approximate(method: str, vmax: int, p: float, density) -> Approximation:
     Raises
     ------
     InvalidParameterError
-        Unknown method, unsupported ``vmax``, ``p`` or ``density`` outside ``(0, 1)``.
+        Unknown method, unsupported ``vmax``, a cluster too large to enumerate,
+        ``p`` or ``density`` outside ``(0, 1)``.
 
     Examples
     --------
@@ -118,7 +186,7 @@ def approximate(method: str, vmax: int, p: float, density) -> Approximation:
     """
     from .solve import ensure_open_unit, flux_of, solve_mf, solve_pmf
 
-    vmax = _ensure_method(method, vmax)
+    base, order, vmax = _ensure_method(method, vmax, order)
     p_arr = ensure_open_unit("p", p)
     if p_arr.ndim:
         raise InvalidParameterError(f"p must be a single number in (0, 1), got {p!r}")
@@ -126,15 +194,19 @@ def approximate(method: str, vmax: int, p: float, density) -> Approximation:
     if c_arr.ndim > 1:
         raise InvalidParameterError("density must be a number or a 1-d array of numbers")
     p_val = float(p_arr)
-    if method == "mf":
+    if base == "mf":
         c_v = solve_mf(vmax, p_val, c_arr)
-    elif method in ("pmf", "pmf2"):
-        c_v = solve_pmf(vmax, p_val, c_arr, second_order=(method == "pmf2"))
+    elif base in ("pmf", "pmf2"):
+        c_v = solve_pmf(vmax, p_val, c_arr, second_order=(base == "pmf2"))
+    elif base == "comf":
+        from .comf import solve_comf
+        c_v = solve_comf(vmax, p_val, c_arr)
     else:
         from .cluster import solve_cluster
-        c_v = solve_cluster(vmax, int(method[-1]), p_val, c_arr)
+        c_v = solve_cluster(vmax, order, p_val, c_arr)
     c_v = np.asarray(c_v, dtype=float)
     flux = flux_of(c_v)
+    name = method_name(base, order)
     if c_arr.ndim == 0:
-        return Approximation(method, vmax, p_val, float(c_arr), c_v, float(flux))
-    return Approximation(method, vmax, p_val, c_arr.copy(), c_v, flux)
+        return Approximation(name, vmax, p_val, float(c_arr), c_v, float(flux))
+    return Approximation(name, vmax, p_val, c_arr.copy(), c_v, flux)

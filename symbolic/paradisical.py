@@ -1,17 +1,31 @@
-"""Paradisical mean-field (pMF): MF with the Garden of Eden (GoE) states removed.
+"""Paradisical mean-field (pMF): MF with the Garden of Eden (GoE) states removed, any vmax.
 
 Construction (the paper's, made explicit; it reproduces eqs. (pmf10)-(pmf11),
 (c0eq)-(c2eq), its normalisation and the second-order modification exactly):
 
-* a car of velocity ``v`` at cell ``x`` and the ``K`` cells ahead of it form a
-  word, ``K = max(gap horizon, longest GoE pattern - 1)``;
-* words with a GoE pattern *starting at the car at x* get weight 0, the others
-  the product-measure weight (``d`` per empty cell, ``c_u`` per car);
+* a car of velocity ``v`` at cell ``x`` and the cells ahead of it form a word;
+* words with an elementary GoE pattern *starting at the car at x* get weight
+  0, the others the product-measure weight (``d`` per empty cell, ``c_u`` per
+  car);
 * the car moves ``w`` cells with the R3 coin weight from
   :func:`markov.rules.velocity_outcomes`; summing gives ``F_w``;
 * the normalisation ``N = c / sum_w F_w`` restores ``sum_w c_w = c``; it is the
   inverse probability that the continuation of a car is GoE free,
   e.g. ``1 / (c_0 + d (1 - c_2))`` for ``vmax = 2``.
+
+Closed form: two patterns never start at the same car (neither is a prefix of
+the other: both are minimal forbidden words), and a pattern fixes the gap of
+its first car (its second car lies inside it), so
+
+.. math:: F_w = F^{MF}_w - \\sum_{\\text{patterns } a\\,\\bullet^k b \\ldots}
+          c_a\\, d^k c_b \\cdots \\, T(w \\mid a, k),
+
+the MF right-hand side minus the weight of the words that start with each
+pattern.  The patterns are the elementary GoE patterns of the exhaustive
+automaton search :func:`markov.goe_patterns.elementary_patterns`: ``pmf``
+removes those of order 1 (the pairs ``a •^k b`` with ``k < b``), ``pmf2``
+also those of order 2 (vmax = 2: the paper's ``(0,•,•,2)``).  For vmax 1, 2
+they equal the paper's lists (:data:`GOE_PATTERNS`, tested).
 
 Anchoring the patterns at the updated car (rather than removing every pattern
 anywhere in the window) is what the paper's equations encode; see
@@ -32,7 +46,8 @@ import sympy as sp
 from markov.errors import InvalidParameterError
 from markov.rules import velocity_outcomes
 
-from .meanfield import EMPTY, c, d, gap_horizons, p, q, velocity_symbols, word_weight
+from . import MAX_PMF_VMAX
+from .meanfield import EMPTY, c, d, gap_horizons, mf_rhs, p, q, velocity_symbols, word_weight
 
 __all__ = [
     "GOE_PATTERNS", "SECOND_ORDER_PATTERNS", "goe_patterns", "parse_pattern",
@@ -40,34 +55,43 @@ __all__ = [
     "paper_pmf_equations", "paper_pmf_normalisation", "paper_c2", "paper_cubic",
 ]
 
-# Elementary GoE patterns from the paper (eqs. goe1-goe3 and Sec. 3), cars
-# driving to the right, '.' an empty cell.  Data, cross-checked against
-# markov.goe by the tests when that module offers a search.
+# Elementary GoE patterns as printed in the paper (eqs. goe1-goe3 and Sec. 3), cars
+# driving to the right, '.' an empty cell: data for the comparison with the
+# exhaustive search that the equations use (tests/test_symbolic_paradisical.py).
 GOE_PATTERNS = {
     1: ("01", "11"),
     2: ("01", "02", "12", "0.2", "11", "21", "22", "1.2", "2.2"),
 }
 SECOND_ORDER_PATTERNS = {1: (), 2: ("0..2",)}
-
-
 def parse_pattern(text: str) -> tuple[int, ...]:
     """``"0.2"`` -> ``(0, -1, 2)`` (``-1`` an empty cell)."""
     return tuple(EMPTY if ch in ".•_" else int(ch) for ch in text)
 
 
+@lru_cache(maxsize=None)
 def goe_patterns(vmax: int, second_order: bool = False) -> tuple[tuple[int, ...], ...]:
-    """The paper's elementary GoE patterns as cell tuples.
+    """Elementary GoE patterns of order 1 (and 2 with ``second_order``), as cell tuples.
+
+    From the exhaustive search :func:`markov.goe_patterns.elementary_patterns`
+    (complete for every length).
 
     Examples
     --------
     >>> goe_patterns(1)
     ((0, 1), (1, 1))
+    >>> goe_patterns(2, second_order=True)[-1]          # the paper's (0, •, •, 2)
+    (0, -1, -1, 2)
     """
-    if vmax not in GOE_PATTERNS:
+    if isinstance(vmax, bool) or not isinstance(vmax, int) or not 1 <= vmax <= MAX_PMF_VMAX:
         raise InvalidParameterError(
-            f"the paper lists GoE patterns for vmax = 1 and 2 only, got vmax = {vmax}")
-    texts = GOE_PATTERNS[vmax] + (SECOND_ORDER_PATTERNS[vmax] if second_order else ())
-    return tuple(parse_pattern(t) for t in texts)
+            f"pMF needs the GoE patterns of vmax = 1..{MAX_PMF_VMAX}, got vmax = {vmax!r}")
+    from markov.goe_patterns import elementary_patterns
+
+    search = elementary_patterns(vmax, 40)
+    if not search.complete:
+        raise RuntimeError(f"GoE pattern search for vmax = {vmax} is not complete at 40 cells")
+    top = 2 if second_order else 1
+    return tuple(parse_pattern(pt.pattern) for pt in search.patterns if pt.order <= top)
 
 
 def _gap(word) -> int:
@@ -86,13 +110,25 @@ def pmf_rhs(vmax: int, second_order: bool = False,
             anchored: bool = True) -> tuple[sp.Expr, ...]:
     """Un-normalised ``F_w`` of the pMF equations ``c_w = N F_w``.
 
-    Expressions in ``c_v``, ``d``, ``p``, ``q`` (every car resolved by velocity).
-    ``anchored=False`` is the alternative reading (remove words with a GoE
-    pattern *anywhere* in the window); it is not the paper's and is kept for
-    the comparison in ``docs/symbolic.md``.
+    ``anchored=True`` (the paper's construction): the closed form of the module
+    doc, MF minus the words starting with a pattern; expressions in ``c_v``,
+    ``c``, ``d``, ``p``, ``q``.  ``anchored=False`` is the alternative reading
+    (remove words with a pattern *anywhere* in the window of ``K`` cells ahead,
+    every car resolved by velocity), enumerated word by word; vmax 1 and 2
+    only.  It is not the paper's and is kept for the comparison in
+    ``docs/symbolic.md``.
     """
     cv = velocity_symbols(vmax)
     patterns = goe_patterns(vmax, second_order)
+    if anchored:
+        rhs = list(mf_rhs(vmax))
+        for pat in patterns:
+            weight = cv[pat[0]] * word_weight(pat[1:], cv)
+            for w, coin in velocity_outcomes(pat[0], _gap(pat[1:]), vmax, p):
+                rhs[w] -= weight * sp.sympify(coin).subs(1 - p, q)
+        return tuple(sp.collect(sp.expand(r), cv) for r in rhs)
+    if vmax > 2:
+        raise InvalidParameterError("the window reading of pMF is enumerated for vmax <= 2 only")
     horizon = max(gap_horizons(vmax))
     window = max(horizon, max(len(pt) for pt in patterns) - 1)
     cells = (EMPTY,) + tuple(range(vmax + 1))
@@ -100,8 +136,7 @@ def pmf_rhs(vmax: int, second_order: bool = False,
     for v in range(vmax + 1):
         for ahead in itertools.product(cells, repeat=window):
             word = (v,) + ahead
-            starts = range(1) if anchored else range(len(word))
-            if any(_starts_with(word[i:], pt) for pt in patterns for i in starts):
+            if any(_starts_with(word[i:], pt) for pt in patterns for i in range(len(word))):
                 continue  # a GoE state: removed from the measure
             weight = cv[v] * word_weight(ahead, cv)
             for w, coin in velocity_outcomes(v, min(_gap(ahead), window), vmax, p):

@@ -27,7 +27,7 @@ from .paradisical import paper_cubic, pmf_normalisation, pmf_rhs
 
 __all__ = [
     "ensure_open_unit", "solve_mf", "solve_pmf_vmax1", "solve_pmf_cubic",
-    "cubic_roots", "solve_fixed_point", "newton_polish", "solve_pmf", "flux_of",
+    "cubic_roots", "solve_fixed_point", "solve_pmf", "flux_of",
 ]
 
 
@@ -248,42 +248,6 @@ def solve_fixed_point(update, start: np.ndarray, tol: float = 1e-14,
         return gx, max_iter
     raise ConvergenceError(f"fixed-point iteration did not reach {tol:g} in {max_iter} steps",
                            max_iter, err, gx)
-
-
-def newton_polish(update, x: np.ndarray, project=None, tol: float = 1e-14,
-                  steps: int = 30, invariants: np.ndarray | None = None) -> np.ndarray:
-    """Newton steps on ``update(x) - x`` for one problem, ``x`` of shape ``(m,)``.
-
-    For slow modes (relaxation time ~ 1/q when ``p -> 1``) where even the
-    accelerated iteration crawls.  The Jacobian is taken by forward
-    differences in one batched call of ``update`` on ``m`` rows.  Fixed points
-    come in families along the conserved quantities (mass, density), which
-    makes the Jacobian singular; the rows of ``invariants`` (``(r, m)``, linear
-    functionals the step must not change) are appended to the linear system,
-    which is solved by least squares; ``project`` then removes rounding drift.
-    Raises :class:`~markov.errors.ConvergenceError` if ``tol`` is not reached.
-    """
-    cons = np.zeros((0, np.size(x))) if invariants is None else np.asarray(invariants, float)
-    project = project or (lambda y: y)
-    x = np.array(x, dtype=float)
-    m = x.size
-    err = np.inf
-    for _ in range(steps):
-        gx = np.asarray(update(x[None]), dtype=float)[0]
-        f = gx - x
-        previous, err = err, float(np.abs(f).max())
-        if err <= tol or (err <= 100 * tol and err > 0.5 * previous):
-            return gx        # converged, or stalled at the rounding floor
-        # central differences, step relative to each entry (they span many decades)
-        h = 1e-5 * np.maximum(np.abs(x), 1e-9 * max(np.abs(x).max(), 1e-300))
-        both = np.asarray(update(np.vstack([x[None] + np.diag(h), x[None] - np.diag(h)])),
-                          dtype=float)
-        jac = ((both[:m] - both[m:]) / (2 * h[:, None])).T - np.eye(m)
-        system = np.vstack([jac, cons])
-        rhs = np.concatenate([-f, np.zeros(len(cons))])
-        step = np.linalg.lstsq(system, rhs, rcond=None)[0]
-        x = project(np.clip(x + step, 0.0, None)[None])[0]
-    raise ConvergenceError(f"Newton polish did not reach {tol:g} in {steps} steps", steps, err, x)
 
 
 def solve_pmf(vmax: int, p_val, c_val, second_order: bool = False,

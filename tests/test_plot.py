@@ -90,3 +90,18 @@ def test_cli_plot(tmp_path):
     assert bad.exit_code == 2 and bad.output.startswith("error:")
     bad = CliRunner().invoke(main, ["plot", "fundamental", "--p", "0", "--output", str(out)])
     assert bad.exit_code == 2
+
+
+def test_four_cluster_and_comf_curves_on_request_are_exact_for_vmax1(tmp_path):
+    # both approximations give the exact infinite-ring flux for vmax = 1
+    d = fundamental_data(1, 0.5, methods=("cluster4", "comf"), lengths=[],
+                         extrapolation_densities=[], mc_steps=0, curve_points=9, serial=True)
+    for m in ("cluster4", "comf"):
+        c, f = d["curves"][m]
+        assert len(c) == 11
+        assert f[1:-1] == pytest.approx([exact_vmax1_flux(0.5, x) for x in c[1:-1]], abs=1e-12)
+    labels = {t.get_text() for t in fundamental_figure([d]).legends[0].get_texts()}
+    assert {"4-cluster", "COMF"} <= labels
+    bad = CliRunner().invoke(main, ["plot", "fundamental", "--methods", "cluster",
+                                    "--output", str(tmp_path / "x.png")])
+    assert bad.exit_code == 2 and "needs an order" in bad.output

@@ -8,7 +8,7 @@ from click.testing import CliRunner
 
 from markov import InvalidParameterError
 from markov.cli import main
-from symbolic import APPROXIMATIONS, Approximation, approximate, supported
+from symbolic import APPROXIMATIONS, Approximation, approximate, label, method_name, supported
 
 
 def run(*args):
@@ -33,18 +33,23 @@ def test_approximate_scalar_and_array(method, vmax):
         a.flux = 0.0
 
 
-def test_vmax1_paradisical_and_cluster_give_the_exact_flux_but_mf_does_not():
+def test_vmax1_paradisical_cluster_and_comf_give_the_exact_flux_but_mf_does_not():
     pv, c = 0.25, 0.35
     exact = (1 - np.sqrt(1 - 4 * (1 - pv) * c * (1 - c))) / 2
-    for method in ("pmf", "pmf2", "cluster2", "cluster3"):
+    for method in APPROXIMATIONS[1:]:
         assert abs(approximate(method, 1, pv, c).flux - exact) < 1e-12
     assert approximate("mf", 1, pv, c).flux < exact - 0.01
 
 
-def test_supported():
-    assert supported("mf", 7) and supported("cluster2", 2)
-    assert not supported("pmf", 3) and not supported("cluster2", 0)
+def test_supported_names_and_labels():
+    assert supported("mf", 7) and supported("cluster2", 2) and supported("pmf", 6)
+    assert supported("cluster", 3, order=7) and supported("comf", 9)
+    assert not supported("pmf", 7) and not supported("cluster2", 0)
+    assert not supported("cluster", 2) and not supported("cluster", 2, order=0)
     assert not supported("bogus", 1) and not supported("mf", True)
+    assert method_name("cluster", 5) == "cluster5" and label("cluster5") == "5-cluster"
+    assert approximate("cluster", 2, 0.5, 0.3, order=4).flux == approximate(
+        "cluster4", 2, 0.5, 0.3).flux
 
 
 @pytest.mark.parametrize("kwargs, message", [
@@ -53,9 +58,13 @@ def test_supported():
     (dict(method="mf", vmax=2, p=0.5, density=1.2), "density must"),
     (dict(method="mf", vmax=2, p=0.5, density=[0.5, 0.0]), "density must"),
     (dict(method="mf", vmax=2, p=float("nan"), density=0.5), "p must"),
-    (dict(method="pmf", vmax=3, p=0.5, density=0.5), "vmax"),
+    (dict(method="pmf", vmax=7, p=0.5, density=0.5), "vmax"),
     (dict(method="mf", vmax=0, p=0.5, density=0.5), "vmax"),
     (dict(method="cmf", vmax=2, p=0.5, density=0.5), "method must be one of"),
+    (dict(method="cluster", vmax=2, p=0.5, density=0.5), "needs an order"),
+    (dict(method="cluster4", vmax=2, p=0.5, density=0.5, order=3), "disagree"),
+    (dict(method="mf", vmax=2, p=0.5, density=0.5, order=3), "only given for the cluster"),
+    (dict(method="cluster", vmax=2, p=0.5, density=0.5, order=12), "window words"),
 ])
 def test_bad_input_raises_invalid_parameter(kwargs, message):
     with pytest.raises(InvalidParameterError, match=message):
@@ -75,16 +84,35 @@ def test_cli_approx_json_matches_the_api():
 def test_cli_approx_text_and_help():
     result = run("approx", "--method", "mf", "--vmax", "1", "--p", "0.5", "--density", "0.5")
     assert result.exit_code == 0 and "flux" in result.output and "0.125" in result.output
-    assert "Example" in run("approx", "--help").output
-    assert "Example" in run("derive", "--help").output
+    for command in ("approx", "derive", "study"):
+        assert "Example" in run(command, "--help").output
+    assert "--order" in run("approx", "--help").output
+
+
+@pytest.mark.parametrize("args, name", [(("--method", "cluster", "--order", "4"), "cluster4"),
+                                        (("--method", "cluster5"), "cluster5"),
+                                        (("--method", "comf"), "comf")])
+def test_cli_approx_new_methods_match_the_api(args, name):
+    result = run("approx", *args, "--vmax", "2", "--p", "0.5", "-c", "0.25", "--json")
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert data["method"] == name and data["flux"] == approximate(name, 2, 0.5, 0.25).flux
 
 
 @pytest.mark.parametrize("args", [
-    ("approx", "--method", "pmf", "--vmax", "3", "--p", "0.5", "--density", "0.5"),
+    ("approx", "--method", "pmf", "--vmax", "7", "--p", "0.5", "--density", "0.5"),
     ("approx", "--method", "mf", "--vmax", "2", "--p", "1.5", "--density", "0.5"),
     ("approx", "--method", "mf", "--vmax", "2", "--p", "0.5", "--density", "0"),
     ("approx", "--method", "nope", "--vmax", "2", "--p", "0.5", "--density", "0.5"),
+    ("approx", "--method", "cluster", "--vmax", "2", "--p", "0.5", "--density", "0.5"),
+    ("approx", "--method", "cluster", "--order", "0", "--p", "0.5", "--density", "0.5"),
+    ("approx", "--method", "cluster", "--order", "12", "--p", "0.5", "--density", "0.5"),
     ("derive", "--method", "cluster2", "--vmax", "4"),
+    ("derive", "--method", "pmf", "--vmax", "7"),
+    ("study", "--vmax", "2", "--p", "0.5", "--density", "0.5", "--methods", "cluster"),
+    ("study", "--vmax", "2", "--p", "1.5", "--density", "0.5"),
+    ("study", "--vmax", "2", "--p", "0.5", "--density", "0.5", "--figure", "x.txt"),
+    ("study", "--vmax", "2", "--p", "0.5", "--density", "0.5", "--mc-steps", "5"),
 ])
 def test_cli_bad_input_exits_2_with_a_message(args):
     result = run(*args)
@@ -99,3 +127,8 @@ def test_cli_derive_prints_the_paper_equations():
                                           "c_1 = c_0*d*q + c_1*d*q"]
     latex = run("derive", "--method", "pmf", "--vmax", "1", "--latex")
     assert latex.exit_code == 0 and "\\frac" in latex.output
+    comf = run("derive", "--method", "comf", "--vmax", "1")
+    assert comf.exit_code == 0 and comf.output.splitlines()[-1] == \
+        "Sum(d*(P[0, d] + P[1, d]), (d, 0, oo)) = (1 - c)/c"
+    cluster = run("derive", "--method", "cluster", "--order", "2", "--vmax", "1")
+    assert cluster.exit_code == 0 and "P_01 = 0" in cluster.output

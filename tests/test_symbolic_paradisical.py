@@ -196,3 +196,70 @@ def test_pmf_breaks_the_flux_bound_for_weak_noise():
         assert f > (1 - c_val) + 0.05
     assert solve(Ring(10, 5, 2, pv)).flux <= 1 - c_val
     assert float(np.dot([0, 1, 2], solve_pmf(2, 0.2, c_val))) < 1 - c_val
+
+
+def test_patterns_used_are_the_papers_for_vmax_1_and_2():
+    # the equations take their patterns from the automaton search; for vmax 1, 2 they are
+    # exactly the paper's lists (order 1) plus (0,•,•,2) (order 2)
+    from symbolic.paradisical import parse_pattern
+    for vmax in (1, 2):
+        assert set(goe_patterns(vmax)) == {parse_pattern(t) for t in GOE_PATTERNS[vmax]}
+        assert set(goe_patterns(vmax, True)) - set(goe_patterns(vmax)) == {
+            parse_pattern(t) for t in SECOND_ORDER_PATTERNS[vmax]}
+
+
+def _enumerated_rhs(vmax, second, cv, pv):
+    """F_w by brute force (float weights): every word of K cells ahead, anchored patterns out."""
+    import itertools
+
+    from markov.rules import velocity_outcomes
+    from symbolic.meanfield import gap_horizons
+    pats = goe_patterns(vmax, second)
+    K = max(max(gap_horizons(vmax)), max(len(pt) for pt in pats) - 1)
+    dens = 1 - sum(cv)
+    out = np.zeros(vmax + 1)
+    for v in range(vmax + 1):
+        for ahead in itertools.product([-1] + list(range(vmax + 1)), repeat=K):
+            word = (v,) + ahead
+            if any(word[:len(pt)] == pt for pt in pats):
+                continue
+            weight = cv[v] * np.prod([dens if x == -1 else cv[x] for x in ahead])
+            gap = next((i for i, x in enumerate(ahead) if x != -1), K)
+            for w, coin in velocity_outcomes(v, gap, vmax, pv):
+                out[w] += weight * coin
+    return out
+
+
+@pytest.mark.parametrize("vmax, second", [(3, False), (3, True), (4, False)])
+def test_closed_form_pmf_equals_the_word_enumeration_beyond_vmax2(vmax, second):
+    # the closed form (MF minus the pattern-starting words) against the enumeration of
+    # all words ahead of the car, at random velocity densities
+    rng = np.random.default_rng(vmax + 10 * second)
+    cv_syms = velocity_symbols(vmax)
+    f = sp.lambdify((cv_syms, c, d, p, q), list(pmf_rhs(vmax, second)))
+    for _ in range(3):
+        weights = rng.dirichlet(np.ones(vmax + 2))
+        cv, pv = weights[1:], rng.uniform(0.05, 0.95)
+        mine = np.array(f(list(cv), cv.sum(), weights[0], pv, 1 - pv), dtype=float)
+        np.testing.assert_allclose(mine, _enumerated_rhs(vmax, second, cv, pv), atol=1e-14)
+
+
+@pytest.mark.parametrize("vmax", [3, 4])
+def test_pmf_beyond_vmax2_solves_its_equations(vmax):
+    cv_syms = velocity_symbols(vmax)
+    for second in (False, True):
+        norm = pmf_normalisation(vmax, second)
+        f = sp.lambdify((cv_syms, c, p), [(norm * r).subs({q: 1 - p, d: 1 - c})
+                                          for r in pmf_rhs(vmax, second)])
+        for cval in (0.1, 0.4, 0.8):
+            sol = solve_pmf(vmax, 0.25, cval, second_order=second)
+            np.testing.assert_allclose(f(list(sol), cval, 0.25), sol, atol=1e-13)
+            assert abs(sol.sum() - cval) < 1e-14 and np.all(sol >= 0)
+
+
+def test_pmf2_of_vmax5_breaks_the_flux_bound_near_the_maximum():
+    # docs/symbolic.md: removing the order-2 patterns makes pMF worse for vmax >= 3; at
+    # vmax = 5, p = 0.25, c = 0.2 pMF2 gives 0.805 > min(5c, 1 - c) = 0.8 (Monte Carlo 0.479)
+    f2 = float(np.dot(np.arange(6), solve_pmf(5, 0.25, 0.2, second_order=True)))
+    f1 = float(np.dot(np.arange(6), solve_pmf(5, 0.25, 0.2)))
+    assert f2 > 0.8 > f1 > 0.69

@@ -1,0 +1,457 @@
+"""Car-oriented mean-field theory (COMF), derived from the rules, any ``vmax``.
+
+State of a car: its velocity ``v`` (the cells it moved in the last step) and
+its gap ``d`` (empty cells ahead).  COMF treats the states of consecutive cars
+as independent, all with the same distribution ``P(v, d)``.  In one parallel
+update a car moves ``w`` cells with probability ``T(w | v, d)``
+(:func:`markov.rules.velocity_outcomes`; the gap matters only up to the
+horizon ``H`` of :func:`symbolic.meanfield.gap_horizons`), the car ahead moves
+``a`` cells with probability
+
+.. math:: g_a = \\sum_{v, d} P(v, d)\\, T(a \\mid v, d)
+
+independently, and the new state is ``(w, d - w + a)``.  Stationarity:
+
+.. math:: P(w, n) = \\sum_{v, a} P(v, n + w - a)\\, T(w \\mid v, n + w - a)\\, g_a ,
+
+with ``sum P = 1`` and mean gap ``sum d P(v, d) = (1 - c) / c`` (a car and its
+gap fill ``1 / c`` cells).  Both are conserved by the update, so the fixed
+points form a one-parameter family, labelled by the density.  Observables:
+``c_v = c sum_d P(v, d)`` and the flux ``f = c sum_a a g_a``.
+
+Solution.  For a given ``g`` the update is a *linear* Markov chain on
+``(v, d)``; its stationary vector ``P_g`` is a banded solve (gaps up to a cut
+``D``, doubled until the states beyond ``D - 2 vmax`` carry less than
+``1e-15``; cells past ``D`` are kept at ``D``).  ``g`` is then found by the
+self-consistency iteration ``g <- distribution of the next moves under P_g``,
+each step with ``g`` tilted (``g_a ∝ g_a e^{lam a}``) to the mean move whose
+``P_g`` has the mean gap ``(1 - c) / c`` (a monotone 1-d root), and
+Anderson-accelerated; converged to ``|g - g'| < 1e-14`` (at worst ``1e-10``,
+the rounding floor) for vmax 1-5, ``p = 0.001 .. 0.99``, ``c = 0.005 .. 0.98``.
+
+For ``vmax = 1`` the move does not depend on ``v``, the gaps of an exact
+stationary state are independent, and COMF is exact:
+``f = (1 - sqrt(1 - 4 q c (1 - c))) / 2`` (tested).
+
+References
+----------
+A. Schadschneider and M. Schreckenberg, J. Phys. A 30, L69 (1997) and
+Ann. Phys. (Leipzig) 6, 541 (1997) (COMF); "Garden of Eden states in traffic
+models" (``shared/paper``), its claims about COMF (``docs/symbolic.md``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+import scipy.sparse as sp_sparse
+
+from markov.errors import ConvergenceError, InvalidParameterError
+from markov.rules import velocity_outcomes
+
+from .meanfield import gap_horizons
+
+__all__ = ["ComfState", "comf_state", "solve_comf", "comf_word_probability",
+           "comf_equations"]
+
+_TAIL = 1e-15          # probability allowed beyond the gap cut
+# Largest residual of the outer equations accepted where rounding stops the descent:
+# the banded solves over ~1e4 gaps lose ~5 digits (1e-11 measured at c = 0.005).
+_FLOOR = 1e-10
+_MAX_STEPS = 200       # self-consistency steps (4-20 needed where tried)
+_MAX_GAP = 2_000_000   # largest gap cut tried (c >= ~1e-5)
+
+
+@lru_cache(maxsize=None)
+def _moves(vmax: int, p: float) -> np.ndarray:
+    """``T[v, g, w]``: probability that a car of velocity ``v`` and gap ``g <= H`` moves ``w``.
+
+    Read off :func:`markov.rules.velocity_outcomes` (gaps beyond the horizon
+    ``H`` act as ``H``).
+    """
+    horizon = max(gap_horizons(vmax))
+    out = np.zeros((vmax + 1, horizon + 1, vmax + 1))
+    for v in range(vmax + 1):
+        for g in range(horizon + 1):
+            for w, weight in velocity_outcomes(v, g, vmax, p):
+                out[v, g, int(w)] += float(weight)
+    return out
+
+
+@lru_cache(maxsize=64)
+def _operators(vmax: int, p: float, cut: int):
+    """Sparse pieces of the update on states ``i = d (vmax + 1) + v``, ``d = 0..cut``.
+
+    ``own``: state -> (move ``w``, gap left ``d - w``), as a state index;
+    ``shift[a]``: gap + ``a`` (the car ahead's move), beyond ``cut`` kept at
+    ``cut``; ``moved``: ``(vmax + 1, N)``, probability of each move per state.
+    """
+    nv = vmax + 1
+    horizon = max(gap_horizons(vmax))
+    table = _moves(vmax, p)
+    n = nv * (cut + 1)
+    d = np.repeat(np.arange(cut + 1), nv)
+    v = np.tile(np.arange(nv), cut + 1)
+    rows, cols, vals = [], [], []
+    moved = np.zeros((nv, n))
+    for w in range(nv):
+        prob = table[v, np.minimum(d, horizon), w]
+        ok = prob > 0
+        rows.append((d[ok] - w) * nv + w)
+        cols.append(np.flatnonzero(ok))
+        vals.append(prob[ok])
+        moved[w] = prob
+    own = sp_sparse.csr_array((np.concatenate(vals), (np.concatenate(rows),
+                                                      np.concatenate(cols))), shape=(n, n))
+    shift = []
+    for a in range(nv):
+        target = np.minimum(d + a, cut) * nv + v
+        shift.append(sp_sparse.csr_array((np.ones(n), (target, np.arange(n))), shape=(n, n))
+                     @ own)
+    return shift, moved, d
+
+
+def _pinned_solve(k: sp_sparse.coo_array, pin: int) -> np.ndarray | None:
+    """Solution of ``P = K P`` with ``P(pin) = 1`` by banded LU, or None if singular."""
+    from scipy.linalg import LinAlgError, solve_banded
+
+    n = k.shape[0]
+    keep = k.row != pin
+    rows = np.concatenate([k.row[keep], np.arange(n)])
+    cols = np.concatenate([k.col[keep], np.arange(n)])
+    vals = np.concatenate([k.data[keep], np.where(np.arange(n) == pin, 1.0, -1.0)])
+    lower, upper = int(max(0, (rows - cols).max())), int(max(0, (cols - rows).max()))
+    band = np.zeros((lower + upper + 1, n))
+    np.add.at(band, (upper + rows - cols, cols), vals)
+    rhs = np.zeros(n)
+    rhs[pin] = 1.0
+    try:
+        x = solve_banded((lower, upper), band, rhs, check_finite=False)
+    except LinAlgError:
+        return None
+    x = np.maximum(x, 0.0)
+    return x / x.sum() if np.all(np.isfinite(x)) and x.sum() > 0 else None
+
+
+def _stationary(vmax: int, p: float, cut: int, g: np.ndarray, pin: int) -> np.ndarray | None:
+    """Stationary ``P_g`` of the linear chain with the car ahead moving ``a`` w.p. ``g_a``.
+
+    Banded LU (a gap changes by at most ``vmax`` per step) with the balance
+    equation of one state (one is redundant) replaced by ``P(state) = 1``,
+    then normalised.  Pinning a rare state loses digits or everything (at
+    ``p = 0.001``, vmax 5 a stopped car with gap 0 is ~1e-15 likely), so the
+    answer is checked (``|K P - P| <= 1e-13 max P``) and the solve repeated
+    pinned at its most likely state, at a stopped car with gap 0, or at a free
+    fast car.  None when no pin gives a stationary vector (``g`` outside the
+    physical range).
+    """
+    shift, _, _ = _operators(vmax, p, cut)
+    k = sum(ga * s for ga, s in zip(g, shift)).tocsr()
+    coo = k.tocoo()
+    tried = set()
+    candidates = [pin]
+    while candidates:
+        pin = candidates.pop(0)
+        if pin in tried:
+            continue
+        tried.add(pin)
+        x = _pinned_solve(coo, pin)
+        if x is None:
+            candidates += [0, (cut // 2) * (vmax + 1) + vmax]
+            continue
+        if np.abs(k @ x - x).max() <= 1e-13 * x.max():
+            return x
+        candidates += [int(np.argmax(x)), 0, (cut // 2) * (vmax + 1) + vmax]
+    return None
+
+
+def _tilted(logw: np.ndarray, mean: float) -> np.ndarray | None:
+    """``g_a ∝ exp(logw_a + lam a)`` with ``sum_a a g_a = mean`` (``lam`` by bisection)."""
+    a = np.arange(len(logw))
+    if not 0 < mean < len(logw) - 1:
+        return None
+
+    def dist(lam):
+        z = logw + lam * a
+        e = np.exp(z - z.max())
+        return e / e.sum()
+
+    lo, hi = -2000.0, 2000.0
+    for _ in range(200):       # the mean of the tilted law increases with lam
+        mid = 0.5 * (lo + hi)
+        if a @ dist(mid) < mean:
+            lo = mid
+        else:
+            hi = mid
+        if hi - lo < 1e-15 * max(1.0, abs(mid)):
+            break
+    return dist(0.5 * (lo + hi))
+
+
+def _gap_root(vmax, p, cut, shape, target, u, pin):
+    """The logit ``u`` of the mean move ``m / (vmax - p)`` giving the target mean gap.
+
+    ``g`` is ``shape`` tilted to mean ``m`` (:func:`_tilted`).  Far from the car
+    ahead the gap walk drifts by ``-(vmax - p - m)``: the mean gap grows with
+    ``m`` (like ``1 / (vmax - p - m)`` in free flow, where ``vmax - p - m`` is
+    ~1e-12 at ``c = 0.005, p = 0.001``), so the logit is a smooth, monotone
+    unknown; bracketed, then Brent's method.  Returns ``(u, g, P_g)``.
+    """
+    from scipy.optimize import brentq
+
+    free = vmax - p
+    _, _, d = _operators(vmax, p, cut)
+    logw = np.log(np.maximum(shape, 1e-300))
+    found = {}
+
+    def f(uu):
+        g = _tilted(logw, free / (1.0 + np.exp(-uu)))
+        x = None if g is None else _stationary(vmax, p, cut, g, pin)
+        if x is None:         # outside the physical range: treat as too fast
+            return np.inf
+        found[uu] = (g, x)
+        return np.log(float(d @ x) / target)
+
+    lo, hi, step = u - 0.5, u + 0.5, 1.0
+    while f(lo) > 0:
+        lo, step = lo - step, 2 * step
+        if lo < -800:
+            raise ConvergenceError(f"COMF: no mean move gives the mean gap (p = {p:g})", 0,
+                                   np.inf)
+    step = 1.0
+    while f(hi) < 0:
+        hi, step = hi + step, 2 * step
+        if hi > 800:
+            raise ConvergenceError(f"COMF: no mean move gives the mean gap (p = {p:g})", 0,
+                                   np.inf)
+    u = brentq(f, lo, hi, xtol=1e-13, rtol=1e-15, maxiter=200)
+    if u not in found:
+        f(u)
+    return (u,) + found[u]
+
+
+def _solve_cut(vmax: int, p: float, c: float, cut: int, shape: np.ndarray):
+    """Self-consistent ``g`` at one gap cut: ``g <- moves of P_g``, density kept exact.
+
+    Each step tilts the current velocity distribution to the mean move that
+    gives the mean gap ``(1 - c) / c`` (:func:`_gap_root`), solves for
+    ``P_g`` and takes the distribution of the next moves; the fixed point of
+    this map is the COMF solution.  Plain steps converge linearly (rate 0.97
+    at ``p = 0.001``), so they are Anderson-accelerated
+    (:func:`symbolic.solve.solve_fixed_point`).  Newton on the same unknowns
+    needs a start close to the answer.  Returns ``(g, P)``.
+    """
+    from .solve import solve_fixed_point
+
+    target = (1 - c) / c
+    _, moved, _ = _operators(vmax, p, cut)
+    warm = {"u": 0.0, "pin": 0}
+
+    def update(rows):
+        out = np.empty_like(rows)
+        for i, row in enumerate(rows):
+            u, g, x = _gap_root(vmax, p, cut, row, target, warm["u"], warm["pin"])
+            warm.update(u=u, pin=int(np.argmax(x)), x=x)
+            out[i] = moved @ x
+        return out
+
+    def project(rows):
+        rows = np.maximum(rows, 1e-300)
+        return rows / rows.sum(axis=1, keepdims=True)
+
+    shape, _ = solve_fixed_point(update, shape[None], 1e-14, _MAX_STEPS, memory=5,
+                                 project=project, raise_on_fail=False)
+    # the last evaluation was at the returned shape's predecessor: evaluate it once more
+    new = update(shape)[0]
+    err = float(np.abs(new - shape[0]).max())
+    if err > _FLOOR:
+        raise ConvergenceError(f"COMF did not converge (p = {p:g}, c = {c:g})", _MAX_STEPS,
+                               err)
+    return new, warm["x"]
+
+
+@dataclass(frozen=True)
+class ComfState:
+    """A COMF fixed point.
+
+    Attributes
+    ----------
+    vmax : int
+    p, density : float
+    gap_cut : int
+        Largest gap kept (the probability beyond ``gap_cut - 2 vmax`` is below 1e-15).
+    probs : (gap_cut + 1, vmax + 1) ndarray
+        ``P(v, d)`` at ``[d, v]``.
+    ahead : (vmax + 1,) ndarray
+        ``g_a``, the move distribution of the car ahead (= of every car).
+    residual : float
+        ``max |P - update(P)|``.
+    """
+
+    vmax: int
+    p: float
+    density: float
+    gap_cut: int
+    probs: np.ndarray = field(repr=False)
+    ahead: np.ndarray = field(repr=False)
+    residual: float
+
+    @property
+    def c_v(self) -> np.ndarray:
+        return self.density * self.probs.sum(axis=0)
+
+    @property
+    def flux(self) -> float:
+        return float(self.density * np.arange(self.vmax + 1) @ self.ahead)
+
+
+def _update(vmax: int, p: float, cut: int, x: np.ndarray) -> np.ndarray:
+    shift, moved, _ = _operators(vmax, p, cut)
+    g = moved @ x
+    return sum(ga * (s @ x) for ga, s in zip(g, shift))
+
+
+def comf_state(vmax: int, p: float, c: float) -> ComfState:
+    """The COMF fixed point at braking probability ``p`` and density ``c``.
+
+    Examples
+    --------
+    >>> s = comf_state(1, 0.5, 0.5)        # exact for vmax = 1
+    >>> round(s.flux, 12), round((1 - (1 - 4 * 0.5 * 0.25) ** 0.5) / 2, 12)
+    (0.146446609407, 0.146446609407)
+    """
+    if isinstance(vmax, bool) or not isinstance(vmax, (int, np.integer)) or vmax < 1:
+        raise InvalidParameterError(f"vmax must be an integer >= 1, got {vmax!r}")
+    vmax, p, c = int(vmax), float(p), float(c)
+    if not (0 < p < 1 and 0 < c < 1):
+        raise InvalidParameterError(f"COMF needs 0 < p < 1 and 0 < c < 1, got p={p}, c={c}")
+    # start: all moves equally likely (converged from several starts to the same point;
+    # the MF solution would cost a sympy solve, 5 s for vmax 5)
+    shape = np.full(vmax + 1, 1.0 / (vmax + 1))
+    cut = max(16 * vmax, int(np.ceil(40 * (1 - c) / c)))
+    while True:
+        shape, x = _solve_cut(vmax, p, c, cut, shape)
+        tail = x[(cut + 1 - 2 * vmax) * (vmax + 1):].sum()
+        if tail < _TAIL:
+            break
+        if cut > _MAX_GAP:
+            raise ConvergenceError(f"COMF gap distribution does not fit {_MAX_GAP} cells"
+                                   f" (c = {c:g})", 0, float(tail))
+        cut *= 2
+    residual = float(np.abs(_update(vmax, p, cut, x) - x).max())
+    probs = x.reshape(cut + 1, vmax + 1)
+    _, moved, _ = _operators(vmax, p, cut)
+    return ComfState(vmax, p, c, cut, probs, moved @ x, residual)
+
+
+def solve_comf(vmax: int, p_val, c_val) -> np.ndarray:
+    """``c_v`` (axis 0) of COMF, broadcast over ``p`` and ``c``.
+
+    Examples
+    --------
+    >>> solve_comf(2, 0.5, [0.25, 0.5]).shape
+    (3, 2)
+    """
+    p_b, c_b = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
+    out = np.array([comf_state(vmax, pv, cv).c_v for pv, cv in zip(p_b.ravel(), c_b.ravel())])
+    return out.T.reshape((vmax + 1,) + c_b.shape)
+
+
+def _cars_of(word: str) -> list[tuple[int, int]]:
+    """``(velocity, position)`` of the cars of a word such as ``"0..2"``."""
+    return [(int(ch), i) for i, ch in enumerate(word) if ch not in ".•_"]
+
+
+def comf_word_probability(state: ComfState, word: str, after_update: bool = False) -> float:
+    """Probability of ``word`` at a given place, for a word that starts and ends with a car.
+
+    ``after_update=False``: in the COMF measure itself (cars independent, each
+    with ``P(v, d)``): ``c prod_j P(v_j, d_j) P_v(v_last)``.
+
+    ``after_update=True``: after one exact parallel update of that measure (what
+    the COMF equations compute before they drop the correlation between
+    neighbours): car ``j`` moved ``v_j`` from the gap ``d_j + v_j - v_{j+1}``,
+    so ``c prod_j [sum_u P(u, d_j + v_j - v_{j+1}) T(v_j | u, .)] g_{v_last}``.
+
+    Examples
+    --------
+    >>> s = comf_state(1, 0.5, 0.5)
+    >>> comf_word_probability(s, "11") > 0, comf_word_probability(s, "11", after_update=True)
+    (True, 0.0)
+    """
+    cars = _cars_of(word)
+    if len(cars) < 1 or word[0] in ".•_" or word[-1] in ".•_":
+        raise InvalidParameterError(f"word must start and end with a car, got {word!r}")
+    if any(v > state.vmax for v, _ in cars):
+        raise InvalidParameterError(f"velocities in {word!r} exceed vmax = {state.vmax}")
+    probs = state.probs
+    table = _moves(state.vmax, state.p)
+    horizon = table.shape[1] - 1
+    out = state.density
+    for (v, x), (v_next, x_next) in zip(cars, cars[1:]):
+        gap = x_next - x - 1
+        if not after_update:
+            out *= probs[gap, v] if gap < len(probs) else 0.0
+            continue
+        old = gap + v - v_next
+        if old < 0 or old >= len(probs):
+            return 0.0
+        out *= float(probs[old] @ table[:, min(old, horizon), v])
+    v_last = cars[-1][0]
+    return float(out * (state.ahead[v_last] if after_update else probs[:, v_last].sum()))
+
+
+def comf_equations(vmax: int) -> list:
+    """The COMF equations as derived from the rules (sympy).
+
+    Symbols: ``P[v, d]`` (probability of a car with velocity ``v`` and gap
+    ``d``), ``g_a`` (the car ahead moves ``a``), ``p``, ``q = 1 - p``, ``c``;
+    ``n`` a gap ``>= 2 vmax``, where the update no longer depends on it.
+    Returned: the ``g_a`` (tail sums from the horizon ``H`` on), the equations
+    for the gaps ``0 .. 2 vmax - 1``, the general one for ``n``, and the two
+    conditions (normalisation, mean gap).
+
+    Examples
+    --------
+    >>> eqs = comf_equations(1)          # g_0: gap 0, or braked with a gap >= 1
+    >>> eqs[0].lhs, sorted(map(str, eqs[0].rhs.args))
+    (g_0, ['P[0, 0]', 'P[1, 0]', 'p*Sum(P[0, d], (d, 1, oo))', 'p*Sum(P[1, d], (d, 1, oo))'])
+    """
+    import sympy as sp
+
+    from .meanfield import c, p, q
+
+    horizon = max(gap_horizons(vmax))
+    P = sp.IndexedBase("P")
+    dd, nn = sp.symbols("d n", integer=True, nonnegative=True)
+    g = sp.symbols(f"g_0:{vmax + 1}", nonnegative=True)
+
+    def t(v, gap, w):
+        return sum((sp.sympify(wt).subs(1 - p, q) for u, wt in
+                    velocity_outcomes(v, min(gap, horizon), vmax, p) if u == w), sp.Integer(0))
+
+    eqs = []
+    for a in range(vmax + 1):
+        rhs = sum(P[v, k] * t(v, k, a) for v in range(vmax + 1) for k in range(horizon))
+        rhs += sum(t(v, horizon, a) * sp.Sum(P[v, dd], (dd, horizon, sp.oo))
+                   for v in range(vmax + 1))
+        eqs.append(sp.Eq(g[a], rhs))
+
+    def balance(w, gap):
+        terms = []
+        for v in range(vmax + 1):
+            for a in range(vmax + 1):
+                old = gap + w - a
+                if isinstance(old, int) and old < 0:
+                    continue
+                terms.append(P[v, old] * t(v, old if isinstance(old, int) else horizon, w)
+                             * g[a])
+        return sp.Eq(P[w, gap], sp.Add(*terms))
+
+    eqs += [balance(w, k) for k in range(2 * vmax) for w in range(vmax + 1)]
+    eqs += [balance(w, nn) for w in range(vmax + 1)]
+    eqs.append(sp.Eq(sp.Sum(sum(P[v, dd] for v in range(vmax + 1)), (dd, 0, sp.oo)), 1))
+    eqs.append(sp.Eq(sp.Sum(dd * sum(P[v, dd] for v in range(vmax + 1)), (dd, 0, sp.oo)),
+                     (1 - c) / c))
+    return eqs

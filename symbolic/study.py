@@ -1,0 +1,411 @@
+"""Convergence study: every approximation against Monte Carlo and exact L -> infinity.
+
+For each point ``(vmax, p, c)`` of a grid:
+
+* the flux of each approximation (:func:`symbolic.approximate`; a method not
+  offered for a ``vmax``, or refused there, e.g. a cluster too large to
+  enumerate, is left empty and the reason kept in ``notes``);
+* Monte Carlo: ``mc_replicas`` runs of ``mc_steps`` steps (after as many
+  warm-up steps) on a ring of at least ``mc_length`` cells with density exactly
+  ``c`` (:func:`markov.tables.mc_job`), flux and 1-sigma error of
+  :func:`markov.simulate.simulate`; this is the reference;
+* the ``L -> infinity`` extrapolation of the exact fluxes of the rings among
+  ``lengths`` with ``c L`` an integer and at most ``max_states`` rotation
+  classes (counted exactly first, :func:`markov.goe_census.recurrent_class_count`),
+  when three or more fit (:func:`markov.extrapolate.extrapolate`, order 2).
+
+The deviation of a method is ``(f - f_MC) / f_MC``; ``best`` is the method
+with the smallest ``|deviation|``.  Rendered in the formats of ``nasch table``
+(text, csv, md, latex, json); :func:`deviation_figure` draws the deviations
+against ``c``, one panel per ``(vmax, p)``.
+
+Monte Carlo runs and exact rings fan out through :func:`markov.sweep.run_jobs`
+(each a pure function of its point, seeds derived from the point); the
+approximations run here, all densities of a ``(vmax, p, method)`` at once.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import Sequence
+
+import numpy as np
+
+from markov.errors import InvalidParameterError, NaschError
+
+from . import APPROXIMATIONS, approximate, label, method_name, supported
+
+__all__ = ["DEFAULT_DENSITIES", "DEFAULT_METHODS", "StudyTable", "convergence_study",
+           "deviation_figure"]
+
+DEFAULT_DENSITIES = tuple(sorted({k / 20 for k in range(1, 20)} | {1 / 3, 2 / 3}))
+DEFAULT_METHODS = APPROXIMATIONS
+FORMATS = ("text", "csv", "md", "latex", "json")
+
+
+def _job(task):
+    """One Monte Carlo run or exact ring (module level: travels to Dask workers)."""
+    from markov.tables import exact_job, mc_job
+
+    kind, point = task
+    if kind == "mc":
+        return mc_job(point)
+    try:
+        return exact_job(point)
+    except NaschError as exc:    # a ring the solver refuses is left out, with the reason
+        return {"flux": float("nan"), "error": str(exc)}
+
+
+def _cost(task) -> float:
+    from markov.tables import _task_cost
+    return _task_cost(task)
+
+
+@dataclass(frozen=True)
+class StudyTable:
+    """Result of :func:`convergence_study`.
+
+    Attributes
+    ----------
+    rows : tuple of dict
+        One per ``(vmax, p, c)``: ``vmax, p, density, mc_flux, mc_error,
+        mc_length, exact_flux, exact_error, exact_lengths``, one flux per
+        method (None where not available), ``best`` (closest to Monte Carlo)
+        and ``within_2sigma`` (the methods within two Monte Carlo errors of it).
+    methods : tuple of str
+    mc_steps, mc_replicas : int
+    notes : tuple of str
+        Methods left out, and why.
+    seconds : float
+    """
+
+    rows: tuple = field(repr=False)
+    methods: tuple
+    mc_steps: int
+    mc_replicas: int
+    notes: tuple = ()
+    seconds: float = 0.0
+
+    def deviation(self, row: dict, method: str) -> float | None:
+        """``(f - f_MC) / f_MC`` of ``method`` at ``row`` (None when missing)."""
+        f = row[method]
+        return None if f is None else (f - row["mc_flux"]) / row["mc_flux"]
+
+    def winners(self) -> dict:
+        """``{(vmax, p): [(c, best method, its |deviation|), ...]}``."""
+        out = {}
+        for r in self.rows:
+            if r["best"] is not None:
+                out.setdefault((r["vmax"], r["p"]), []).append(
+                    (r["density"], r["best"], abs(self.deviation(r, r["best"]))))
+        return out
+
+    def render(self, fmt: str = "text") -> str:
+        """The table as text in one of ``text, csv, md, latex, json``."""
+        if fmt not in FORMATS:
+            raise InvalidParameterError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+        return getattr(self, f"to_{fmt}")()
+
+    def to_dict(self) -> dict:
+        return {"methods": list(self.methods), "mc_steps": self.mc_steps,
+                "mc_replicas": self.mc_replicas, "notes": list(self.notes),
+                "seconds": self.seconds,
+                "rows": [{**r, "exact_lengths": list(r["exact_lengths"]),
+                          "within_2sigma": list(r["within_2sigma"])} for r in self.rows]}
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=2) + "\n"
+
+    def to_csv(self) -> str:
+        from markov.tables import _g
+
+        buf = io.StringIO()
+        w = csv.writer(buf, lineterminator="\n")
+        w.writerow(["vmax", "p", "density", "mc_length", "mc_flux", "mc_error", "exact_flux",
+                    "exact_error", "exact_lengths"] + list(self.methods)
+                   + ["best", "within_2sigma"])
+        for r in self.rows:
+            w.writerow([r["vmax"], _g(r["p"]), _g(r["density"]), r["mc_length"],
+                        _g(r["mc_flux"]), _g(r["mc_error"]), _g(r["exact_flux"]),
+                        _g(r["exact_error"]), " ".join(map(str, r["exact_lengths"]))]
+                       + [_g(r[m]) for m in self.methods]
+                       + [r["best"] or "", " ".join(r["within_2sigma"])])
+        return buf.getvalue()
+
+    def _cells(self, latex: bool) -> tuple[list[str], list[list[str]]]:
+        from markov.tables import _pm
+
+        head = ["vmax", "p", "c", "Monte Carlo", "exact L->inf"] + [label(m) for m in
+                                                                   self.methods] + ["best"]
+        body = []
+        for r in self.rows:
+            row = [str(r["vmax"]), f"{r['p']:g}", f"{r['density']:.4f}",
+                   _pm(r["mc_flux"], r["mc_error"], latex),
+                   "--" if r["exact_flux"] is None else _pm(r["exact_flux"], r["exact_error"],
+                                                             latex)]
+            for m in self.methods:
+                dev = self.deviation(r, m)
+                pct = r"\%" if latex else "%"
+                row.append("--" if dev is None else f"{r[m]:.5f} ({100 * dev:+.1f}{pct})")
+            row.append("--" if r["best"] is None else label(r["best"]))
+            body.append(row)
+        return head, body
+
+    def _caption(self) -> str:
+        return (f"NaSch flux: approximations (deviation from Monte Carlo in parentheses),"
+                f" Monte Carlo ({self.mc_replicas} x {self.mc_steps} steps) and exact rings"
+                f" extrapolated to L = inf")
+
+    def summary(self) -> list[str]:
+        """One line per (vmax, p): the best method over runs of densities; then the notes."""
+        lines = []
+        for (vmax, p), items in sorted(self.winners().items()):
+            runs = []
+            for c, best, dev in items:
+                if runs and runs[-1][0] == best:
+                    runs[-1][2] = c
+                    runs[-1][3] = max(runs[-1][3], dev)
+                else:
+                    runs.append([best, c, c, dev])
+            parts = [f"{label(b)} for c = {lo:.2f}" + (f"-{hi:.2f}" if hi != lo else "")
+                     + f" (|dev| <= {100 * d:.1f}%)" for b, lo, hi, d in runs]
+            lines.append(f"vmax = {vmax}, p = {p:g}: best " + "; ".join(parts))
+            worst = self.largest_deviation(vmax, p)
+            lines.append(f"vmax = {vmax}, p = {p:g}: largest |dev| over c: " + ", ".join(
+                f"{label(m)} {100 * d:.1f}%" for m, d in worst.items()))
+        return lines + list(self.notes)
+
+    def largest_deviation(self, vmax: int, p: float, low: float = 0.0,
+                          high: float = 1.0) -> dict:
+        """``{method: max_c |deviation|}`` over the densities in ``[low, high]``."""
+        out = {}
+        for r in self.rows:
+            if r["vmax"] == vmax and r["p"] == p and low <= r["density"] <= high:
+                for m in self.methods:
+                    dev = self.deviation(r, m)
+                    if dev is not None:
+                        out[m] = max(out.get(m, 0.0), abs(dev))
+        return out
+
+    def to_text(self) -> str:
+        head, body = self._cells(False)
+        widths = [max(len(x) for x in col) for col in zip(head, *body)]
+        line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731
+        out = [self._caption(), line(head), "  ".join("-" * w for w in widths)]
+        out += [line(b) for b in body]
+        return "\n".join(out + [""] + self.summary()) + "\n"
+
+    def to_md(self) -> str:
+        head, body = self._cells(False)
+        out = [f"*{self._caption()}*", "", "| " + " | ".join(head) + " |",
+               "|" + "|".join("---:" for _ in head) + "|"]
+        out += ["| " + " | ".join(b) + " |" for b in body]
+        return "\n".join(out + [""] + [f"* {x}" for x in self.summary()]) + "\n"
+
+    def to_latex(self) -> str:
+        head, body = self._cells(True)
+        out = [f"% {self._caption()}", r"\begin{tabular}{" + "r" * len(head) + "}",
+               r"\toprule", " & ".join(head).replace("->", r"$\to$") + r" \\", r"\midrule"]
+        out += [" & ".join(b) + r" \\" for b in body]
+        return "\n".join(out + [r"\bottomrule", r"\end{tabular}"]
+                         + [f"% {x}" for x in self.summary()]) + "\n"
+
+
+def _exact_rings(vmax: int, c: Fraction, lengths, max_states: int) -> list[tuple[int, int]]:
+    """Rings ``(L, c L)`` among ``lengths`` with at most ``max_states`` rotation classes."""
+    from markov.extrapolate import commensurate_lengths
+    from markov.goe_census import recurrent_class_count
+
+    out = []
+    for L in commensurate_lengths(c, lengths):
+        N = int(c * L)
+        if 0 < N < L and recurrent_class_count(L, N, vmax) / L <= max_states:
+            out.append((L, N))
+    return out
+
+
+def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequence[float],
+                      methods: Sequence[str] = DEFAULT_METHODS, *, mc_length: int = 10000,
+                      mc_steps: int = 5000, mc_replicas: int = 2,
+                      lengths: Sequence[int] = tuple(range(8, 17)), max_states: int = 300_000,
+                      order: int = 2, seed: int = 0, serial: bool | None = None,
+                      scheduler: str | None = None) -> StudyTable:
+    """Fluxes of the approximations beside Monte Carlo and exact extrapolations.
+
+    Parameters
+    ----------
+    vmax, p, densities : sequences
+        The grid (``0 < p < 1``, ``0 < c < 1``; a density is read as the nearest
+        fraction with denominator at most 1000, so that rings match it exactly).
+    methods : sequence of str
+        Method names (``mf``, ``pmf``, ``pmf2``, ``clusterN``, ``comf``).
+    mc_length, mc_steps, mc_replicas : int
+        Monte Carlo ring (rounded up to match each density), steps per replica
+        (plus ``mc_steps`` warm-up), independent replicas.
+    lengths : sequence of int
+        Candidate exact rings; ``()`` for none.
+    max_states : int
+        Largest exact ring, in rotation classes.
+    order : int
+        Order of the ``1/L`` series of the extrapolation.
+    seed : int
+        Base seed of the Monte Carlo runs.
+    serial, scheduler
+        See :func:`markov.sweep.run_jobs`.
+
+    Returns
+    -------
+    StudyTable
+
+    Examples
+    --------
+    >>> t = convergence_study([1], [0.5], [0.5], methods=["mf", "comf"], mc_length=500,
+    ...                       mc_steps=200, lengths=(), serial=True)
+    >>> t.rows[0]["best"]                   # COMF is exact for vmax = 1
+    'comf'
+    """
+    import time
+
+    from markov.extrapolate import extrapolate
+    from markov.sweep import run_jobs
+    from markov.tables import _derived_seed, mc_ring
+
+    start = time.perf_counter()
+    vmaxes = [int(v) for v in vmax]
+    for v in vmaxes:
+        if v < 1:
+            raise InvalidParameterError(f"vmax must be >= 1, got {v}")
+    ps = [float(x) for x in p]
+    fracs = [Fraction(float(c)).limit_denominator(1000) for c in densities]
+    for name, values in (("p", ps), ("densities", fracs)):
+        if not values or not all(0 < x < 1 for x in values):
+            raise InvalidParameterError(f"{name} must lie strictly between 0 and 1, got"
+                                        f" {[float(x) for x in values]}")
+    names = [method_name(m) for m in methods]          # validates before any work
+    if isinstance(mc_steps, bool) or int(mc_steps) < 20:
+        raise InvalidParameterError(f"mc_steps must be at least 20, got {mc_steps}")
+    if int(mc_replicas) < 1 or int(mc_length) < 2:
+        raise InvalidParameterError("mc_replicas must be >= 1 and mc_length >= 2")
+    fracs = sorted(set(fracs))
+
+    tasks, keys = [], []
+    for v in vmaxes:
+        rings = {c: _exact_rings(v, c, lengths, max_states) for c in fracs}
+        for x in ps:
+            for c in fracs:
+                Lm, Nm = mc_ring(c, mc_length)
+                s = _derived_seed(seed, c.numerator, c.denominator, v, round(x * 2**40))
+                tasks.append(("mc", (Lm, Nm, v, x, "parallel", int(mc_steps), int(mc_steps),
+                                     s, int(mc_replicas))))
+                keys.append(("mc", v, x, c))
+                if len(rings[c]) >= order + 1:
+                    for L, N in rings[c]:
+                        tasks.append(("exact", (L, N, v, x, "parallel")))
+                        keys.append(("exact", v, x, c, L))
+    results = run_jobs(_job, tasks, serial=serial, scheduler=scheduler, cost=_cost,
+                       desc="convergence study")
+    mc = {k[1:]: r for k, r in zip(keys, results) if k[0] == "mc"}
+    exact = {}
+    for k, r in zip(keys, results):
+        if k[0] == "exact" and math.isfinite(r["flux"]):
+            exact.setdefault(k[1:4], []).append((k[4], r["flux"]))
+
+    notes, approx = [], {}
+    for v in vmaxes:
+        for name in names:
+            if not supported(name, v):
+                notes.append(f"{label(name)}: not offered for vmax = {v}")
+                continue
+            for x in ps:
+                try:
+                    a = approximate(name, v, x, np.array([float(c) for c in fracs]))
+                except NaschError as exc:
+                    notes.append(f"{label(name)}, vmax = {v}, p = {x:g}: {exc}")
+                    continue
+                for c, f in zip(fracs, np.atleast_1d(a.flux)):
+                    approx[v, x, c, name] = float(f)
+
+    rows = []
+    for v in vmaxes:
+        for x in ps:
+            for c in fracs:
+                m = mc[v, x, c]
+                ring = sorted(exact.get((v, x, c), []))
+                ext = (extrapolate([L for L, _ in ring], [f for _, f in ring], order=order)
+                       if len(ring) >= order + 1 else None)
+                row = {"vmax": v, "p": x, "density": float(c), "mc_flux": m["flux"],
+                       "mc_error": m["error"], "mc_length": m["length"],
+                       "exact_flux": None if ext is None else ext.f_inf,
+                       "exact_error": None if ext is None else ext.error,
+                       "exact_lengths": tuple(L for L, _ in ring) if ext else ()}
+                for name in names:
+                    row[name] = approx.get((v, x, c, name))
+                scored = {n: abs(row[n] - m["flux"]) for n in names if row[n] is not None}
+                row["best"] = min(scored, key=scored.get) if scored else None
+                # methods that Monte Carlo cannot tell apart from the truth
+                row["within_2sigma"] = tuple(n for n in names if n in scored
+                                             and scored[n] <= 2 * m["error"])
+                rows.append(row)
+    return StudyTable(tuple(rows), tuple(names), int(mc_steps), int(mc_replicas), tuple(notes),
+                      time.perf_counter() - start)
+
+
+_STYLE = {"mf": (":", "k"), "pmf": ("-", "C0"), "pmf2": ("--", "C4"), "comf": ("-", "C3"),
+          "cluster2": ("-.", "C2"), "cluster3": ((0, (5, 1)), "C5"), "cluster4": ("-", "C1"),
+          "cluster5": ((0, (3, 1, 1, 1)), "C8"), "cluster6": ("-", "C9")}
+
+
+def deviation_figure(table: StudyTable, width: float = 3.6, height: float = 3.0):
+    """Deviation from Monte Carlo against ``c``: one panel per ``(vmax, p)``, a curve per method.
+
+    The grey band is the Monte Carlo 1-sigma error; diamonds are the exact
+    ``L -> infinity`` extrapolations with their error estimate.
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    vmaxes = sorted({r["vmax"] for r in table.rows})
+    ps = sorted({r["p"] for r in table.rows})
+    fig = Figure(figsize=(width * len(ps), height * len(vmaxes) + 0.8), layout="constrained")
+    axes = fig.subplots(len(vmaxes), len(ps), squeeze=False, sharex=True)
+    for i, v in enumerate(vmaxes):
+        for j, x in enumerate(ps):
+            ax = axes[i, j]
+            rows = [r for r in table.rows if r["vmax"] == v and r["p"] == x]
+            c = np.array([r["density"] for r in rows])
+            mcf = np.array([r["mc_flux"] for r in rows])
+            band = 100 * np.array([r["mc_error"] for r in rows]) / mcf
+            ax.fill_between(c, -band, band, color="0.8", lw=0, label="Monte Carlo 1σ")
+            ax.axhline(0, color="0.5", lw=0.6)
+            for m in table.methods:
+                dev = [table.deviation(r, m) for r in rows]
+                if all(d is None for d in dev):
+                    continue
+                ls, color = _STYLE.get(m, ("-", None))
+                ax.plot(c, [np.nan if d is None else 100 * d for d in dev], ls=ls, color=color,
+                        lw=1.3, marker=".", ms=3, label=label(m))
+            ext = [(r["density"], 100 * (r["exact_flux"] - r["mc_flux"]) / r["mc_flux"],
+                    100 * r["exact_error"] / r["mc_flux"]) for r in rows
+                   if r["exact_flux"] is not None]
+            if ext:
+                ec, ed, ee = map(np.array, zip(*ext))
+                ax.errorbar(ec, ed, yerr=ee, fmt="D", ms=4, color="k", mfc="w", capsize=2,
+                            label=r"exact $L\to\infty$", zorder=5)
+            ax.set_title(f"$v_\\mathrm{{max}} = {v}$, $p = {x:g}$", fontsize=9)
+            devs = [100 * table.deviation(r, m) for r in rows for m in table.methods
+                    if r[m] is not None]
+            ax.set_ylim(max(-40.0, min(devs, default=-5) - 2), min(30.0, max(devs, default=5) + 2))
+            ax.grid(alpha=0.25, lw=0.5)
+            if i == len(vmaxes) - 1:
+                ax.set_xlabel("density $c$")
+            if j == 0:
+                ax.set_ylabel("(f - f_MC) / f_MC  [%]")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(6, len(labels)),
+               fontsize=8, frameon=False)
+    return fig
