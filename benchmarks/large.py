@@ -334,7 +334,7 @@ def _ratios(rows):
         if tool == "quantecon" and ours:
             out.append(f"L={L} {'lumped' if lumped else 'unlumped'} ({r['states']:,} states):"
                        f" QuantEcon solve {r['solve_s']:.3f} s vs ours {ours['solve_s']:.4f} s"
-                       f" on the same matrix: {_x(r['solve_s'] / ours['solve_s'])};"
+                       f" on the same chain: {_x(r['solve_s'] / ours['solve_s'])};"
                        f" |flux difference| {abs(r['flux'] - ours['flux']):.1e}")
     return out
 
