@@ -1,8 +1,8 @@
 """`make bench-coverage`: is the error bar of the L -> inf extrapolation honest?
 
 Over a grid of densities and braking probabilities, the exact fluxes of the
-largest rings that fit a time budget (``markov.budget``) are extrapolated in
-``1/L`` (``markov.extrapolate``) and compared with a reference for the
+largest rings that fit a time budget (``nasch.budget``) are extrapolated in
+``1/L`` (``nasch.extrapolate``) and compared with a reference for the
 infinite road:
 
 * vmax = 1: the exact closed form ``(1 - sqrt(1 - 4 q c (1 - c))) / 2``;
@@ -44,10 +44,10 @@ def measure(vmax: int, p: float, c: Fraction, budget: float, mc_length: int,
             mc_steps: int, seed: int) -> dict:
     """Exact rings within the budget, their extrapolation, and the reference."""
     from markov import Ring, solve
-    from markov.budget import lengths_within_budget
-    from markov.extrapolate import exact_vmax1_flux
+    from nasch.budget import lengths_within_budget
+    from nasch.extrapolate import exact_vmax1_flux
     from markov.simulate import simulate
-    from markov.tables import mc_ring
+    from nasch.tables import mc_ring
 
     start = time.perf_counter()
     lengths = lengths_within_budget(vmax, p, c, budget)
@@ -67,7 +67,7 @@ def measure(vmax: int, p: float, c: Fraction, budget: float, mc_length: int,
 
 def score(points: list[dict]) -> tuple[list[dict], dict]:
     """The extrapolation of every point with the error model in use, and its coverage."""
-    from markov.extrapolate import extrapolate
+    from nasch.extrapolate import extrapolate
 
     rows = []
     for pt in points:
@@ -116,14 +116,14 @@ def main(argv=None) -> None:
                     help="re-score benchmarks/results/coverage.json without solving")
     ap.add_argument("--out", type=Path, default=RESULTS)
     args = ap.parse_args(argv)
-    from markov.io import write_atomic
+    from markov.files import write_atomic
 
     store = args.out / "coverage.json"
     if args.from_json:
         data = json.loads(store.read_text())
     else:
         data = {"meta": {"date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-                         "budget per point": f"{args.budget:g} s (markov.budget, predicted)",
+                         "budget per point": f"{args.budget:g} s (nasch.budget, predicted)",
                          "Monte Carlo": f"ring of about {args.mc_length} cells,"
                                         f" {args.mc_steps} steps (+ half warm-up) x 4 replicas",
                          "load average at start": " ".join(f"{x:.2f}"

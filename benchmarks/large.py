@@ -20,7 +20,7 @@ Every case runs in a fresh subprocess, so its peak resident memory
   per extra p.
 * **budget**: rings of several sizes, densities, vmax and p solved on one
   thread (as the table and figure jobs run), measured against the cost model
-  of ``markov.budget`` that chooses rings by budget.
+  of ``nasch.budget`` that chooses rings by budget.
 * **compare**: small rings, the same chains, by the naive reference
   (``tests/naive.py``), QuantEcon (dense GTH on our matrix) and the Storm
   model checker (``benchmarks/storm.py``: sound long-run average at 1e-13,
@@ -136,7 +136,7 @@ def work_budget(L, N, vmax, p) -> dict:
     """One ring on one thread, like a table job, beside the budget's prediction."""
     import numba
 
-    from markov.budget import predicted_seconds
+    from nasch.budget import predicted_seconds
 
     numba.set_num_threads(1)
     out = work_ours(L, N, vmax, p, tol=1e-13)
@@ -340,7 +340,7 @@ def _ratios(rows):
 
 
 def write_results(rows, meta, out_dir: Path) -> None:
-    from markov.io import write_atomic
+    from markov.files import write_atomic
 
     out_dir.mkdir(parents=True, exist_ok=True)
     buf = io.StringIO()

@@ -93,7 +93,7 @@ def main() -> None:
     if args.case:
         print(json.dumps(run_case(*args.case)))
         return
-    from markov.io import write_atomic
+    from markov.files import write_atomic
 
     rows = []
     for case in CASES:

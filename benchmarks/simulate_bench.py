@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 
-from markov.model import Ring
+from markov.ring import Ring
 from markov.simulate import simulate
 
 __all__ = ["benchmark_simulator", "CASES"]

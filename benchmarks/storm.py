@@ -264,14 +264,14 @@ def _umb_archive(path: Path, P, rewards: np.ndarray, init: int) -> None:
 def _our_matrix(L: int, N: int, vmax: int, p: float):
     """Our unlumped chain: transition matrix, flux per state, index of an initial state."""
     from markov import Ring
-    from markov.space import recurrent_keys
-    from markov.states import compact_jam_key
+    from markov.statespace import recurrent_keys
+    from markov.encoding import compact_jam_key
     from markov.transition import transition_matrix
 
     ring = Ring(L, N, vmax, p)
     keys = recurrent_keys(ring, lump=False)
     P = transition_matrix(ring, keys, lump=False)
-    # N = 1 starts elsewhere (markov.space): any state of the class will do
+    # N = 1 starts elsewhere (markov.statespace): any state of the class will do
     init = int(np.searchsorted(keys, compact_jam_key(L, N, vmax))) if N > 1 else 0
     return P, flux_rewards(keys, L, vmax), init
 
@@ -325,7 +325,7 @@ def _matrix_model(L: int, N: int, vmax: int, p: float, handover: str):
 def _warm_up_markov() -> None:
     """Load our compiled kernels (numba cache) on a tiny ring, outside the timings."""
     from markov import Ring
-    from markov.space import recurrent_keys
+    from markov.statespace import recurrent_keys
     from markov.transition import transition_matrix
 
     ring = Ring(6, 3, 2, 0.5)

@@ -25,9 +25,9 @@ import argparse  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from markov.io import write_atomic  # noqa: E402
-from markov.plot import save_figure  # noqa: E402
-from symbolic.study import convergence_study, deviation_figure  # noqa: E402
+from markov.files import write_atomic  # noqa: E402
+from nasch.plot import save_figure  # noqa: E402
+from nasch.study import convergence_study, deviation_figure  # noqa: E402
 
 DENSITIES = [0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 1 / 3, 0.4, 0.5, 0.6, 2 / 3, 0.75, 0.9]
 PS = [0.1, 0.25, 0.5, 0.75]

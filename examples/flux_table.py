@@ -2,7 +2,7 @@
 
 For vmax = 2 and p = 0.5 (the paper's case) it prints, at half filling and at
 quarter filling, for the four largest rings whose exact solution fits a budget
-of 15 s each density (``markov.budget``: at half filling L = 16..22, at
+of 15 s each density (``nasch.budget``: at half filling L = 16..22, at
 quarter filling L = 16..28):
 
 * the exact stationary flux of each finite ring (Markov chain, solved exactly),
@@ -10,7 +10,7 @@ quarter filling L = 16..28):
   at the same density,
 * a Monte Carlo flux with its 1-sigma error bar on a ring of 10 000 cells,
 * an ``L = inf`` row: the exact fluxes extrapolated in 1/L, with the error
-  estimate of ``markov.extrapolate``.
+  estimate of ``nasch.extrapolate``.
 
 Run:  python examples/flux_table.py         (about a minute on 2 cores)
 Same table from the command line:
@@ -27,7 +27,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMB
 
 import time  # noqa: E402
 
-from markov.tables import flux_table  # noqa: E402
+from nasch.tables import flux_table  # noqa: E402
 
 
 def main() -> None:

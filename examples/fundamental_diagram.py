@@ -22,11 +22,11 @@ import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-from markov.plot import fundamental_data, fundamental_figure, save_figure  # noqa: E402
+from nasch.plot import fundamental_data, fundamental_figure, save_figure  # noqa: E402
 
 
 def main(outdir: Path) -> None:
-    from markov.io import check_output_path
+    from markov.files import check_output_path
 
     start = time.perf_counter()
     for ext in (".png", ".pdf"):   # a bad directory is reported before the work

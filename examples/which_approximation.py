@@ -4,7 +4,7 @@ Reference values, for vmax = 2 on a grid of densities c in {1/4, 1/3, 1/2,
 2/3, 3/4} and braking probabilities p in {0.1, 0.25, 0.5, 0.75}:
 
 * exact fluxes of rings with 8..16 cells extrapolated to L = infinity
-  (``markov.extrapolate``: 1/L series, error from order change and
+  (``nasch.extrapolate``: 1/L series, error from order change and
   leave-one-out), and
 * Monte Carlo on a ring of ~4000 cells (4 independent replicas).
 
@@ -26,7 +26,7 @@ import time  # noqa: E402
 from collections import Counter  # noqa: E402
 from fractions import Fraction  # noqa: E402
 
-from markov.tables import flux_table  # noqa: E402
+from nasch.tables import flux_table  # noqa: E402
 
 DENSITIES = [Fraction(1, 4), Fraction(1, 3), Fraction(1, 2), Fraction(2, 3), Fraction(3, 4)]
 PS = [0.1, 0.25, 0.5, 0.75]

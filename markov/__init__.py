@@ -31,7 +31,7 @@ __all__ = [
 
 # public name -> submodule that defines it
 _WHERE = {
-    "Ring": "model", "UPDATES": "model", "PARALLEL": "model", "RANDOM_SEQUENTIAL": "model",
+    "Ring": "ring", "UPDATES": "ring", "PARALLEL": "ring", "RANDOM_SEQUENTIAL": "ring",
     "RingChain": "chain", "Solution": "chain", "solve": "chain",
     "load_solution": "storage",
     "stationary": "solvers", "StationaryResult": "solvers", "SOLVERS": "choices",

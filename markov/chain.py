@@ -19,10 +19,10 @@ from . import memory, observables
 from .choices import OPERATORS, PRODUCT_METHODS
 from .errors import InvalidParameterError, NoUniqueStationaryStateError
 from .goe_census import recurrent_class_count
-from .model import PARALLEL, Ring
-from .space import count_all, recurrent_keys
+from .ring import PARALLEL, Ring
+from .statespace import count_all, recurrent_keys
 from .solvers import DEFAULT_TOL, StationaryResult, stationary
-from .states import compact_jam_key
+from .encoding import compact_jam_key
 from .transition import successor_counts, transition_matrix
 from .validate import ensure_chain_arguments, format_count
 
@@ -31,8 +31,8 @@ __all__ = ["RingChain", "Solution", "solve", "OPERATORS"]
 # OPERATORS (markov.choices): how ``x -> x P`` is applied (see
 # RingChain.operator_kind for ``auto``): ``matrix`` the assembled CSR matrix
 # (every solver); ``matrix-free`` nothing of size "transitions" stored: the
-# per-car levels of markov.factored.FactoredOperator for parallel update, rows
-# regenerated per product (markov.operator.TransitionOperator) for
+# per-car levels of markov._factored.FactoredOperator for parallel update, rows
+# regenerated per product (markov._sequential.TransitionOperator) for
 # random-sequential update.
 
 #: ``auto`` assembles the matrix (exact LU) up to this many states when it fits;
@@ -258,16 +258,16 @@ class RingChain:
 
     @cached_property
     def transition_operator(self):
-        """``x -> x P`` without a CSR matrix: :class:`markov.factored.FactoredOperator`
-        for parallel update, :class:`markov.operator.TransitionOperator` otherwise."""
+        """``x -> x P`` without a CSR matrix: :class:`markov._factored.FactoredOperator`
+        for parallel update, :class:`markov._sequential.TransitionOperator` otherwise."""
         keys = self.keys
         start = time.perf_counter()
         if self.ring.update == PARALLEL:
-            from .factored import FactoredOperator
+            from ._factored import FactoredOperator
 
             op = FactoredOperator(self.ring, keys, self.lump)
         else:
-            from .operator import TransitionOperator
+            from ._sequential import TransitionOperator
 
             op = TransitionOperator(self.ring, keys, self.lump)
         self.build_seconds += time.perf_counter() - start
@@ -284,8 +284,8 @@ class RingChain:
 
     @cached_property
     def aggregates(self):
-        """Position configurations of the states (:func:`markov.aggregates.position_aggregates`)."""
-        from .aggregates import position_aggregates
+        """Position configurations of the states (:func:`markov._aggregates.position_aggregates`)."""
+        from ._aggregates import position_aggregates
 
         return position_aggregates(self.ring, self.keys, self.lump)
 

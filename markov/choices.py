@@ -6,7 +6,8 @@ without loading the numerical libraries.
 """
 from __future__ import annotations
 
-__all__ = ["SOLVERS", "METHODS", "PRODUCT_METHODS", "OPERATORS", "GMRES_RESTART"]
+__all__ = ["SOLVERS", "METHODS", "PRODUCT_METHODS", "OPERATORS", "GMRES_RESTART",
+           "DEFAULT_TOL", "DEFAULT_MAXITER"]
 
 #: Stationary solvers (:func:`markov.solvers.stationary`).
 SOLVERS = ("direct", "eigs", "iterative", "gmres", "bicgstab", "power", "aggregation")
@@ -19,3 +20,7 @@ PRODUCT_METHODS = ("iterative", "gmres", "bicgstab", "power", "aggregation")
 OPERATORS = ("auto", "matrix", "matrix-free")
 #: Krylov basis size of GMRES (its memory: GMRES_RESTART + 6 vectors).
 GMRES_RESTART = 60
+#: Default target of ``||pi P - pi||_1`` of every solver and path (API and CLI).
+DEFAULT_TOL = 1e-13
+#: Default cap on ARPACK iterations or products ``x P``.
+DEFAULT_MAXITER = 20_000

@@ -36,10 +36,10 @@ from numba import njit
 from .errors import InvalidParameterError
 from .goe_census import census, frozen_count, pattern_free_count, recurrent_class_count
 from .goe_patterns import Pattern, elementary_patterns, order_automaton, word_allowed
-from .model import PARALLEL, Ring
+from .ring import PARALLEL, Ring
 from .rules import deterministic_velocity, randomize
-from .space import all_keys
-from .states import check_encodable, encode, from_text
+from .statespace import all_keys
+from .encoding import check_encodable, encode, from_text
 from .transition import _cars_of, successors
 
 __all__ = [
@@ -96,7 +96,7 @@ def goe_mask(keys, length: int, vmax: int) -> np.ndarray:
     Parameters
     ----------
     keys : (n,) int64 array
-        Configuration keys (:mod:`markov.states`) of a ring of ``length`` cells.
+        Configuration keys (:mod:`markov.encoding`) of a ring of ``length`` cells.
     length, vmax : int
 
     Returns
@@ -105,7 +105,7 @@ def goe_mask(keys, length: int, vmax: int) -> np.ndarray:
 
     Examples
     --------
-    >>> from markov.states import encode
+    >>> from markov.encoding import encode
     >>> goe_mask([encode([0, 1, -1], 1), encode([0, -1, 1], 1)], 3, 1).tolist()
     [True, False]
     """
@@ -184,7 +184,7 @@ def pattern_free_mask(keys, length: int, vmax: int, order: int | None = None) ->
 
     Examples
     --------
-    >>> from markov.states import encode
+    >>> from markov.encoding import encode
     >>> keys = [encode([0, -1, -1, 2, -1, -1], 2), encode([0, -1, -1, -1, 2, -1], 2)]
     >>> pattern_free_mask(keys, 6, 2).tolist()
     [False, True]
@@ -227,7 +227,7 @@ def image_keys(ring: Ring, order: int | None = None) -> tuple[np.ndarray, int]:
 
     Examples
     --------
-    >>> from markov.model import Ring
+    >>> from markov.ring import Ring
     >>> len(image_keys(Ring(3, 1, 1, 0.5), 1)[0])   # the car at v=1 anywhere, or v=0
     6
     """

@@ -33,9 +33,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from .goe_patterns import elementary_patterns, order_automaton, _ensure_vmax
-from .model import Ring
-from .space import all_keys, count_all, recurrent_keys
-from .states import check_encodable
+from .ring import Ring
+from .statespace import all_keys, count_all, recurrent_keys
+from .encoding import check_encodable
 
 __all__ = [
     "pattern_free_count",

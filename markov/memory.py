@@ -1,7 +1,7 @@
 """The memory model of the exact solver: bytes per state of each path and method.
 
 Every figure the memory guard and the choice of path use lives here, so that
-the refusal before enumeration (:func:`markov.space.recurrent_keys`), the
+the refusal before enumeration (:func:`markov.statespace.recurrent_keys`), the
 choice of ``operator="auto"`` (:attr:`markov.chain.RingChain.operator_kind`)
 and ``docs/performance.md`` agree.  Figures are peak bytes of float64 vectors,
 int32/int64 index arrays and the state keys; the Python interpreter and the
@@ -13,12 +13,12 @@ Paths
     the assembled CSR matrix: 12 bytes per stored nonzero, 40 while
     assembling (unsummed int64 successor, column and value lists).
 ``factored``
-    :class:`markov.factored.FactoredOperator` (parallel update): the level
+    :class:`markov._factored.FactoredOperator` (parallel update): the level
     links (two int32 per word; words summed over the levels are 1.5 to 5.5
     times the states, :data:`LEVEL_WORDS_PER_STATE` is the bound used before
     the levels exist), the level-0 permutation and offsets, two level buffers.
 ``rows``
-    :class:`markov.operator.TransitionOperator` (random-sequential update):
+    :class:`markov._sequential.TransitionOperator` (random-sequential update):
     rows regenerated per product; a rank hash table and one accumulator per
     thread.
 """
@@ -103,7 +103,7 @@ def factored_bytes_per_state(method: str, words_per_state: float = LEVEL_WORDS_P
         Stationary solver (its work vectors, :func:`solver_vectors`).
     words_per_state : float
         Words of levels ``1..N`` per state (after building: the measured
-        figure, :attr:`markov.factored.FactoredOperator.edges` / n).
+        figure, :attr:`markov._factored.FactoredOperator.edges` / n).
     first_level : float
         Level-0 words per state (at most 1).
     """

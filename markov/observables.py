@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .model import Ring
+from .ring import Ring
 from .rules import deterministic_velocity
 from .transition import _cars_of, _gap
 
@@ -52,7 +52,7 @@ def cluster_probabilities(ring: Ring, keys: np.ndarray, pi: np.ndarray, n: int) 
     Examples
     --------
     >>> import numpy as np
-    >>> from markov.states import encode
+    >>> from markov.encoding import encode
     >>> ring = Ring(2, 1, 1, 0.5)
     >>> keys = np.array([encode([1, -1], 1)]); pi = np.array([1.0])
     >>> float(cluster_probabilities(ring, keys, pi, 2)[2, 0])   # P(car v=1, empty)

@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit
 
 from .errors import InvalidParameterError
-from .model import PARALLEL, Ring
+from .ring import PARALLEL, Ring
 from .progress import progress_bar
 from .rules import deterministic_velocity, randomize
 

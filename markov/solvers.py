@@ -23,7 +23,7 @@ Methods (:data:`SOLVERS`)
 ``aggregation`` two-level iterative aggregation/disaggregation
               (Koury-McAllister-Stewart) over a partition of the states given
               as :class:`Aggregates` (for the NaSch chain: the position
-              configurations, :func:`markov.aggregates.position_aggregates`).
+              configurations, :func:`markov._aggregates.position_aggregates`).
 ``auto``      ``direct`` up to :data:`DIRECT_LIMIT` states, else ``eigs``
               (robust and fastest in ``make bench``), ``iterative`` if ARPACK
               does not converge.
@@ -38,7 +38,8 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
-from .choices import GMRES_RESTART, METHODS, PRODUCT_METHODS, SOLVERS
+from .choices import (DEFAULT_MAXITER, DEFAULT_TOL, GMRES_RESTART, METHODS, PRODUCT_METHODS,
+                      SOLVERS)
 from .errors import ConvergenceError, InvalidParameterError, NoUniqueStationaryStateError
 
 __all__ = ["SOLVERS", "METHODS", "PRODUCT_METHODS", "DIRECT_LIMIT", "GMRES_RESTART",
@@ -332,9 +333,6 @@ def _product_of(P):
     return P.apply, P.n
 
 
-#: Default target of ``||pi P - pi||_1`` and cap on products, for every path.
-DEFAULT_TOL = 1e-13
-DEFAULT_MAXITER = 20_000
 #: What ``auto`` runs on an operator: aggregation when the aggregates are
 #: given, else the BiCGSTAB -> GMRES -> power ladder
 #: (:class:`markov.chain.RingChain` also weighs ``p`` and memory).
@@ -351,8 +349,8 @@ def stationary(P, method: str = "auto", tol: float = DEFAULT_TOL,
     ----------
     P : (n, n) sparse matrix or operator
         Row-stochastic matrix, or an operator with ``n`` and ``apply(x) -> x P``
-        (:class:`markov.factored.FactoredOperator`,
-        :class:`markov.operator.TransitionOperator`): then only the methods of
+        (:class:`markov._factored.FactoredOperator`,
+        :class:`markov._sequential.TransitionOperator`): then only the methods of
         :data:`PRODUCT_METHODS` apply.
     method : {"auto", "direct", "eigs", "iterative", "gmres", "bicgstab", "power", "aggregation"}
         Solver (see the module docstring).  ``auto``: ``direct`` up to

@@ -49,9 +49,9 @@ import numpy as np
 from numba import njit
 
 from .errors import InvalidParameterError, StateSpaceTooLargeError
-from .io import write_bytes_atomic
-from .model import Ring
-from .states import base, check_encodable, orbit_size, powers, to_text
+from .files import write_bytes_atomic
+from .ring import Ring
+from .encoding import base, check_encodable, orbit_size, powers, to_text
 from .validate import ensure_int
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "ENCODING", "save_solution", "load_solution",
@@ -123,7 +123,7 @@ def rotation_counts(keys, length: int, vmax: int) -> np.ndarray:
     keys = np.asarray(keys, dtype=np.int64).ravel()
     pw = powers(length, vmax)
     out = np.empty(keys.size, dtype=np.int64)
-    # markov.states.orbit_size returns the smallest period r, which is the
+    # markov.encoding.orbit_size returns the smallest period r, which is the
     # number of distinct rotations
     _rotation_counts(keys, length, pw, out)
     return out

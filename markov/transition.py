@@ -12,7 +12,7 @@ a car at ``x`` that ends with velocity ``w`` contributes ``(w + 1) B**(x + w)``.
   step; the sub-step chain has the same stationary distribution.
 
 With ``lump=True`` every successor is replaced by its canonical rotation
-(:func:`markov.states.canonical`): the chain lumped by rotations of the ring,
+(:func:`markov.encoding.canonical`): the chain lumped by rotations of the ring,
 exact because the rules are translation invariant.
 """
 from __future__ import annotations
@@ -21,10 +21,10 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 
-from .model import PARALLEL, Ring
+from .ring import PARALLEL, Ring
 from .progress import progress_bar
 from .rules import deterministic_velocity, randomize
-from .states import canonical, powers
+from .encoding import canonical, powers
 
 __all__ = ["max_successors", "successor_counts", "successors", "transition_matrix"]
 

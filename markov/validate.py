@@ -12,8 +12,9 @@ from decimal import Decimal
 
 from .errors import InvalidParameterError
 
-__all__ = ["ensure_int", "ensure_real", "ensure_tol", "ensure_max_memory",
-           "ensure_chain_arguments", "format_count", "TOL_RANGE"]
+__all__ = ["ensure_int", "ensure_real", "ensure_open_unit", "ensure_open_probability",
+           "ensure_tol", "ensure_max_memory", "ensure_chain_arguments", "format_count",
+           "TOL_RANGE"]
 
 #: Allowed residual targets ``||pi P - pi||_1`` of the iterative solvers.  Below
 #: 1e-15 the target is under double-precision round-off of the residual itself
@@ -92,6 +93,82 @@ def ensure_real(name: str, value, low: float | None = None, high: float | None =
     return x
 
 
+def ensure_open_unit(name: str, value, reason: str = ""):
+    """``value`` strictly inside ``(0, 1)``: a float, or a float array for array input.
+
+    Parameters
+    ----------
+    name : str
+        The argument, for the message.
+    value : number or array_like
+        A probability or a density (an array of them for the vectorised
+        approximations).
+    reason : str
+        Why the end points are excluded, appended to the message.
+
+    Returns
+    -------
+    float or numpy.ndarray
+
+    Raises
+    ------
+    InvalidParameterError
+        For anything that is not a finite number (or array of them) in ``(0, 1)``.
+
+    Examples
+    --------
+    >>> ensure_open_unit("density", 0.25)
+    0.25
+    >>> ensure_open_unit("density", 1)
+    Traceback (most recent call last):
+    ...
+    markov.errors.InvalidParameterError: density must lie strictly between 0 and 1, got 1
+    """
+    what = f"{name} must lie strictly between 0 and 1{f' ({reason})' if reason else ''}"
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+        x = float(value)
+        if not (math.isfinite(x) and 0 < x < 1):
+            raise InvalidParameterError(f"{what}, got {value!r}")
+        return x
+    import numpy as np   # array input: only the vectorised approximations pass one
+
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise InvalidParameterError(f"{what}, got {value!r}") from None
+    if arr.size == 0 or not np.all(np.isfinite(arr)) or np.any(arr <= 0) or np.any(arr >= 1):
+        raise InvalidParameterError(f"{what}, got {value!r}")
+    return arr
+
+
+def ensure_open_probability(value, name: str = "p") -> float:
+    """A braking probability strictly inside ``(0, 1)``, where the stationary state is unique.
+
+    Parameters
+    ----------
+    value : number
+    name : str
+        The argument, for the message (``"--p"`` on the command line).
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> ensure_open_probability(0.5)
+    0.5
+    >>> ensure_open_probability(0.0)
+    Traceback (most recent call last):
+    ...
+    markov.errors.InvalidParameterError: p must lie strictly between 0 and 1 (p = 0 or 1 has no unique stationary state), got 0.0
+    """
+    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+        raise InvalidParameterError(f"{name} must be a number strictly between 0 and 1,"
+                                    f" got {value!r}")
+    return ensure_open_unit(name, value, "p = 0 or 1 has no unique stationary state")
+
+
 def ensure_tol(tol, name: str = "tol") -> float:
     """A residual target in :data:`TOL_RANGE`.
 
@@ -121,11 +198,11 @@ def ensure_chain_arguments(ring, method: str | None = None, tol=None,
                            max_memory=None) -> None:
     """The exact solver's up-front checks: all instant, all before enumerating.
 
-    The ring must fit the 64-bit key (:func:`markov.states.check_encodable`),
+    The ring must fit the 64-bit key (:func:`markov.encoding.check_encodable`),
     ``method`` be a solver name, ``tol`` lie in :data:`TOL_RANGE` and
     ``max_memory`` (bytes) be ``None`` or positive and finite.
     """
-    from .states import check_encodable
+    from .encoding import check_encodable
     from .choices import METHODS
 
     check_encodable(ring.length, ring.vmax)

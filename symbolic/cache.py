@@ -10,7 +10,7 @@ it and its parameters (method, order, vmax).  It is built once and stored as
 * the parameters,
 
 so a change of the rules or of the derivation gives a new file instead of a
-stale answer.  Files are written atomically (:func:`markov.io.write_bytes_atomic`),
+stale answer.  Files are written atomically (:func:`markov.files.write_bytes_atomic`),
 so concurrent processes (pytest-xdist, Dask workers) may build the same entry;
 a file that cannot be read back, or whose stored key or arrays do not match, is
 ignored and rebuilt; a cache directory that cannot be written is skipped.
@@ -131,7 +131,7 @@ def cached_arrays(name: str, key: str, build: Callable[[], dict],
 
 
 def _write(path: Path, key: str, arrays: dict) -> None:
-    from markov.io import write_bytes_atomic
+    from markov.files import write_bytes_atomic
 
     buf = io.BytesIO()
     np.savez(buf, __key__=np.array(key), **arrays)

@@ -1,7 +1,7 @@
 """Exact rational stationary states of tiny rings, with ``p`` a number or a symbol.
 
 The matrix comes from the same enumeration as the floating-point solver:
-:func:`markov.space.recurrent_keys` for the states and
+:func:`markov.statespace.recurrent_keys` for the states and
 :func:`markov.transition.successors` for the transitions.  For parallel update
 a state with ``k`` cars able to move has ``2**k`` successor entries, one per
 brake mask, with probability ``q**a p**b`` (``a + b = k``, ``b`` = cars that
@@ -27,9 +27,9 @@ import sympy as sp
 from sympy.polys.matrices import DomainMatrix
 
 from markov.errors import InvalidParameterError, StateSpaceTooLargeError
-from markov.model import PARALLEL, Ring
-from markov.space import recurrent_keys
-from markov.states import decode
+from markov.ring import PARALLEL, Ring
+from markov.statespace import recurrent_keys
+from markov.encoding import decode
 from markov.transition import successors
 
 from .meanfield import p as P_SYMBOL
@@ -48,7 +48,7 @@ def transition_polynomials(ring: Ring, keys: np.ndarray, lump: bool = True):
     ring : Ring
         Parallel update only (the random-sequential weights carry ``1/L``).
     keys : (n,) int64 array, sorted
-        A closed state set (e.g. :func:`markov.space.recurrent_keys`).
+        A closed state set (e.g. :func:`markov.statespace.recurrent_keys`).
     lump : bool
         Whether ``keys`` are rotation classes.
     """

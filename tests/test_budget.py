@@ -5,12 +5,12 @@ import pytest
 from click.testing import CliRunner
 
 from markov import InvalidParameterError, Ring
-from markov.budget import (lengths_within_budget, parse_budget, predicted_classes,
+from nasch.budget import (lengths_within_budget, parse_budget, predicted_classes,
                            predicted_seconds)
-from markov.cli import main
-from markov.extrapolate import extrapolate_flux
-from markov.space import recurrent_keys
-from markov.tables import flux_table
+from nasch.cli import main
+from nasch.extrapolate import extrapolate_flux
+from markov.statespace import recurrent_keys
+from nasch.tables import flux_table
 
 
 @pytest.mark.parametrize("text, seconds", [("90", 90.0), ("90s", 90.0), ("2.5m", 150.0),

@@ -8,8 +8,8 @@ import pytest
 import naive
 from markov import (NoUniqueStationaryStateError, Ring, RingChain, SOLVERS,
                     StateSpaceTooLargeError, solve)
-from markov.space import all_keys, count_all, recurrent_keys
-from markov.states import decode, encode
+from markov.statespace import all_keys, count_all, recurrent_keys
+from markov.encoding import decode, encode
 from markov.transition import transition_matrix
 
 SMALL = [  # (L, N, vmax)

@@ -7,7 +7,7 @@ import pytest
 from click.testing import CliRunner
 
 from markov import Ring, solve
-from markov.cli import main
+from nasch.cli import main
 
 
 def run(*args):
@@ -64,6 +64,6 @@ def test_bad_input_exit_code_2_without_traceback(args, words):
 
 
 def test_console_script_runs_in_a_subprocess():
-    out = subprocess.run([sys.executable, "-m", "markov.cli", "solve", "-L", "4", "-N", "5",
+    out = subprocess.run([sys.executable, "-m", "nasch", "solve", "-L", "4", "-N", "5",
                           "--p", "0.5"], capture_output=True, text=True)
     assert out.returncode == 2 and out.stderr.startswith("error:") and "Traceback" not in out.stderr

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from markov import InvalidParameterError, Ring
-from markov.extrapolate import (commensurate_lengths, exact_vmax1_flux, extrapolate,
+from nasch.extrapolate import (commensurate_lengths, exact_vmax1_flux, extrapolate,
                                 extrapolate_flux)
 from markov.simulate import simulate
 

@@ -6,10 +6,10 @@ import pytest
 
 import naive
 from markov import InvalidParameterError, Ring, RingChain, solve
-from markov.aggregates import position_aggregates
-from markov.factored import FactoredOperator, frontier_successors, word_bits
-from markov.space import recurrent_keys
-from markov.states import decode, encode
+from markov._aggregates import position_aggregates
+from markov._factored import FactoredOperator, frontier_successors, word_bits
+from markov.statespace import recurrent_keys
+from markov.encoding import decode, encode
 from markov.transition import transition_matrix
 
 # vmax 1, 2, 3, 5; one car, one empty cell, low and high density; B = 3, 4, 5, 7

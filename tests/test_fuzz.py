@@ -31,7 +31,7 @@ from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from markov.cli import main
+from nasch.cli import main
 
 pytestmark = pytest.mark.slow
 

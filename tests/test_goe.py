@@ -4,7 +4,7 @@ Oracles written here from the rule text (no import of markov.rules or
 markov.goe*): plain-Python successors of a ring configuration and a naive
 backward search for predecessors.  Further routes: the set of all successors
 of all configurations (markov.transition), the recurrent class found by
-breadth-first search from the compact jam (markov.space), and the exact
+breadth-first search from the compact jam (markov.statespace), and the exact
 stationary state (markov.chain).
 """
 from __future__ import annotations
@@ -24,9 +24,9 @@ from markov.goe import goe_mask, image_keys, is_goe, is_pattern_free, pattern_fr
 from markov.goe_census import (census, frozen_count, pattern_free_count,
                                recurrent_class_count)
 from markov.goe_patterns import elementary_patterns, word_allowed
-from markov.model import Ring
-from markov.space import all_keys, recurrent_keys
-from markov.states import decode, encode
+from markov.ring import Ring
+from markov.statespace import all_keys, recurrent_keys
+from markov.encoding import decode, encode
 from markov.transition import successors
 
 # ---------------------------------------------------------------- naive oracle
@@ -90,7 +90,7 @@ def all_configs(L, N, vmax):
 
 def ring_of(word, vmax, extra):
     """The word followed by ``extra`` empty cells, as a ring configuration."""
-    from markov.states import from_text
+    from markov.encoding import from_text
     return tuple(from_text(word, vmax)) + (-1,) * extra
 
 

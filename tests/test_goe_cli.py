@@ -6,7 +6,7 @@ import math
 
 from click.testing import CliRunner
 
-from markov.cli import main
+from nasch.cli import main
 
 
 def run(*args):

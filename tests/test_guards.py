@@ -16,7 +16,7 @@ import pytest
 from click.testing import CliRunner
 
 from markov import InvalidParameterError, Ring, RingChain, solve
-from markov.cli import main
+from nasch.cli import main
 from markov.validate import TOL_RANGE, format_count
 
 
@@ -145,8 +145,8 @@ def _read_only_dir(tmp_path) -> str:
 def no_work(monkeypatch):
     def fail(*a, **k):
         pytest.fail("computed before the output path was checked")
-    monkeypatch.setattr("markov.tables.flux_table", fail)
-    monkeypatch.setattr("markov.plot.fundamental_data", fail)
+    monkeypatch.setattr("nasch.tables.flux_table", fail)
+    monkeypatch.setattr("nasch.plot.fundamental_data", fail)
     monkeypatch.setattr("markov.chain.solve", fail)
 
 
@@ -183,7 +183,7 @@ def test_plot_output_extension_checked_first(tmp_path, no_work):
 # ---------------------------------------------------------------- item 6: plot drops rings
 
 def test_plot_drops_rings_beyond_the_key_with_a_notice(tmp_path):
-    from markov.plot import fundamental_data, fundamental_figure
+    from nasch.plot import fundamental_data, fundamental_figure
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         d = fundamental_data(2, 0.5, lengths=[40, 6], extrapolation_lengths=[6, 8, 10],
@@ -199,7 +199,7 @@ def test_plot_drops_rings_beyond_the_key_with_a_notice(tmp_path):
 
 
 def test_table_refuses_rings_beyond_the_key_before_the_work(monkeypatch):
-    monkeypatch.setattr("markov.tables.run_jobs", lambda *a, **k: pytest.fail("worked first"))
+    monkeypatch.setattr("nasch.tables.run_jobs", lambda *a, **k: pytest.fail("worked first"))
     assert refused(run("table", "--lengths", "8,40", "--mc-steps", "0"),
                    "holds rings of up to L = 30 cells")
 
@@ -215,7 +215,7 @@ def test_table_refuses_rings_beyond_the_key_before_the_work(monkeypatch):
     (["--scheduler", "nonsense"], "must look like tcp://HOST:PORT"),
 ])
 def test_table_options_checked_before_the_work(args, words, monkeypatch):
-    monkeypatch.setattr("markov.tables.run_jobs", lambda *a, **k: pytest.fail("worked first"))
+    monkeypatch.setattr("nasch.tables.run_jobs", lambda *a, **k: pytest.fail("worked first"))
     assert refused(run("table", "--lengths", "6,8", *args), words)
 
 
@@ -239,7 +239,7 @@ def test_lone_car_flux_is_w_minus_p_over_L(L, vmax, p):
 
 def test_random_sequential_unreachable_count_quoted_in_the_readme():
     # README: L = 9, N = 4, vmax = 3 random-sequential: 1,899 of 32,256 unreachable
-    from markov.space import all_keys, recurrent_keys
+    from markov.statespace import all_keys, recurrent_keys
     ring = Ring(9, 4, 3, 0.5, "random-sequential")
     every = all_keys(ring)
     assert len(every) == 32_256
@@ -252,8 +252,8 @@ def test_goe_doc_lone_car_pattern_free_but_transient_not_frozen():
     # not frozen (the car at velocity 1), and the recurrent class is 2 L.
     from markov.goe import pattern_free_mask
     from markov.goe_census import frozen_count, pattern_free_count, recurrent_class_count
-    from markov.space import all_keys, recurrent_keys
-    from markov.states import decode
+    from markov.statespace import all_keys, recurrent_keys
+    from markov.encoding import decode
     ring = Ring(8, 1, 3, 0.5)
     keys = all_keys(ring)
     pf = keys[pattern_free_mask(keys, 8, 3)]

@@ -18,7 +18,7 @@ import pytest
 
 pytestmark = pytest.mark.slow
 
-NASCH = [sys.executable, "-m", "markov.cli"]
+NASCH = [sys.executable, "-m", "nasch"]
 
 
 def _live_processes(pgid: int) -> list[str]:
@@ -73,7 +73,7 @@ def test_ctrl_c_during_a_dask_table(tmp_path, delay):
 def test_unreachable_scheduler_is_reported_within_ten_seconds():
     from click.testing import CliRunner
 
-    from markov.cli import main
+    from nasch.cli import main
 
     start = time.monotonic()
     res = CliRunner().invoke(main, ["table", "--lengths", "8,10", "--mc-steps", "0",
@@ -89,7 +89,7 @@ def test_serial_table_equals_worker_processes_bit_for_bit():
     # around the serial call, which must not change a bit of the result.
     from threadpoolctl import threadpool_limits
 
-    from markov.tables import flux_table
+    from nasch.tables import flux_table
 
     kwargs = dict(vmax=2, p=[0.5, 0.25], lengths=[8, 10, 12], densities=[0.5, 0.25],
                   mc_steps=64, mc_length=300, mc_replicas=2, seed=3)

@@ -8,10 +8,10 @@ import pytest
 from markov import (ConvergenceError, InvalidParameterError, Ring, RingChain, SOLVERS,
                     StateSpaceTooLargeError, solve, stationary)
 from markov.chain import AUTO_MATRIX_STATES
-from markov.factored import FactoredOperator
+from markov._factored import FactoredOperator
 from markov.memory import factored_bytes_per_state, memory_limit, solver_vectors
-from markov.operator import TransitionOperator
-from markov.space import recurrent_keys
+from markov._sequential import TransitionOperator
+from markov.statespace import recurrent_keys
 from markov.solvers import PRODUCT_METHODS
 from markov.transition import transition_matrix
 
@@ -152,7 +152,7 @@ def test_errors_say_what_is_allowed():
 def test_cli_solve_operator_and_method_options():
     from click.testing import CliRunner
 
-    from markov.cli import main
+    from nasch.cli import main
 
     args = ["solve", "-L", "14", "-N", "7", "--p", "0.5", "--json"]
     runner = CliRunner()

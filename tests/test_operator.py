@@ -4,9 +4,9 @@ import pytest
 
 from markov import Ring
 from markov import InvalidParameterError
-from markov.operator import KeyIndex, TransitionOperator, canonical_keys, rank_keys, successor_keys
-from markov.space import recurrent_keys
-from markov.states import decode, encode
+from markov._sequential import KeyIndex, TransitionOperator, canonical_keys, rank_keys, successor_keys
+from markov.statespace import recurrent_keys
+from markov.encoding import decode, encode
 from markov.transition import successors, transition_matrix
 
 CASES = [  # (L, N, vmax, update): B = 3 and 5 take the division path, B = 4 and 8 bit shifts

@@ -14,7 +14,7 @@ import pytest
 from markov import Ring
 from markov.goe_patterns import elementary_patterns
 from markov.simulate import simulate
-from markov.tables import mc_ring
+from nasch.tables import mc_ring
 from symbolic import approximate
 from symbolic.cluster import cluster_fixed_point, word_probability
 from symbolic.comf import comf_state, comf_word_probability

@@ -9,9 +9,9 @@ from click.testing import CliRunner
 
 import naive
 from markov import InvalidParameterError
-from markov.cli import main
-from markov.extrapolate import exact_vmax1_flux
-from markov.plot import fundamental_data, fundamental_figure, save_figure
+from nasch.cli import main
+from nasch.extrapolate import exact_vmax1_flux
+from nasch.plot import fundamental_data, fundamental_figure, save_figure
 
 SMALL = dict(lengths=[6], extrapolation_lengths=[6, 8, 10],
              extrapolation_densities=[Fraction(1, 2)], mc_length=500, mc_steps=400,

@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from markov import InvalidParameterError, Ring, solve
-from markov.cli import main
+from nasch.cli import main
 from markov.simulate import blocking_error, evolve, initial_configuration, simulate
 
 

@@ -11,7 +11,7 @@ import sys
 import pytest
 from click.testing import CliRunner
 
-from markov.cli import _LAZY, main
+from nasch.cli import _LAZY, main
 
 HEAVY = ("sympy", "dask", "distributed", "matplotlib")
 
@@ -35,16 +35,16 @@ def test_import_markov_loads_no_heavy_library():
 def test_solver_and_library_modules_load_neither_sympy_dask_nor_matplotlib():
     loaded = _top(_modules_after(
         "from markov import Ring, solve\n"
-        "import markov.tables, markov.plot, markov.sweep, markov.simulate, markov.goe\n"
-        "import markov.storage, markov.extrapolate\n"
+        "import nasch.tables, nasch.plot, nasch.sweep, markov.simulate, markov.goe\n"
+        "import markov.storage, nasch.extrapolate\n"
         "solve(Ring(8, 4, 2, 0.5)).flux"))
     assert not loaded & set(HEAVY)
     assert "numpy" in loaded   # the check itself works
 
 
 def test_the_cli_module_loads_only_click():
-    # nasch --help imports markov.cli alone: no numpy, scipy, numba or sympy
-    loaded = _top(_modules_after("import markov.cli"))
+    # nasch --help imports nasch.cli alone: no numpy, scipy, numba or sympy
+    loaded = _top(_modules_after("import nasch.cli"))
     assert not loaded & {*HEAVY, "numpy", "scipy", "numba", "symbolic", "tqdm"}
 
 

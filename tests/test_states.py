@@ -5,7 +5,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from markov import InvalidParameterError
-from markov.states import (canonical, check_encodable, compact_jam_key, decode, encode,
+from markov.encoding import (canonical, check_encodable, compact_jam_key, decode, encode,
                            from_text, max_length, orbit_size, powers, to_text)
 
 

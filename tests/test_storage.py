@@ -18,7 +18,7 @@ from click.testing import CliRunner
 
 import naive
 from markov import InvalidParameterError, Ring, load_solution, solve
-from markov.cli import main
+from nasch.cli import main
 from markov.storage import ENCODING, decode_keys, rotation_counts, top_configurations
 
 CASES = [(8, 3, 2, 0.5, "parallel"), (7, 3, 1, 0.25, "parallel"), (9, 4, 3, 0.75, "parallel"),

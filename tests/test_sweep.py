@@ -5,8 +5,8 @@ import time
 
 import pytest
 
-from markov.sweep import run_jobs
-from markov.tables import flux_table
+from nasch.sweep import run_jobs
+from nasch.tables import flux_table
 
 distributed = pytest.importorskip("dask.distributed")
 
@@ -47,7 +47,7 @@ def test_table_identical_serial_and_distributed(client):
 
 def test_automatic_choice(monkeypatch):
     calls = []
-    monkeypatch.setattr("markov.sweep._run_dask", lambda *a: calls.append(a) or [0, 0])
+    monkeypatch.setattr("nasch.sweep._run_dask", lambda *a: calls.append(a) or [0, 0])
     assert run_jobs(abs, [-1, 2], cost=lambda j: 0.1) == [1, 2]        # tiny: serial
     assert calls == []
     run_jobs(abs, [-1, 2], cost=lambda j: 10.0)                           # big: Dask

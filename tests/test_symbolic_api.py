@@ -7,7 +7,7 @@ import pytest
 from click.testing import CliRunner
 
 from markov import InvalidParameterError
-from markov.cli import main
+from nasch.cli import main
 from symbolic import APPROXIMATIONS, Approximation, approximate, label, method_name, supported
 
 

@@ -13,10 +13,10 @@ from click.testing import CliRunner
 
 import naive
 from markov import InvalidParameterError, OutputError
-from markov.cli import main
-from markov.extrapolate import exact_vmax1_flux
-from markov.io import write_atomic
-from markov.tables import FORMATS, flux_table, mc_ring, table_points
+from nasch.cli import main
+from nasch.extrapolate import exact_vmax1_flux
+from markov.files import write_atomic
+from nasch.tables import FORMATS, flux_table, mc_ring, table_points
 
 
 @pytest.fixture(scope="module")

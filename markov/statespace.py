@@ -6,7 +6,7 @@ single closed class: everything reachable from the jam.  (A single car is the
 exception: it settles at velocities ``w - 1`` and ``w``, ``w = min(vmax, L - 1)``,
 and the search starts there.)  We find it by breadth-first search
 over the *support* of the successor relation, which does not depend on ``p``.
-Sets of states are sorted ``int64`` key arrays (:mod:`markov.states`), 8 bytes
+Sets of states are sorted ``int64`` key arrays (:mod:`markov.encoding`), 8 bytes
 per state, merged level by level; no Python containers of states.
 """
 from __future__ import annotations
@@ -19,9 +19,9 @@ from numba import njit
 
 from .errors import StateSpaceTooLargeError
 from .memory import gib, memory_limit, search_bytes_per_state
-from .model import PARALLEL, Ring
+from .ring import PARALLEL, Ring
 from .progress import progress_bar
-from .states import canonical, check_encodable, compact_jam_key, encode, powers, unique_keys
+from .encoding import canonical, check_encodable, compact_jam_key, encode, powers, unique_keys
 
 __all__ = ["recurrent_keys", "all_keys", "count_all"]
 
@@ -50,10 +50,10 @@ def _not_in(sorted_set: np.ndarray, candidates: np.ndarray) -> np.ndarray:
 def _successor_set(ring: Ring, frontier: np.ndarray, lump: bool) -> np.ndarray:
     """Sorted distinct successors of the frontier states (the support of ``x P``)."""
     if ring.update == PARALLEL:
-        from .factored import frontier_successors
+        from ._factored import frontier_successors
 
         return frontier_successors(ring, frontier, lump)
-    from .operator import successor_keys
+    from ._sequential import successor_keys
 
     return unique_keys(successor_keys(ring, frontier, lump)[1])
 
@@ -87,12 +87,12 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
     -----
     Breadth-first search from the compact jam over the support of the
     successor relation.  Parallel update walks the per-car levels of
-    :func:`markov.factored.frontier_successors` (successors merged at every
+    :func:`markov._factored.frontier_successors` (successors merged at every
     level, about three words per state) instead of ``2**k`` keys per state.
 
     Examples
     --------
-    >>> from markov.model import Ring
+    >>> from markov.ring import Ring
     >>> len(recurrent_keys(Ring(3, 1, 1, 0.5), lump=False))   # 1 car, v in {0, 1}
     6
     """

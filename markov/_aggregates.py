@@ -19,9 +19,9 @@ import numpy as np
 from numba import njit, prange
 
 from .errors import InvalidParameterError
-from .model import PARALLEL, Ring
+from .ring import PARALLEL, Ring
 from .solvers import Aggregates
-from .states import smallest_rotation, unique_keys
+from .encoding import smallest_rotation, unique_keys
 from .transition import _cars_of
 
 __all__ = ["position_aggregates"]
@@ -69,7 +69,7 @@ def position_aggregates(ring: Ring, keys: np.ndarray, lump: bool) -> Aggregates:
 
     Examples
     --------
-    >>> from markov.space import recurrent_keys
+    >>> from markov.statespace import recurrent_keys
     >>> ring = Ring(6, 3, 2, 0.5)
     >>> agg = position_aggregates(ring, recurrent_keys(ring), lump=True)
     >>> agg.count      # rotation classes of 3 occupied cells among 6

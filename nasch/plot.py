@@ -10,7 +10,7 @@ For each braking probability ``p`` one panel shows, against the density ``c``:
   (open markers);
 * the ``L -> infinity`` extrapolation of the exact fluxes at commensurate
   densities (filled diamonds with the error estimate of
-  :func:`markov.extrapolate.extrapolate`).
+  :func:`nasch.extrapolate.extrapolate`).
 
 :func:`fundamental_data` computes the numbers (testable without drawing);
 :func:`fundamental_figure` draws them; :func:`save_figure` writes PNG or PDF
@@ -31,9 +31,9 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import InvalidParameterError, NaschError
+from markov.errors import InvalidParameterError, NaschError
 from .extrapolate import commensurate_lengths, extrapolate
-from .io import write_bytes_atomic
+from markov.files import write_bytes_atomic
 from .sweep import run_jobs
 from .tables import (_derived_seed, _task_cost, ensure_mc_steps, exact_job, mc_job, mc_ring,
                      preflight)
@@ -102,11 +102,11 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
         (the extrapolated densities are added); ``mc_steps = 0``: no Monte Carlo.
     seed : int
     serial, scheduler, client
-        See :func:`markov.sweep.run_jobs`.
+        See :func:`nasch.sweep.run_jobs`.
     budget : float, optional
         Seconds of exact solving per extrapolated density and panel: the
         ``order + 2`` largest rings of each density that fit
-        (:func:`markov.budget.lengths_within_budget`), instead of
+        (:func:`nasch.budget.lengths_within_budget`), instead of
         ``extrapolation_lengths``.
 
     Returns
@@ -123,8 +123,8 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     >>> [round(float(x), 6) for x in d["exact"][6][1]]
     [0.083333, 0.145833, 0.171053, 0.145833, 0.083333]
     """
-    from .states import max_length
-    from .validate import ensure_int
+    from markov.encoding import max_length
+    from markov.validate import ensure_int
 
     single = np.ndim(p) == 0
     ps = [float(p)] if single else [float(x) for x in p]

@@ -54,10 +54,10 @@ import scipy.sparse.linalg as spla
 from numba import njit, prange
 
 from .errors import InvalidParameterError
-from .model import PARALLEL, Ring
-from .operator import _canon, _shift_bits
+from .ring import PARALLEL, Ring
+from ._sequential import _canon, _shift_bits
 from .rules import deterministic_velocity
-from .states import check_encodable, powers, rotate_mask, unique_keys
+from .encoding import check_encodable, powers, rotate_mask, unique_keys
 from .transition import _cars_of, _gap
 
 __all__ = ["FactoredOperator", "word_bits", "frontier_successors"]
@@ -275,7 +275,7 @@ class FactoredOperator:
         The system (parallel update, ``N >= 1``); ``ring.p`` gives the weights.
     keys : (n,) int64 array, sorted
         A closed set of (canonical, if ``lump``) state keys, e.g. the
-        recurrent class (:func:`markov.space.recurrent_keys`).
+        recurrent class (:func:`markov.statespace.recurrent_keys`).
     lump : bool
         Whether ``keys`` are rotation classes.
 
@@ -296,7 +296,7 @@ class FactoredOperator:
 
     Examples
     --------
-    >>> from markov.space import recurrent_keys
+    >>> from markov.statespace import recurrent_keys
     >>> ring = Ring(3, 1, 1, 0.5)            # one car: rotation classes v = 0, v = 1
     >>> op = FactoredOperator(ring, recurrent_keys(ring), lump=True)
     >>> op.apply(np.array([1.0, 0.0])).tolist()   # from v = 0: v' = 1 or 0, each 1/2

@@ -3,14 +3,14 @@
 * :func:`_canon` (and :func:`canonical_keys`): the smallest rotation of a key,
   with bit rotations when ``B = vmax + 2`` is a power of two (``vmax = 2, 6``),
   trying only the rotations that start a longest empty run; otherwise
-  :func:`markov.states.canonical`.
+  :func:`markov.encoding.canonical`.
 * :class:`KeyIndex`: rank a key among the sorted states through a hash table.
 * :class:`TransitionOperator`: the row operator of the random-sequential
   sub-step chain.  A sub-step has at most ``2 N + 1`` successors (an empty
   cell drawn, or one car updated, braking or not), so the kernel regenerates
   each row from the rules, canonicalises and ranks its successors and scatters
   ``x_i P_ij``; nothing of size "transitions" is stored.  Parallel update is
-  applied by :class:`markov.factored.FactoredOperator`.
+  applied by :class:`markov._factored.FactoredOperator`.
 
 Memory: per state the key (8 bytes), the rank hash table (24 to 48, at most
 half full), one accumulator per thread (8 each), and the solver's work
@@ -32,9 +32,9 @@ from numba.core import cgutils, types
 from numba.extending import intrinsic
 
 from .errors import InvalidParameterError
-from .model import PARALLEL, Ring
+from .ring import PARALLEL, Ring
 from .rules import deterministic_velocity, randomize
-from .states import base, canonical, check_encodable, powers
+from .encoding import base, canonical, check_encodable, powers
 from .transition import _cars_of, _gap, _term
 
 __all__ = ["KeyIndex", "TransitionOperator", "rank_keys", "canonical_keys", "successor_keys"]
@@ -75,7 +75,7 @@ def _canon(key, length, pw, bits):
     With ``B = 2**bits`` the smallest rotation puts the end of a longest run of
     empty cells at the top digit, so only those rotations are tried: the cells
     ending a longest run are found with a few whole-word masks, one pass per
-    run length.  Otherwise fall back to :func:`markov.states.canonical`.
+    run length.  Otherwise fall back to :func:`markov.encoding.canonical`.
     """
     if bits == 0:
         return canonical(key, length, pw)
@@ -298,7 +298,7 @@ def successor_keys(ring: Ring, keys: np.ndarray, lump: bool) -> tuple[np.ndarray
     ----------
     ring : Ring
         Random-sequential update (parallel update:
-        :func:`markov.factored.frontier_successors`).
+        :func:`markov._factored.frontier_successors`).
     keys : (n,) int64 array
     lump : bool
         Canonical rotations of the successors.
@@ -344,7 +344,7 @@ class TransitionOperator:
         The system (random-sequential update); ``ring.p`` gives the weights.
     keys : (n,) int64 array, sorted
         A closed set of (canonical, if ``lump``) keys, e.g. from
-        :func:`markov.space.recurrent_keys`.
+        :func:`markov.statespace.recurrent_keys`.
     lump : bool
         Whether ``keys`` are rotation classes.
 
@@ -365,7 +365,7 @@ class TransitionOperator:
 
     Examples
     --------
-    >>> from markov.space import recurrent_keys
+    >>> from markov.statespace import recurrent_keys
     >>> ring = Ring(3, 1, 1, 0.5, "random-sequential")   # one car: v = 0 or 1
     >>> keys = recurrent_keys(ring, lump=True)
     >>> op = TransitionOperator(ring, keys, lump=True)
@@ -377,7 +377,7 @@ class TransitionOperator:
         if ring.update == PARALLEL:
             raise InvalidParameterError(
                 "the row operator is for random-sequential update; parallel update is"
-                " applied by markov.factored.FactoredOperator")
+                " applied by markov._factored.FactoredOperator")
         check_encodable(ring.length, ring.vmax)
         self.ring = ring
         self.lump = bool(lump)

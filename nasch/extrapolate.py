@@ -43,8 +43,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import InvalidParameterError
-from .model import PARALLEL, Ring
+from markov.errors import InvalidParameterError
+from markov.ring import PARALLEL, Ring
 
 __all__ = ["Extrapolation", "extrapolate", "commensurate_lengths", "extrapolate_flux",
            "exact_vmax1_flux"]
@@ -233,7 +233,7 @@ def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int] | None = None
     budget : float, optional
         Seconds for the exact rings instead of ``lengths``: the ``n_fit``
         (default ``order + 2``) largest rings of this density that fit
-        (:func:`markov.budget.lengths_within_budget`).
+        (:func:`nasch.budget.lengths_within_budget`).
 
     Returns
     -------
@@ -245,7 +245,7 @@ def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int] | None = None
     >>> abs(e.f_inf - exact_vmax1_flux(0.5, 0.5)) < e.error
     True
     """
-    from .chain import solve
+    from markov.chain import solve
 
     c = Fraction(density).limit_denominator(1000)
     if budget is not None:

@@ -7,19 +7,19 @@ For each point ``(vmax, p, c)`` of a grid:
   enumerate, is left empty and the reason kept in ``notes``);
 * Monte Carlo: ``mc_replicas`` runs of ``mc_steps`` steps (after as many
   warm-up steps) on a ring of at least ``mc_length`` cells with density exactly
-  ``c`` (:func:`markov.tables.mc_job`), flux and 1-sigma error of
+  ``c`` (:func:`nasch.tables.mc_job`), flux and 1-sigma error of
   :func:`markov.simulate.simulate`; this is the reference;
 * the ``L -> infinity`` extrapolation of the exact fluxes of the rings among
   ``lengths`` with ``c L`` an integer and at most ``max_states`` rotation
   classes (counted exactly first, :func:`markov.goe_census.recurrent_class_count`),
-  when three or more fit (:func:`markov.extrapolate.extrapolate`, order 2).
+  when three or more fit (:func:`nasch.extrapolate.extrapolate`, order 2).
 
 The deviation of a method is ``(f - f_MC) / f_MC``; ``best`` is the method
 with the smallest ``|deviation|``.  Rendered in the formats of ``nasch table``
 (text, csv, md, latex, json); :func:`deviation_figure` draws the deviations
 against ``c``, one panel per ``(vmax, p)``.
 
-Monte Carlo runs and exact rings fan out through :func:`markov.sweep.run_jobs`
+Monte Carlo runs and exact rings fan out through :func:`nasch.sweep.run_jobs`
 (each a pure function of its point, seeds derived from the point); the
 approximations run here, all densities of a ``(vmax, p, method)`` at once.
 """
@@ -37,7 +37,7 @@ import numpy as np
 
 from markov.errors import InvalidParameterError, NaschError
 
-from . import APPROXIMATIONS, approximate, label, method_name, supported
+from symbolic import APPROXIMATIONS, approximate, label, method_name, supported
 
 __all__ = ["DEFAULT_DENSITIES", "DEFAULT_METHODS", "StudyTable", "convergence_study",
            "deviation_figure"]
@@ -49,7 +49,7 @@ FORMATS = ("text", "csv", "md", "latex", "json")
 
 def _job(task):
     """One Monte Carlo run or exact ring (module level: travels to Dask workers)."""
-    from markov.tables import exact_job, mc_job
+    from nasch.tables import exact_job, mc_job
 
     kind, point = task
     if kind == "mc":
@@ -61,7 +61,7 @@ def _job(task):
 
 
 def _cost(task) -> float:
-    from markov.tables import _task_cost
+    from nasch.tables import _task_cost
     return _task_cost(task)
 
 
@@ -121,7 +121,7 @@ class StudyTable:
         return json.dumps(self.to_dict(), indent=2) + "\n"
 
     def to_csv(self) -> str:
-        from markov.tables import _g
+        from nasch.tables import _g
 
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
@@ -137,7 +137,7 @@ class StudyTable:
         return buf.getvalue()
 
     def _cells(self, latex: bool) -> tuple[list[str], list[list[str]]]:
-        from markov.tables import _pm
+        from nasch.tables import _pm
 
         head = ["vmax", "p", "c", "Monte Carlo", "exact L->inf"] + [label(m) for m in
                                                                    self.methods] + ["best"]
@@ -217,7 +217,7 @@ class StudyTable:
 
 def _exact_rings(vmax: int, c: Fraction, lengths, max_states: int) -> list[tuple[int, int]]:
     """Rings ``(L, c L)`` among ``lengths`` with at most ``max_states`` rotation classes."""
-    from markov.extrapolate import commensurate_lengths
+    from nasch.extrapolate import commensurate_lengths
     from markov.goe_census import recurrent_class_count
 
     out = []
@@ -255,7 +255,7 @@ def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequen
     seed : int
         Base seed of the Monte Carlo runs.
     serial, scheduler
-        See :func:`markov.sweep.run_jobs`.
+        See :func:`nasch.sweep.run_jobs`.
 
     Returns
     -------
@@ -270,9 +270,9 @@ def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequen
     """
     import time
 
-    from markov.extrapolate import extrapolate
-    from markov.sweep import run_jobs
-    from markov.tables import _derived_seed, mc_ring
+    from nasch.extrapolate import extrapolate
+    from nasch.sweep import run_jobs
+    from nasch.tables import _derived_seed, mc_ring
 
     start = time.perf_counter()
     vmaxes = [int(v) for v in vmax]

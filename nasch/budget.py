@@ -1,7 +1,7 @@
 """Rings chosen by budget: the largest rings of a density whose exact solve fits.
 
 The exact finite-ring flux converges to the infinite road like a power series
-in ``1/L`` (:mod:`markov.extrapolate`), so the largest rings one can afford
+in ``1/L`` (:mod:`nasch.extrapolate`), so the largest rings one can afford
 are worth most.  Which ones one can afford follows from the size of the
 recurrent class, known *before* enumerating it: the Garden of Eden transfer
 matrix counts the recurrent configurations exactly
@@ -24,8 +24,8 @@ import math
 import re
 from fractions import Fraction
 
-from .errors import InvalidParameterError
-from .model import PARALLEL, Ring
+from markov.errors import InvalidParameterError
+from markov.ring import PARALLEL, Ring
 
 __all__ = ["parse_budget", "predicted_classes", "predicted_seconds", "lengths_within_budget",
            "MAX_BUDGET_LENGTH"]
@@ -78,8 +78,8 @@ def predicted_classes(length: int, cars: int, vmax: int, update: str = PARALLEL)
     Exact count / L (a lower bound by at most the periodic orbits) where the
     transfer-matrix count exists; otherwise every configuration over ``L``.
     """
-    from .chain import predicted_states
-    from .space import count_all
+    from markov.chain import predicted_states
+    from markov.statespace import count_all
 
     ring = Ring(length, cars, vmax, 0.5, update)
     n = predicted_states(ring, lump=True)
@@ -90,7 +90,7 @@ def _products(p: float) -> float:
     """Products ``x P`` of the solver ``auto`` picks, measured at L = 22: aggregation
     18-22 up to p = 0.3 (:data:`markov.chain.AGGREGATION_MAX_P`), BiCGSTAB 59 at
     p = 0.5 and 179 at p = 0.9."""
-    from .chain import AGGREGATION_MAX_P
+    from markov.chain import AGGREGATION_MAX_P
 
     if p <= AGGREGATION_MAX_P:
         return 25.0
@@ -109,8 +109,8 @@ def predicted_seconds(length: int, cars: int, vmax: int, p: float,
 
 def _solvable(length: int, cars: int, vmax: int, update: str) -> bool:
     """Whether the exact solver can represent the ring at all (64-bit keys and words)."""
-    from .factored import word_bits
-    from .states import max_length
+    from markov._factored import word_bits
+    from markov.encoding import max_length
 
     if length > max_length(vmax):
         return False

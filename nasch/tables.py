@@ -5,10 +5,10 @@ finite chain, the mean-field (MF), paradisical mean-field (pMF, pMF2) and
 2-cluster fluxes at the same density ``c = N / L`` (from :mod:`symbolic`), and a
 Monte Carlo flux with its batch-means error bar on a large ring of exactly the
 same density.  For every density with enough ring sizes an extra row holds the
-``L -> infinity`` extrapolation of the exact fluxes (:mod:`markov.extrapolate`).
+``L -> infinity`` extrapolation of the exact fluxes (:mod:`nasch.extrapolate`).
 
 The work (exact chains, Monte Carlo runs) fans out over Dask through
-:func:`markov.sweep.run_jobs`; every job is a pure function of its point, so
+:func:`nasch.sweep.run_jobs`; every job is a pure function of its point, so
 the table is identical whichever way it was computed.
 
 Exports: :meth:`FluxTable.render` with ``fmt`` in :data:`FORMATS`.
@@ -27,12 +27,12 @@ from typing import Sequence
 
 import numpy as np
 
-from .errors import InvalidParameterError
+from markov.errors import InvalidParameterError
 from .extrapolate import commensurate_lengths, extrapolate
-from .model import PARALLEL, UPDATES, Ring
-from .simulate import DEFAULT_BATCHES
+from markov.ring import PARALLEL, UPDATES, Ring
+from markov.simulate import DEFAULT_BATCHES
 from .sweep import run_jobs
-from .validate import ensure_int
+from markov.validate import ensure_int
 
 __all__ = ["FORMATS", "APPROXIMATIONS", "FluxTable", "flux_table", "table_points",
            "exact_job", "mc_job", "mc_ring", "ensure_mc_steps", "preflight"]
@@ -47,7 +47,7 @@ _LABELS = {"mf": "MF", "pmf": "pMF", "pmf2": "pMF2", "cluster2": "2-cluster"}
 
 def exact_job(point: tuple) -> dict:
     """Exact stationary flux of one ring; ``point = (length, cars, vmax, p, update)``."""
-    from .chain import solve
+    from markov.chain import solve
 
     length, cars, vmax, p, update = point
     sol = solve(Ring(length, cars, vmax, p, update))
@@ -60,7 +60,7 @@ def mc_job(point: tuple) -> dict:
 
     ``point = (length, cars, vmax, p, update, steps, warmup, seed[, replicas])``.
     """
-    from .simulate import simulate
+    from markov.simulate import simulate
 
     length, cars, vmax, p, update, steps, warmup, seed, *rest = point
     replicas = rest[0] if rest else 1
@@ -103,8 +103,8 @@ def preflight(tasks) -> None:
     """Instant checks of every job before any runs: a ring beyond the exact
     solver's 64-bit key, or a Monte Carlo ring too large for memory, is refused
     here rather than after the other jobs have been computed."""
-    from .simulate import _ensure_memory
-    from .validate import ensure_chain_arguments
+    from markov.simulate import _ensure_memory
+    from markov.validate import ensure_chain_arguments
 
     for kind, point in tasks:
         ring = Ring(*point[:5])
@@ -358,7 +358,7 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
     budget : float, optional
         Seconds of exact solving per density and ``p``, instead of ``lengths``:
         the ``order + 2`` largest rings of each density that fit
-        (:func:`markov.budget.lengths_within_budget`); needs ``densities``
+        (:func:`nasch.budget.lengths_within_budget`); needs ``densities``
         (or the default half filling), not ``cars``.
     update : {"parallel", "random-sequential"}
     mc_steps : int
@@ -380,9 +380,9 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
     extrapolation : bool
         Add an ``L = inf`` row per density with at least ``order + 1`` sizes.
     order : int
-        Order of the ``1/L`` series (see :func:`markov.extrapolate.extrapolate`).
+        Order of the ``1/L`` series (see :func:`nasch.extrapolate.extrapolate`).
     serial, scheduler, client, n_workers
-        How to run the jobs (see :func:`markov.sweep.run_jobs`).
+        How to run the jobs (see :func:`nasch.sweep.run_jobs`).
 
     Returns
     -------

@@ -1,68 +1,16 @@
-"""The ``nasch`` command line.
-
-Every subcommand validates through :class:`markov.model.Ring` and friends;
-errors of this package (:class:`markov.errors.NaschError`) and click's usage
-errors are printed as one line ``error: ...`` with exit status 2, never as a
-traceback; Ctrl-C gives one line and exit status 130.
-
-Start-up: this module imports only click and :mod:`markov.cli_common`.  The
-subcommands living in other modules are imported when they run
-(:class:`markov.cli_common.NaschGroup`), and each command imports numpy,
-the solver, sympy, Dask or matplotlib inside its body, so ``nasch --help``
-and a small ``nasch solve`` do not pay for the libraries they do not use.
-"""
+"""``nasch solve``: the exact stationary state of one ring."""
 from __future__ import annotations
 
 import click
 
-from .cli_common import NaschGroup, emit_json, handle_errors, quiet_option, run_console
+from markov.choices import DEFAULT_TOL, METHODS, OPERATORS
 
-from .choices import METHODS, OPERATORS
+from ..cli_common import emit_json, handle_errors, quiet_option
 
-__all__ = ["main", "run"]
-
-# subcommand -> (module, attribute, summary for ``nasch --help``); the summaries
-# are checked against the commands' own docstrings in tests/test_cli.py
-_LAZY = {
-    "approx": ("symbolic.cli", "approx",
-               "Stationary c_v and flux of an analytic approximation."),
-    "derive": ("symbolic.cli", "derive",
-               "Print the equations of an approximation, derived from the update rules."),
-    "goe": ("markov.goe_cli", "goe",
-            "Elementary Garden of Eden patterns (exhaustive) or a ring's GoE census."),
-    "plot": ("markov.products_cli", "plot", "Figures (PNG or PDF, by the file extension)."),
-    "simulate": ("markov.products_cli", "simulate",
-                 "Monte Carlo flux of a large ring, with a batch-means error bar."),
-    "study": ("symbolic.cli", "study",
-              "Convergence study: every approximation against Monte Carlo and exact rings."),
-    "table": ("markov.products_cli", "table",
-              "Exact finite-ring fluxes beside MF, pMF, 2-cluster and Monte Carlo."),
-}
+__all__ = ["solve"]
 
 
-@click.group(cls=NaschGroup, lazy=_LAZY,
-             context_settings={"help_option_names": ["-h", "--help"]})
-@click.version_option(package_name="nasch-exact")
-def main():
-    """Exact stationary states of the Nagel-Schreckenberg model on small rings.
-
-    \b
-    Examples:
-      nasch solve -L 12 -N 6 --vmax 2 --p 0.5             exact flux, c_v, residual
-      nasch solve -L 10 -N 5 --p 0.5 --top 5 --save pi.npz  likeliest states; pi on disk
-      nasch approx --method pmf --vmax 2 --p 0.5 -c 0.25    an analytic approximation
-      nasch approx --method cluster --order 4 --p 0.5 -c 0.25   the 4-cluster approximation
-      nasch derive --method mf --vmax 2 --latex            its equations
-      nasch goe --vmax 2 --max-cells 12                    Garden of Eden patterns
-      nasch goe --census -L 12 -N 6 --vmax 2               GoE census of one ring
-      nasch table --vmax 2 --p 0.5 --lengths 8,10,12 --density 0.5 --format md
-      nasch simulate --length 100000 --density 0.2 --vmax 2 --p 0.5 --steps 1000
-      nasch plot fundamental --vmax 2 --p 0.5 --output fig.png
-      nasch study --vmax 2 --p 0.5 --density 0.25,0.5 --figure dev.png   which is best
-    """
-
-
-@main.command()
+@click.command()
 @click.option("--length", "-L", type=int, required=True, help="Ring length L (cells).")
 @click.option("--cars", "-N", type=int, required=True, help="Number of cars N, 0 <= N <= L.")
 @click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity >= 1.")
@@ -75,7 +23,7 @@ def main():
 @click.option("--operator", type=click.Choice(OPERATORS), default="auto", show_default=True,
               help="Assemble P, or apply x -> xP without storing it (parallel update:"
                    " factored car by car).")
-@click.option("--tol", type=float, default=1e-13, show_default=True,
+@click.option("--tol", type=float, default=DEFAULT_TOL, show_default=True,
               help="Target ||pi P - pi||_1 of the iterative solvers, 1e-15..1e-3.")
 @click.option("--no-lump", is_flag=True, help="Do not lump rotations of the ring.")
 @click.option("--max-memory", type=float, default=None,
@@ -102,10 +50,10 @@ def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_mem
       nasch solve -L 22 -N 11 --p 0.5 --operator matrix-free --tol 1e-10
     """
     # every check before the work: the solver's own up-front checks, then the options
-    from .chain import solve as solve_ring
-    from .io import check_output_path
-    from .model import Ring
-    from .validate import ensure_int, ensure_max_memory
+    from markov.chain import solve as solve_ring
+    from markov.files import check_output_path
+    from markov.ring import Ring
+    from markov.validate import ensure_int, ensure_max_memory
 
     ring = Ring(length, cars, vmax, p, update)
     max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
@@ -159,12 +107,3 @@ def _echo_top(rows: list[dict], lumped: bool, n_states: int) -> None:
             line += (f"  (class of {r['rotations']} rotation{'s' if r['rotations'] > 1 else ''},"
                      f" each {r['probability_each']:.6g})")
         click.echo(line)
-
-
-def run() -> None:
-    """The ``nasch`` console script (``python -m markov.cli`` too)."""
-    run_console(main)
-
-
-if __name__ == "__main__":  # pragma: no cover
-    run()

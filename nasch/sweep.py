@@ -44,8 +44,8 @@ import threading
 from typing import Any, Callable, Sequence
 from urllib.parse import urlsplit
 
-from .errors import InvalidParameterError, NaschError
-from .progress import progress_bar
+from markov.errors import InvalidParameterError, NaschError
+from markov.progress import progress_bar
 
 __all__ = ["run_jobs", "default_workers", "single_threaded", "parse_scheduler_address",
            "SINGLE_THREADED_ENV", "CONNECT_TIMEOUT"]
@@ -147,7 +147,7 @@ def run_jobs(func: Callable[[Any], Any], jobs: Sequence[Any], *, serial: bool | 
         else:
             serial = cost is not None and sum(cost(j) for j in jobs) < serial_below
     if n_workers is not None:
-        from .validate import ensure_int
+        from markov.validate import ensure_int
         n_workers = ensure_int("n_workers", n_workers, 1)
     if scheduler is not None:
         parse_scheduler_address(scheduler)

@@ -1,6 +1,6 @@
 """Helpers shared by every ``nasch`` subcommand module.
 
-Kept apart from :mod:`markov.cli` (which registers the subcommand modules) so
+Kept apart from :mod:`nasch.cli` (which registers the subcommand modules) so
 that those modules can import these without a cycle.  Nothing here imports
 numpy or another heavy library: ``nasch --help`` loads only click and this.
 """
@@ -11,18 +11,105 @@ import importlib
 import json
 import signal
 import sys
+from pathlib import Path
 
 import click
 
-from .errors import NaschError
+from markov.errors import InvalidParameterError, NaschError
 
 __all__ = ["handle_errors", "emit_json", "quiet_option", "NaschGroup", "run_console",
+           "number_list", "ensure_probabilities", "output_format", "ensure_dask_options",
            "EXIT_BAD_INPUT", "EXIT_INTERRUPTED"]
 
 #: Exit status of every refusal (bad option, bad value, too large): click's own.
 EXIT_BAD_INPUT = 2
 #: Exit status after Ctrl-C: 128 + SIGINT, as a shell reports it.
 EXIT_INTERRUPTED = 130
+
+# output format of a table written to a file, by the file's extension
+_EXT_FORMAT = {".csv": "csv", ".md": "md", ".tex": "latex", ".json": "json", ".txt": "text"}
+
+
+def number_list(name: str, text: str, kind: type = float) -> list:
+    """A comma-separated option value parsed as ``kind`` (float or int).
+
+    Parameters
+    ----------
+    name : str
+        The option, for the message (``"--p"``).
+    text : str
+        Its value, e.g. ``"0.25,0.5"``.
+    kind : type
+        ``float`` or ``int``.
+
+    Returns
+    -------
+    list
+        The values, at least one.
+
+    Raises
+    ------
+    InvalidParameterError
+        For an item that does not parse, or no item at all.
+    """
+    what = "integers" if kind is int else "numbers"
+    try:
+        values = [kind(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise InvalidParameterError(
+            f"{name} must be a comma-separated list of {what}, got {text!r}") from None
+    if not values:
+        raise InvalidParameterError(f"{name} must not be empty")
+    return values
+
+
+def ensure_probabilities(values: list[float], name: str = "--p") -> list[float]:
+    """Braking probabilities of a sweep, each strictly inside ``(0, 1)``.
+
+    Parameters
+    ----------
+    values : list of float
+    name : str
+        The option, for the message.
+
+    Returns
+    -------
+    list of float
+    """
+    from markov.validate import ensure_open_probability
+
+    return [ensure_open_probability(p, name) for p in values]
+
+
+def output_format(output: str | None) -> str:
+    """The table format implied by an output file's extension; ``text`` otherwise.
+
+    Parameters
+    ----------
+    output : str or None
+        The ``--output`` path.
+
+    Returns
+    -------
+    str
+        One of ``text, csv, md, latex, json``.
+    """
+    return _EXT_FORMAT.get(Path(output).suffix.lower(), "text") if output else "text"
+
+
+def ensure_dask_options(serial: bool, scheduler: str | None) -> None:
+    """Refuse ``--serial`` with ``--scheduler``, and a malformed scheduler address.
+
+    Parameters
+    ----------
+    serial : bool
+    scheduler : str or None
+    """
+    if serial and scheduler is not None:
+        raise InvalidParameterError("give either --serial or --scheduler, not both")
+    if scheduler is not None:
+        from .sweep import parse_scheduler_address
+        parse_scheduler_address(scheduler)
 
 
 def handle_errors(func):
@@ -66,7 +153,7 @@ def quiet_option(func):
     """``--quiet``: no progress bars (they are off anyway when stderr is not a TTY)."""
 
     def callback(ctx, param, value):
-        from .progress import set_quiet
+        from markov.progress import set_quiet
         set_quiet(value)
         return value
 

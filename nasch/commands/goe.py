@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import click
 
-from .cli_common import emit_json, handle_errors, quiet_option
-from .errors import InvalidParameterError
+from ..cli_common import emit_json, handle_errors, quiet_option
+from markov.errors import InvalidParameterError
 
 __all__ = ["goe"]
 
@@ -36,7 +36,7 @@ def goe(vmax, max_cells, do_census, length, cars, as_json):
     if do_census:
         if length is None or cars is None:
             raise InvalidParameterError("--census needs --length L and --cars N")
-        from .goe_census import census
+        from markov.goe_census import census
         row = census(length, cars, vmax)
         if as_json:
             emit_json(row)
@@ -53,7 +53,7 @@ def goe(vmax, max_cells, do_census, length, cars, as_json):
         return
     if length is not None or cars is not None:
         raise InvalidParameterError("--length and --cars are used only with --census")
-    from .goe_patterns import elementary_patterns
+    from markov.goe_patterns import elementary_patterns
     result = elementary_patterns(vmax, max_cells)
     if as_json:
         emit_json(result.to_dict())

@@ -1,0 +1,4 @@
+"""``python -m nasch``: the ``nasch`` command line."""
+from .cli import run
+
+run()

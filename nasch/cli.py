@@ -1,0 +1,68 @@
+"""The ``nasch`` command line.
+
+Every subcommand validates through :class:`markov.ring.Ring` and friends;
+errors of this package (:class:`markov.errors.NaschError`) and click's usage
+errors are printed as one line ``error: ...`` with exit status 2, never as a
+traceback; Ctrl-C gives one line and exit status 130.
+
+Start-up: this module imports only click and :mod:`nasch.cli_common`.  Each
+subcommand lives in a module of :mod:`nasch.commands`, imported when it runs
+(:class:`nasch.cli_common.NaschGroup`), and each command imports numpy,
+the solver, sympy, Dask or matplotlib inside its body, so ``nasch --help``
+and a small ``nasch solve`` do not pay for the libraries they do not use.
+"""
+from __future__ import annotations
+
+import click
+
+from .cli_common import NaschGroup, run_console
+
+__all__ = ["main", "run"]
+
+# subcommand -> (module, attribute, summary for ``nasch --help``); the summaries
+# are checked against the commands' own docstrings in tests/test_cli.py
+_LAZY = {
+    "approx": ("nasch.commands.approx", "approx",
+               "Stationary c_v and flux of an analytic approximation."),
+    "derive": ("nasch.commands.approx", "derive",
+               "Print the equations of an approximation, derived from the update rules."),
+    "goe": ("nasch.commands.goe", "goe",
+            "Elementary Garden of Eden patterns (exhaustive) or a ring's GoE census."),
+    "plot": ("nasch.commands.plot", "plot", "Figures (PNG or PDF, by the file extension)."),
+    "simulate": ("nasch.commands.simulate", "simulate",
+                 "Monte Carlo flux of a large ring, with a batch-means error bar."),
+    "solve": ("nasch.commands.solve", "solve",
+              "Exact stationary state of one ring: flux, c_v, gap distribution."),
+    "study": ("nasch.commands.study", "study",
+              "Convergence study: every approximation against Monte Carlo and exact rings."),
+    "table": ("nasch.commands.table", "table",
+              "Exact finite-ring fluxes beside MF, pMF, 2-cluster and Monte Carlo."),
+}
+
+
+@click.group(cls=NaschGroup, lazy=_LAZY,
+             context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="nasch-exact")
+def main():
+    """Exact stationary states of the Nagel-Schreckenberg model on small rings.
+
+    \b
+    Examples:
+      nasch solve -L 12 -N 6 --vmax 2 --p 0.5             exact flux, c_v, residual
+      nasch solve -L 10 -N 5 --p 0.5 --top 5 --save pi.npz  likeliest states; pi on disk
+      nasch approx --method pmf --vmax 2 --p 0.5 -c 0.25    an analytic approximation
+      nasch approx --method cluster --order 4 --p 0.5 -c 0.25   the 4-cluster approximation
+      nasch derive --method mf --vmax 2 --latex            its equations
+      nasch goe --vmax 2 --max-cells 12                    Garden of Eden patterns
+      nasch goe --census -L 12 -N 6 --vmax 2               GoE census of one ring
+      nasch table --vmax 2 --p 0.5 --lengths 8,10,12 --density 0.5 --format md
+      nasch simulate --length 100000 --density 0.2 --vmax 2 --p 0.5 --steps 1000
+      nasch plot fundamental --vmax 2 --p 0.5 --output fig.png
+      nasch study --vmax 2 --p 0.5 --density 0.25,0.5 --figure dev.png   which is best
+    """
+
+
+def run() -> None:
+    """The ``nasch`` console script (``python -m nasch`` too)."""
+    run_console(main)
+

@@ -1,0 +1,64 @@
+"""``nasch simulate``: Monte Carlo flux of a large ring."""
+from __future__ import annotations
+
+import click
+
+from markov.errors import InvalidParameterError
+
+from ..cli_common import emit_json, handle_errors, quiet_option
+
+__all__ = ["simulate"]
+
+
+@click.command()
+@click.option("--length", "-L", type=int, required=True, help="Ring length L (cells).")
+@click.option("--density", "-c", type=float, default=None,
+              help="Car density; N = round(c L).  Give this or --cars.")
+@click.option("--cars", "-N", type=int, default=None, help="Number of cars N.")
+@click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity.")
+@click.option("--p", "p", type=float, required=True, help="Braking probability in [0, 1].")
+@click.option("--steps", type=int, default=10000, show_default=True, help="Measured time steps.")
+@click.option("--warmup", type=int, default=None, help="Discarded time steps [steps/10].")
+@click.option("--batches", type=int, default=32, show_default=True,
+              help="Batches of the batch-means error bar.")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Random seed; the same seed gives identical output.")
+@click.option("--update", type=click.Choice(["parallel", "random-sequential"]),
+              default="parallel", show_default=True, help="Update order.")
+@click.option("--max-memory", type=float, default=None,
+              help="Refuse runs needing more than this many GiB (default 75% of RAM).")
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
+@quiet_option
+@handle_errors
+def simulate(length, density, cars, vmax, p, steps, warmup, batches, seed, update, max_memory,
+             as_json):
+    """Monte Carlo flux of a large ring, with a batch-means error bar.
+
+    \b
+    Example:
+      nasch simulate --length 100000 --density 0.2 --vmax 5 --p 0.25 --steps 2000
+      nasch simulate -L 1000 -c 0.5 --vmax 2 --p 0.5 --seed 7 --json
+    """
+    from markov.ring import Ring
+    from markov.simulate import simulate as run
+    from markov.validate import ensure_int, ensure_max_memory, ensure_real
+
+    if (density is None) == (cars is None):
+        raise InvalidParameterError("give exactly one of --density and --cars")
+    if density is not None:
+        density = ensure_real("--density", density, 0, 1)
+        cars = int(round(density * ensure_int("--length", length, 1)))
+    ring = Ring(length, cars, vmax, p, update)
+    max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
+    r = run(ring, steps=steps, warmup=warmup, seed=seed, batches=batches,
+            max_memory=None if max_memory is None else max_memory * 2**30)
+    if as_json:
+        emit_json(r.to_dict())
+        return
+    click.echo(f"NaSch Monte Carlo L={length} N={cars} (c={ring.density:.6g}) vmax={vmax}"
+               f" p={p:g} update={update} seed={seed}")
+    click.echo(f"  steps {r.steps} (+ {r.warmup} warm-up) in {r.batches} batches,"
+               f" {r.seconds:.2f} s, {r.car_updates_per_s:.3g} car updates/s")
+    click.echo(f"  flux           {r.flux:.8f} +- {r.flux_error:.2g} (1 sigma)")
+    for v, c in enumerate(r.c_v):
+        click.echo(f"  c_{v}            {c:.8f}")

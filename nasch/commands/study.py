@@ -1,0 +1,93 @@
+"""``nasch study``: every approximation against Monte Carlo and exact rings."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from markov.errors import InvalidParameterError
+
+from ..cli_common import (ensure_probabilities, handle_errors, number_list, output_format,
+                          quiet_option)
+
+__all__ = ["study"]
+
+
+@click.command()
+@click.option("--vmax", "vmax_text", default="2,3,5", show_default=True,
+              help="Maximal velocities, comma-separated.")
+@click.option("--p", "p_text", default="0.1,0.25,0.5,0.75", show_default=True,
+              help="Braking probabilities, comma-separated.")
+@click.option("--density", "density_text", default=None,
+              help="Densities, comma-separated [k/20, k = 1..19].")
+@click.option("--methods", "methods_text", default=None,
+              help="Approximations, comma-separated [mf,pmf,pmf2,cluster2..cluster6,comf];"
+                   " those not available for a vmax are skipped.")
+@click.option("--mc-length", type=int, default=10000, show_default=True,
+              help="Monte Carlo ring length (rounded up to match each density exactly).")
+@click.option("--mc-steps", type=int, default=5000, show_default=True,
+              help="Monte Carlo time steps per replica (plus as many warm-up steps).")
+@click.option("--mc-replicas", type=int, default=2, show_default=True,
+              help="Independent Monte Carlo runs per point.")
+@click.option("--lengths", "lengths_text", default="8,9,10,11,12,13,14,15,16",
+              show_default=True,
+              help="Exact rings for the L -> infinity extrapolation ('' for none).")
+@click.option("--max-states", type=int, default=300_000, show_default=True,
+              help="Skip exact rings with more rotation classes (estimated first).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Monte Carlo base seed.")
+@click.option("--format", "fmt", type=click.Choice(["text", "csv", "md", "latex", "json"]),
+              default=None, help="Table format [from the --output extension, else text].")
+@click.option("--output", "-o", type=click.Path(dir_okay=False), default=None,
+              help="Write the table here (atomically) instead of stdout.")
+@click.option("--figure", type=click.Path(dir_okay=False), default=None,
+              help="Also draw the deviation from Monte Carlo against c (.png or .pdf).")
+@click.option("--serial", is_flag=True, help="Run everything in this process (no Dask).")
+@click.option("--scheduler", default=None, help="Address of a running Dask scheduler.")
+@quiet_option
+@handle_errors
+def study(vmax_text, p_text, density_text, methods_text, mc_length, mc_steps, mc_replicas,
+          lengths_text, max_states, seed, fmt, output, figure, serial, scheduler):
+    """Convergence study: every approximation against Monte Carlo and exact rings.
+
+    For each (vmax, p, c): the flux of each approximation, a long Monte Carlo
+    run on a large ring of exactly that density, and where exact rings of that
+    density fit, their L -> infinity extrapolation; the table says which
+    approximation is closest.  The full default grid takes hours: start small.
+
+    \b
+    Example:
+      nasch study --vmax 2 --p 0.5 --density 0.25,0.5 --mc-steps 2000
+      nasch study --vmax 2,3 --p 0.25,0.5 -o study.csv --figure study.png
+    """
+    from ..plot import FIGURE_FORMATS
+    from ..study import DEFAULT_DENSITIES, DEFAULT_METHODS, convergence_study
+
+    if figure is not None and Path(figure).suffix.lower() not in FIGURE_FORMATS:
+        raise InvalidParameterError(
+            f"--figure must end in {' or '.join(FIGURE_FORMATS)}, got {figure!r}")
+    ps = number_list("--p", p_text)
+    ensure_probabilities(ps)
+    if fmt is None:
+        fmt = output_format(output)
+    methods = (DEFAULT_METHODS if methods_text is None
+               else tuple(m.strip() for m in methods_text.split(",") if m.strip()))
+    result = convergence_study(
+        number_list("--vmax", vmax_text, int), ps,
+        DEFAULT_DENSITIES if density_text is None else number_list("--density", density_text),
+        methods=methods, mc_length=mc_length, mc_steps=mc_steps, mc_replicas=mc_replicas,
+        lengths=[] if not lengths_text.strip() else number_list("--lengths", lengths_text, int),
+        max_states=max_states, seed=seed, serial=True if serial else None,
+        scheduler=scheduler)
+    text = result.render(fmt)
+    if output:
+        from markov.files import write_atomic
+        write_atomic(output, text)
+        click.echo(f"wrote {output} ({len(result.rows)} rows, {fmt})", err=True)
+    else:
+        click.echo(text, nl=False)
+    if figure:
+        from ..plot import save_figure
+
+        from ..study import deviation_figure
+        save_figure(deviation_figure(result), figure)
+        click.echo(f"wrote {figure}", err=True)

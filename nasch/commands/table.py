@@ -1,0 +1,89 @@
+"""``nasch table``: exact finite-ring fluxes beside the approximations and Monte Carlo."""
+from __future__ import annotations
+
+import click
+
+from markov.errors import InvalidParameterError
+
+from ..cli_common import (ensure_dask_options, ensure_probabilities, handle_errors, number_list,
+                          output_format, quiet_option)
+
+__all__ = ["table"]
+
+
+@click.command()
+@click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity.")
+@click.option("--p", "p_text", default="0.5", show_default=True,
+              help="Braking probability, or a comma-separated list.")
+@click.option("--lengths", "lengths_text", default=None,
+              help="Ring lengths, comma-separated [8,10,12,14, or chosen by --budget].")
+@click.option("--budget", "budget_text", default=None,
+              help="Time for the exact rings of each density and p, e.g. 60s or 5m: the"
+                   " largest rings that fit are chosen (instead of --lengths).")
+@click.option("--cars", "cars_text", default=None, help="Numbers of cars, comma-separated.")
+@click.option("--density", "density_text", default=None,
+              help="Densities, comma-separated (rings with c L integer are used) [0.5].")
+@click.option("--update", type=click.Choice(["parallel", "random-sequential"]),
+              default="parallel", show_default=True, help="Update order.")
+@click.option("--format", "fmt", type=click.Choice(["text", "csv", "md", "latex", "json"]),
+              default=None, help="Output format [from the --output extension, else text].")
+@click.option("--output", "-o", type=click.Path(dir_okay=False), default=None,
+              help="Write here (atomically) instead of stdout.")
+@click.option("--mc-steps", type=int, default=2000, show_default=True,
+              help="Monte Carlo time steps per (density, p); 0 for none.")
+@click.option("--mc-length", type=int, default=10000, show_default=True,
+              help="Monte Carlo ring length (rounded up to match the density exactly).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Monte Carlo base seed.")
+@click.option("--order", type=int, default=2, show_default=True,
+              help="Order of the 1/L series of the L -> infinity extrapolation.")
+@click.option("--no-extrapolation", is_flag=True, help="No L = infinity rows.")
+@click.option("--serial", is_flag=True, help="Run everything in this process (no Dask).")
+@click.option("--scheduler", default=None,
+              help="Address of a running Dask scheduler, tcp://HOST:PORT.")
+@click.option("--workers", type=int, default=None, help="Local Dask workers [cores].")
+@quiet_option
+@handle_errors
+def table(vmax, p_text, lengths_text, budget_text, cars_text, density_text, update, fmt, output,
+          mc_steps, mc_length, seed, order, no_extrapolation, serial, scheduler, workers):
+    """Exact finite-ring fluxes beside MF, pMF, 2-cluster and Monte Carlo.
+
+    \b
+    Example:
+      nasch table --vmax 2 --p 0.5 --lengths 8,10,12,14 --density 0.5,0.25
+      nasch table --vmax 2 --p 0.5 --density 0.5,0.25 --budget 30s
+      nasch table --vmax 1 --p 0.25,0.5 --lengths 8,12,16 --format latex -o flux.tex
+    """
+    from ..budget import parse_budget
+    from markov.files import check_output_path, write_atomic
+    from ..tables import flux_table
+
+    if cars_text is not None and density_text is not None:
+        raise InvalidParameterError("give either --cars or --density, not both")
+    ensure_dask_options(serial, scheduler)
+    if workers is not None:
+        from markov.validate import ensure_int
+        workers = ensure_int("--workers", workers, 1)
+    ps = number_list("--p", p_text)
+    ensure_probabilities(ps)
+    if output is not None:
+        check_output_path(output)   # before the work, not after it
+    if fmt is None:
+        fmt = output_format(output)
+    if budget_text is not None and lengths_text is not None:
+        raise InvalidParameterError("give either --lengths or --budget, not both")
+    budget = None if budget_text is None else parse_budget(budget_text)
+    lengths = None if budget is not None else number_list(
+        "--lengths", lengths_text or "8,10,12,14", int)
+    t = flux_table(
+        vmax, ps, lengths, budget=budget,
+        cars=None if cars_text is None else number_list("--cars", cars_text, int),
+        densities=None if density_text is None else number_list("--density", density_text),
+        update=update, mc_steps=mc_steps, mc_length=mc_length, seed=seed, order=order,
+        extrapolation=not no_extrapolation, serial=True if serial else None,
+        scheduler=scheduler, n_workers=workers)
+    text = t.render(fmt)
+    if output:
+        write_atomic(output, text)
+        click.echo(f"wrote {output} ({len(t.rows)} rows, {fmt})", err=True)
+    else:
+        click.echo(text, nl=False)
