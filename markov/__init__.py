@@ -33,7 +33,7 @@ __all__ = [
 _WHERE = {
     "Ring": "ring", "UPDATES": "ring", "PARALLEL": "ring", "RANDOM_SEQUENTIAL": "ring",
     "RingChain": "chain", "Solution": "chain", "solve": "chain",
-    "load_solution": "storage",
+    "load_solution": "chain",
     "stationary": "solvers", "StationaryResult": "solvers", "SOLVERS": "choices",
     "METHODS": "choices",
     **{name: "errors" for name in ("NaschError", "InvalidParameterError",

@@ -26,7 +26,7 @@ from .encoding import compact_jam_key
 from .transition import successor_counts, transition_matrix
 from .validate import ensure_chain_arguments, format_count
 
-__all__ = ["RingChain", "Solution", "solve", "OPERATORS"]
+__all__ = ["RingChain", "Solution", "solve", "load_solution"]
 
 # OPERATORS (markov.choices): how ``x -> x P`` is applied (see
 # RingChain.operator_kind for ``auto``): ``matrix`` the assembled CSR matrix
@@ -503,3 +503,29 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     ensure_chain_arguments(ring, method=method, tol=tol, max_memory=max_memory)
     return RingChain(ring, lump=lump, max_memory=max_memory,
                      operator=operator).solution(method=method, tol=tol)
+
+
+def load_solution(path) -> Solution:
+    """Read a file written by :meth:`Solution.save` (``nasch solve --save``).
+
+    The observables are recomputed from the stored keys and probabilities;
+    ``nonzeros`` and timings are not stored (``None``, 0).  Layout:
+    :mod:`markov.storage`, ``docs/storage.md``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    Solution
+
+    Raises
+    ------
+    InvalidParameterError
+        When the file is missing, not an archive of this format, or inconsistent.
+    """
+    from .storage import read_solution
+
+    ring, keys, result, lumped, operator = read_solution(path)
+    return Solution(ring, keys, result, None, 0.0, lumped, operator)

@@ -34,31 +34,15 @@ import numpy as np
 from numba import njit
 
 from .errors import InvalidParameterError
-from .goe_census import census, frozen_count, pattern_free_count, recurrent_class_count
-from .goe_patterns import Pattern, elementary_patterns, order_automaton, word_allowed
+from .goe_census import frozen_count, pattern_free_count, recurrent_class_count
+from .goe_patterns import order_automaton
 from .ring import PARALLEL, Ring
 from .rules import deterministic_velocity, randomize
-from .statespace import all_keys
+from .statespace import all_keys, count_all, recurrent_keys
 from .encoding import check_encodable, encode, from_text
 from .transition import _cars_of, successors
 
-__all__ = [
-    # ring configurations (this module)
-    "is_goe",
-    "goe_mask",
-    "pattern_free_mask",
-    "is_pattern_free",
-    "image_keys",
-    # re-exported: patterns (markov.goe_patterns) and counts (markov.goe_census)
-    "Pattern",
-    "elementary_patterns",
-    "word_allowed",
-    "order_automaton",
-    "pattern_free_count",
-    "frozen_count",
-    "recurrent_class_count",
-    "census",
-]
+__all__ = ["is_goe", "goe_mask", "pattern_free_mask", "is_pattern_free", "image_keys", "census"]
 
 
 @njit(cache=True)
@@ -243,3 +227,36 @@ def image_keys(ring: Ring, order: int | None = None) -> tuple[np.ndarray, int]:
             return keys, steps - 1
         keys = nxt
     return keys, steps
+
+
+def census(length: int, cars: int, vmax: int, enumerate_limit: int = 2_000_000) -> dict:
+    """One census row: all, GoE, pattern-free, frozen and recurrent-class counts.
+
+    The GoE count and the recurrent class are enumerated when the ring has at
+    most ``enumerate_limit`` configurations (else ``None``); the pattern-free
+    count always comes from the transfer matrix, and is also checked against
+    the enumeration when there is one.
+
+    Examples
+    --------
+    >>> row = census(8, 4, 2)
+    >>> row["all"], row["pattern_free"], row["recurrent"]
+    (5670, 480, 480)
+    """
+    ring = Ring(length, cars, vmax, 0.5)
+    length, cars, vmax = ring.length, ring.cars, ring.vmax
+    pattern_free = pattern_free_count(length, cars, vmax)   # refuses vmax beyond the automata
+    total = count_all(ring)
+    row = {"length": length, "cars": cars, "vmax": vmax, "all": total,
+           "goe": None, "pattern_free": pattern_free,
+           "frozen": frozen_count(length, cars, vmax), "recurrent": None,
+           "recurrent_predicted": recurrent_class_count(length, cars, vmax)}
+    if total <= enumerate_limit:
+        keys = all_keys(ring, lump=False)
+        row["goe"] = int(goe_mask(keys, length, vmax).sum())
+        enumerated = int(pattern_free_mask(keys, length, vmax).sum())
+        if enumerated != row["pattern_free"]:
+            raise RuntimeError(f"transfer-matrix count {row['pattern_free']} differs from"
+                               f" the enumeration {enumerated}")
+        row["recurrent"] = 1 if ring.trivial else len(recurrent_keys(ring, lump=False))
+    return row

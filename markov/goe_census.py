@@ -34,15 +34,9 @@ import scipy.sparse as sp
 
 from .goe_patterns import elementary_patterns, order_automaton, _ensure_vmax
 from .ring import Ring
-from .statespace import all_keys, count_all, recurrent_keys
-from .encoding import check_encodable
+from .statespace import count_all
 
-__all__ = [
-    "pattern_free_count",
-    "frozen_count",
-    "recurrent_class_count",
-    "census",
-]
+__all__ = ["pattern_free_count", "frozen_count", "recurrent_class_count"]
 
 
 def _ensure_ring_numbers(length, cars, vmax) -> tuple[int, int, int]:
@@ -213,38 +207,3 @@ def recurrent_class_count(length: int, cars: int, vmax: int) -> int:
     if cars == 1:
         return 2 * length
     return pattern_free_count(length, cars, vmax) - frozen_count(length, cars, vmax)
-
-
-def census(length: int, cars: int, vmax: int, enumerate_limit: int = 2_000_000) -> dict:
-    """One census row: all, GoE, pattern-free, frozen and recurrent-class counts.
-
-    The GoE count and the recurrent class are enumerated when the ring has at
-    most ``enumerate_limit`` configurations (else ``None``); the pattern-free
-    count always comes from the transfer matrix, and is also checked against
-    the enumeration when there is one.
-
-    Examples
-    --------
-    >>> row = census(8, 4, 2)
-    >>> row["all"], row["pattern_free"], row["recurrent"]
-    (5670, 480, 480)
-    """
-    from .goe import goe_mask, pattern_free_mask
-
-    length, cars, vmax = _ensure_ring_numbers(length, cars, vmax)
-    ring = Ring(length, cars, vmax, 0.5)
-    total = count_all(ring)
-    row = {"length": length, "cars": cars, "vmax": vmax, "all": total,
-           "goe": None, "pattern_free": pattern_free_count(length, cars, vmax),
-           "frozen": frozen_count(length, cars, vmax), "recurrent": None,
-           "recurrent_predicted": recurrent_class_count(length, cars, vmax)}
-    if total <= enumerate_limit:
-        check_encodable(length, vmax)
-        keys = all_keys(ring, lump=False)
-        row["goe"] = int(goe_mask(keys, length, vmax).sum())
-        enumerated = int(pattern_free_mask(keys, length, vmax).sum())
-        if enumerated != row["pattern_free"]:
-            raise RuntimeError(f"transfer-matrix count {row['pattern_free']} differs from"
-                               f" the enumeration {enumerated}")
-        row["recurrent"] = 1 if ring.trivial else len(recurrent_keys(ring, lump=False))
-    return row

@@ -2,7 +2,7 @@
 
 ``Solution.save(path)`` / ``nasch solve ... --save FILE.npz`` write one
 numpy ``.npz`` archive (no pickles: ``numpy.load(path)`` alone reads it);
-:func:`load_solution` reads it back into a :class:`markov.chain.Solution`
+:func:`markov.load_solution` reads it back into a :class:`markov.chain.Solution`
 whose observables (flux, ``c_v``, ...) are recomputed from the stored vector.
 
 Arrays in the file
@@ -39,6 +39,7 @@ configuration; it equals the unlumped solve (``lump=False``) to round-off.
 """
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
 import os
@@ -51,10 +52,11 @@ from numba import njit
 from .errors import InvalidParameterError, StateSpaceTooLargeError
 from .files import write_bytes_atomic
 from .ring import Ring
+from .solvers import StationaryResult
 from .encoding import base, check_encodable, orbit_size, powers, to_text
 from .validate import ensure_int
 
-__all__ = ["FORMAT", "FORMAT_VERSION", "ENCODING", "save_solution", "load_solution",
+__all__ = ["FORMAT", "FORMAT_VERSION", "ENCODING", "save_solution", "read_solution",
            "decode_keys", "rotation_counts", "unlumped", "top_configurations",
            "UNLUMP_LIMIT"]
 
@@ -186,9 +188,6 @@ def unlumped(sol, max_states: int = UNLUMP_LIMIT):
     >>> full.n_states, round(float(full.pi.sum()), 12), full.lumped
     (6, 1.0, False)
     """
-    from .chain import Solution
-    from .solvers import StationaryResult
-
     if not sol.lumped:
         return sol
     length, vmax, keys, pi = _solution_parts(sol)
@@ -206,8 +205,8 @@ def unlumped(sol, max_states: int = UNLUMP_LIMIT):
     res = sol.result
     result = StationaryResult(all_pi[order], res.method, res.residual, res.iterations,
                               res.seconds)
-    return Solution(sol.ring, all_keys[order], result, None, sol.build_seconds, False,
-                    sol.operator)
+    return dataclasses.replace(sol, keys=all_keys[order], result=result, nonzeros=None,
+                               lumped=False, level_sizes=None)
 
 
 def save_solution(sol, path) -> Path:
@@ -219,6 +218,7 @@ def save_solution(sol, path) -> Path:
     >>> from markov import Ring, solve
     >>> path = pathlib.Path(tempfile.mkdtemp()) / "pi.npz"
     >>> sol = solve(Ring(6, 3, 2, 0.5))
+    >>> from markov import load_solution
     >>> back = load_solution(save_solution(sol, path))
     >>> back.flux == sol.flux and back.ring == sol.ring
     True
@@ -241,20 +241,29 @@ def save_solution(sol, path) -> Path:
     return write_bytes_atomic(path, buf.getvalue())
 
 
-def load_solution(path):
-    """Read a file written by :func:`save_solution` into a ``Solution``.
+def read_solution(path) -> tuple[Ring, np.ndarray, StationaryResult, bool, str]:
+    """The parts of a solution stored by :func:`save_solution`.
 
-    The observables of the result are recomputed from the stored keys and
-    probabilities; ``nonzeros`` and timings are not stored (``None``, 0).
+    :func:`markov.chain.load_solution` builds the ``Solution`` from them.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    ring : Ring
+    keys : (n,) int64 array
+    result : StationaryResult
+        The stored vector, method, residual and iterations (no timing).
+    lumped : bool
+    operator : str
 
     Raises
     ------
     InvalidParameterError
         When the file is missing, not an archive of this format, or inconsistent.
     """
-    from .chain import Solution
-    from .solvers import StationaryResult
-
     path = os.fspath(path)
     try:
         with np.load(path, allow_pickle=False) as data:
@@ -275,4 +284,4 @@ def load_solution(path):
     if keys.shape != pi.shape or keys.ndim != 1:
         raise InvalidParameterError(f"{path}: keys and probabilities differ in shape")
     result = StationaryResult(pi, meta["method"], meta["residual"], meta["iterations"], 0.0)
-    return Solution(ring, keys, result, None, 0.0, bool(meta["lumped"]), meta["operator"])
+    return ring, keys, result, bool(meta["lumped"]), meta["operator"]

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from markov.errors import InvalidParameterError
+from markov.goe_patterns import MAX_VMAX
 
 __all__ = ["APPROXIMATIONS", "METHODS", "MAX_PMF_VMAX", "Approximation", "approximate",
            "supported", "method_name", "label"]
@@ -35,9 +36,9 @@ METHODS = ("mf", "pmf", "pmf2", "cluster", "comf")
 # the named methods offered in tables, figures and help texts
 APPROXIMATIONS = ("mf", "pmf", "pmf2", "cluster2", "cluster3", "cluster4", "cluster5",
                   "cluster6", "comf")
-# Largest vmax for pMF: the automaton search for the GoE patterns takes 0.3-0.8 s up
-# to vmax 5 and 8 s for vmax 6 (docs/goe.md); vmax 7 does not finish in reasonable time.
-MAX_PMF_VMAX = 6
+#: Largest vmax for pMF: that of the automaton search for the GoE patterns
+#: (0.3-0.8 s up to vmax 5, 8 s for vmax 6, docs/goe.md).
+MAX_PMF_VMAX = MAX_VMAX
 
 
 def _split(method, order=None) -> tuple[str, int | None]:

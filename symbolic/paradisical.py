@@ -44,9 +44,9 @@ from functools import lru_cache
 import sympy as sp
 
 from markov.errors import InvalidParameterError
+from markov.goe_patterns import MAX_VMAX, elementary_patterns
 from markov.rules import velocity_outcomes
 
-from . import MAX_PMF_VMAX
 from .meanfield import EMPTY, c, d, gap_horizons, mf_rhs, p, q, velocity_symbols, word_weight
 
 __all__ = [
@@ -82,11 +82,9 @@ def goe_patterns(vmax: int, second_order: bool = False) -> tuple[tuple[int, ...]
     >>> goe_patterns(2, second_order=True)[-1]          # the paper's (0, •, •, 2)
     (0, -1, -1, 2)
     """
-    if isinstance(vmax, bool) or not isinstance(vmax, int) or not 1 <= vmax <= MAX_PMF_VMAX:
+    if isinstance(vmax, bool) or not isinstance(vmax, int) or not 1 <= vmax <= MAX_VMAX:
         raise InvalidParameterError(
-            f"pMF needs the GoE patterns of vmax = 1..{MAX_PMF_VMAX}, got vmax = {vmax!r}")
-    from markov.goe_patterns import elementary_patterns
-
+            f"pMF needs the GoE patterns of vmax = 1..{MAX_VMAX}, got vmax = {vmax!r}")
     search = elementary_patterns(vmax, 40)
     if not search.complete:
         raise RuntimeError(f"GoE pattern search for vmax = {vmax} is not complete at 40 cells")

@@ -20,9 +20,8 @@ from scipy.sparse.csgraph import connected_components
 
 from markov.chain import solve
 from markov.errors import InvalidParameterError
-from markov.goe import goe_mask, image_keys, is_goe, is_pattern_free, pattern_free_mask
-from markov.goe_census import (census, frozen_count, pattern_free_count,
-                               recurrent_class_count)
+from markov.goe import census, goe_mask, image_keys, is_goe, is_pattern_free, pattern_free_mask
+from markov.goe_census import frozen_count, pattern_free_count, recurrent_class_count
 from markov.goe_patterns import elementary_patterns, word_allowed
 from markov.ring import Ring
 from markov.statespace import all_keys, recurrent_keys

@@ -172,7 +172,7 @@ def test_cli_solve_operator_and_method_options():
 
 
 def test_refused_before_enumerating_when_the_count_predicts_too_many_states():
-    from markov.goe import recurrent_class_count
+    from markov.goe_census import recurrent_class_count
 
     # L = 24 would take a minute to enumerate: the refusal must come from the count
     lower = -(-recurrent_class_count(24, 12, 2) // 24)  # orbits have at most L members

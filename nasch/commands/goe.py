@@ -36,7 +36,7 @@ def goe(vmax, max_cells, do_census, length, cars, as_json):
     if do_census:
         if length is None or cars is None:
             raise InvalidParameterError("--census needs --length L and --cars N")
-        from markov.goe_census import census
+        from markov.goe import census
         row = census(length, cars, vmax)
         if as_json:
             emit_json(row)
