@@ -18,11 +18,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ._kernels import cars_of, smallest_rotation
+from .encoding import unique_keys
 from .errors import InvalidParameterError
 from .ring import PARALLEL, Ring
 from .solvers import Aggregates
-from .encoding import smallest_rotation, unique_keys
-from .transition import _cars_of
 
 __all__ = ["position_aggregates"]
 
@@ -33,7 +33,7 @@ def _occupancy_masks(keys, length, vmax, lump, here, before):
     for i in prange(keys.shape[0]):
         pos = np.empty(length, np.int64)
         vel = np.empty(length, np.int64)
-        n = _cars_of(keys[i], length, vmax + 2, pos, vel)
+        n = cars_of(keys[i], length, vmax + 2, pos, vel)
         a = np.int64(0)
         b = np.int64(0)
         for k in range(n):

@@ -53,12 +53,11 @@ import numpy as np
 import scipy.sparse.linalg as spla
 from numba import njit, prange
 
+from ._kernels import canonical, cars_of, gap, rotate_mask, shift_bits, term
+from .encoding import check_encodable, powers, unique_keys
 from .errors import InvalidParameterError
 from .ring import PARALLEL, Ring
-from ._sequential import _canon, _shift_bits
 from .rules import deterministic_velocity
-from .encoding import check_encodable, powers, rotate_mask, unique_keys
-from .transition import _cars_of, _gap
 
 __all__ = ["FactoredOperator", "word_bits", "frontier_successors"]
 
@@ -85,10 +84,10 @@ def word_bits(ring: Ring) -> tuple[int, int]:
 @njit(cache=True)
 def _frame_word(key, length, vmax, w, lump, pos, vel, u):
     """Level-0 word of a state: positions in its frame and the velocities after R1+R2."""
-    n = _cars_of(key, length, vmax + 2, pos, vel)
+    n = cars_of(key, length, vmax + 2, pos, vel)
     mask = np.int64(0)
     for i in range(n):
-        u[i] = deterministic_velocity(vel[i], _gap(pos, n, i, length), vmax)
+        u[i] = deterministic_velocity(vel[i], gap(pos, n, i, length), vmax)
         mask |= np.int64(1) << pos[i]
     shift = n * w
     best = np.int64(-1)
@@ -174,9 +173,9 @@ def _moved_key(word, length, ncars, w, pw, bits, lump):
     for x in range(length):
         if (mask >> x) & 1:
             v = (word >> (t * w)) & vmask
-            key += (v + 1) * pw[(x + v) % length]
+            key += term(x, v, length, pw)
             t += 1
-    return _canon(key, length, pw, bits) if lump else key
+    return canonical(key, length, pw, bits) if lump else key
 
 
 @njit(cache=True, parallel=True)
@@ -221,7 +220,7 @@ def frontier_successors(ring: Ring, keys: np.ndarray, lump: bool) -> np.ndarray:
         words = _next_level(words, j, w, False)[0]
     out = np.empty_like(words)
     _moved_keys(words, ring.length, ring.cars, w, powers(ring.length, ring.vmax),
-                _shift_bits(ring.vmax), bool(lump), out)
+                shift_bits(ring.vmax), bool(lump), out)
     return unique_keys(out)
 
 
@@ -266,8 +265,12 @@ def _gather_last(a, b, offsets, z, p, q, out):
         out[s] = acc
 
 
-class FactoredOperator:
-    """``x -> x P`` of the parallel-update chain through the per-car levels.
+class FactoredOperator(spla.LinearOperator):
+    """The parallel-update chain as a scipy ``LinearOperator``, applied through the per-car levels.
+
+    As an operator it is ``A = P^T`` (scipy's column convention: ``A @ x`` is
+    ``x P`` written as a column), so :func:`markov.solvers.stationary` and
+    ``scipy.sparse.linalg`` accept it as they are.
 
     Parameters
     ----------
@@ -313,7 +316,7 @@ class FactoredOperator:
         self.lump = bool(lump)
         self.keys = np.ascontiguousarray(keys, dtype=np.int64)
         self.n = self.keys.shape[0]
-        self.shape = (self.n, self.n)
+        super().__init__(np.float64, (self.n, self.n))
         self.products = 0
         self.seconds = 0.0
         if _levels is None:
@@ -342,7 +345,7 @@ class FactoredOperator:
             sizes.append(len(words))
         targets = np.empty_like(words)
         _moved_keys(words, ring.length, ring.cars, w, powers(ring.length, ring.vmax),
-                    _shift_bits(ring.vmax), self.lump, targets)
+                    shift_bits(ring.vmax), self.lump, targets)
         del words
         order = np.argsort(targets, kind="stable")
         offsets_last = np.empty(n + 1, dtype=np.int64)
@@ -365,16 +368,41 @@ class FactoredOperator:
                 + sum(buf.nbytes for buf in self._buffers))
 
     def with_p(self, p: float) -> "FactoredOperator":
-        """The same levels with another braking probability (no rebuild)."""
+        """The same levels with another braking probability (no rebuild).
+
+        Parameters
+        ----------
+        p : float
+
+        Returns
+        -------
+        FactoredOperator
+        """
         levels = (self._perm, self._offsets0, self._links, self._offsets_last,
                   self.level_sizes)
         return FactoredOperator(self.ring.with_p(p), self.keys, self.lump, _levels=levels)
 
     def apply(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """Return ``x P`` (a row vector times the transition matrix)."""
+        """``x P`` (a row vector times the transition matrix).
+
+        Parameters
+        ----------
+        x : (n,) float64 array
+        out : (n,) float64 array, optional
+            Where to write the result.
+
+        Returns
+        -------
+        (n,) float64 array
+
+        Raises
+        ------
+        InvalidParameterError
+            For ``x`` of another shape.
+        """
         x = np.ascontiguousarray(x, dtype=np.float64)
         if x.shape != (self.n,):
-            raise ValueError(f"x must have shape ({self.n},), got {x.shape}")
+            raise InvalidParameterError(f"x must have shape ({self.n},), got {x.shape}")
         out = np.empty(self.n) if out is None else out
         start = time.perf_counter()
         p = float(self.ring.p)
@@ -392,10 +420,17 @@ class FactoredOperator:
         self.seconds += time.perf_counter() - start
         return out
 
-    def residual(self, pi: np.ndarray) -> float:
-        """``||pi P - pi||_1``."""
-        return float(np.abs(self.apply(pi) - pi).sum())
+    _matvec = apply
 
-    def linear_operator(self) -> spla.LinearOperator:
-        """``x -> P^T x`` (column convention) as a scipy ``LinearOperator``."""
-        return spla.LinearOperator(self.shape, matvec=self.apply, dtype=np.float64)
+    def residual(self, pi: np.ndarray) -> float:
+        """``||pi P - pi||_1``.
+
+        Parameters
+        ----------
+        pi : (n,) float64 array
+
+        Returns
+        -------
+        float
+        """
+        return float(np.abs(self.apply(pi) - pi).sum())

@@ -32,7 +32,7 @@ __all__ = ["RingChain", "Solution", "solve", "load_solution"]
 # RingChain.operator_kind for ``auto``): ``matrix`` the assembled CSR matrix
 # (every solver); ``matrix-free`` nothing of size "transitions" stored: the
 # per-car levels of markov._factored.FactoredOperator for parallel update, rows
-# regenerated per product (markov._sequential.TransitionOperator) for
+# regenerated per product (markov._sequential.SequentialOperator) for
 # random-sequential update.
 
 #: ``auto`` assembles the matrix (exact LU) up to this many states when it fits;
@@ -259,7 +259,7 @@ class RingChain:
     @cached_property
     def transition_operator(self):
         """``x -> x P`` without a CSR matrix: :class:`markov._factored.FactoredOperator`
-        for parallel update, :class:`markov._sequential.TransitionOperator` otherwise."""
+        for parallel update, :class:`markov._sequential.SequentialOperator` otherwise."""
         keys = self.keys
         start = time.perf_counter()
         if self.ring.update == PARALLEL:
@@ -267,9 +267,9 @@ class RingChain:
 
             op = FactoredOperator(self.ring, keys, self.lump)
         else:
-            from ._sequential import TransitionOperator
+            from ._sequential import SequentialOperator
 
-            op = TransitionOperator(self.ring, keys, self.lump)
+            op = SequentialOperator(self.ring, keys, self.lump)
         self.build_seconds += time.perf_counter() - start
         return op
 

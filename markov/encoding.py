@@ -19,8 +19,9 @@ with that velocity, cars moving to the right, e.g. ``"0..2"``.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
+from ._kernels import canonical, digits_of, shift_bits
 from .errors import InvalidParameterError
 
 __all__ = [
@@ -32,11 +33,8 @@ __all__ = [
     "decode",
     "from_text",
     "to_text",
-    "canonical",
-    "orbit_size",
+    "canonical_keys",
     "compact_jam_key",
-    "rotate_mask",
-    "smallest_rotation",
     "unique_keys",
 ]
 
@@ -98,18 +96,11 @@ def encode(cells, vmax: int) -> int:
     return key
 
 
-@njit(cache=True)
-def _decode_into(key, length, b, out):
-    for x in range(length):
-        out[x] = key % b - 1
-        key //= b
-
-
 def decode(key: int, length: int, vmax: int) -> np.ndarray:
     """Cells of a key: ``-1`` for empty, else the velocity (int8 array of length L)."""
-    out = np.empty(length, dtype=np.int8)
-    _decode_into(np.int64(key), length, base(vmax), out)
-    return out
+    out = np.empty(length, dtype=np.int64)
+    digits_of(np.int64(key), length, base(vmax), out)
+    return (out - 1).astype(np.int8)
 
 
 def from_text(text: str, vmax: int) -> list[int]:
@@ -131,49 +122,35 @@ def to_text(cells) -> str:
     return "".join("." if int(c) < 0 else str(int(c)) for c in cells)
 
 
-@njit(cache=True)
-def canonical(key, length, pw):
-    """Smallest key over the ``L`` rotations of a configuration (numba).
+@njit(cache=True, parallel=True)
+def _canonical_many(keys, length, pw, bits, out):
+    for i in prange(keys.shape[0]):
+        out[i] = canonical(keys[i], length, pw, bits)
 
-    Rotating by ``r`` cells maps digit ``x`` to ``x - r (mod L)``:
-    ``key // B**r + (key % B**r) * B**(L - r)``.
+
+def canonical_keys(keys, length: int, vmax: int) -> np.ndarray:
+    """The canonical key (smallest of the ``L`` rotations) of every key.
+
+    Parameters
+    ----------
+    keys : array_like of int
+    length, vmax : int
+
+    Returns
+    -------
+    int64 array
+        Same shape as ``keys``.
+
+    Examples
+    --------
+    >>> key = encode([-1, 0, 1], vmax=1)                                  # ".01"
+    >>> canonical_keys([key], 3, 1).tolist() == [encode([0, 1, -1], vmax=1)]  # "01."
+    True
     """
-    best = key
-    for r in range(1, length):
-        rotated = key // pw[r] + (key % pw[r]) * pw[length - r]
-        if rotated < best:
-            best = rotated
-    return best
-
-
-@njit(cache=True)
-def orbit_size(key, length, pw):
-    """Number of distinct rotations of a configuration (``L / period``)."""
-    for r in range(1, length):
-        if length % r == 0 and key // pw[r] + (key % pw[r]) * pw[length - r] == key:
-            return r
-    return length
-
-
-@njit(cache=True, inline="always")
-def rotate_mask(mask, r, length):
-    """An occupancy bit mask (bit ``x`` = cell ``x``) rotated so that cell ``x``
-    goes to ``x - r (mod L)``, as :func:`canonical` rotates keys."""
-    if r == 0:
-        return mask
-    full = (np.int64(1) << length) - 1
-    return ((mask >> r) | (mask << (length - r))) & full
-
-
-@njit(cache=True, inline="always")
-def smallest_rotation(mask, length):
-    """The smallest of the ``L`` rotations of an occupancy bit mask."""
-    best = mask
-    for r in range(1, length):
-        rotated = rotate_mask(mask, r, length)
-        if rotated < best:
-            best = rotated
-    return best
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    out = np.empty_like(keys)
+    _canonical_many(keys.ravel(), length, powers(length, vmax), shift_bits(vmax), out.ravel())
+    return out
 
 
 def compact_jam_key(length: int, cars: int, vmax: int) -> int:

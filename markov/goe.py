@@ -33,14 +33,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ._kernels import cars_of, digits_of, gap
+from .encoding import check_encodable, encode, from_text, unique_keys
 from .errors import InvalidParameterError
 from .goe_census import frozen_count, pattern_free_count, recurrent_class_count
 from .goe_patterns import order_automaton
 from .ring import PARALLEL, Ring
 from .rules import deterministic_velocity, randomize
 from .statespace import all_keys, count_all, recurrent_keys
-from .encoding import check_encodable, encode, from_text
-from .transition import _cars_of, successors
+from .transition import successors
 
 __all__ = ["is_goe", "goe_mask", "pattern_free_mask", "is_pattern_free", "image_keys", "census"]
 
@@ -62,12 +63,11 @@ def _goe_kernel(keys, length, vmax, out):
     pos = np.empty(length, dtype=np.int64)
     vel = np.empty(length, dtype=np.int64)
     for i in range(keys.shape[0]):
-        n = _cars_of(keys[i], length, vmax + 2, pos, vel)
+        n = cars_of(keys[i], length, vmax + 2, pos, vel)
         goe = False
         for j in range(n):
             k = j + 1 if j + 1 < n else 0
-            gap = (pos[k] - pos[j] - 1) % length if n > 1 else length - 1
-            old_gap = gap + vel[j] - vel[k]
+            old_gap = gap(pos, n, j, length) + vel[j] - vel[k]
             if not _reachable_velocity(vel[j], old_gap, vmax):
                 goe = True
                 break
@@ -132,15 +132,11 @@ def is_goe(config, vmax: int) -> bool:
 
 @njit(cache=True)
 def _periodic_kernel(keys, length, vmax, delta, out):
-    b = vmax + 2
     n_states = delta.shape[0]
     digits = np.empty(length, dtype=np.int64)
     seen = np.full(n_states, -1, dtype=np.int64)
     for i in range(keys.shape[0]):
-        key = keys[i]
-        for x in range(length):
-            digits[x] = key % b
-            key //= b
+        digits_of(keys[i], length, vmax + 2, digits)
         # the ring word repeated: every factor of the periodic configuration is a
         # factor of some power; the state after each copy repeats within n_states copies
         s = 0
@@ -220,8 +216,7 @@ def image_keys(ring: Ring, order: int | None = None) -> tuple[np.ndarray, int]:
     keys = all_keys(ring, lump=False)
     steps = 0
     while order is None or steps < order:
-        _, succ, _ = successors(ring, keys, lump=False, p=0.5)
-        nxt = np.unique(succ)
+        nxt = unique_keys(successors(ring, keys, lump=False).keys)
         steps += 1
         if order is None and np.array_equal(nxt, keys):
             return keys, steps - 1

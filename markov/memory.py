@@ -18,7 +18,7 @@ Paths
     times the states, :data:`LEVEL_WORDS_PER_STATE` is the bound used before
     the levels exist), the level-0 permutation and offsets, two level buffers.
 ``rows``
-    :class:`markov._sequential.TransitionOperator` (random-sequential update):
+    :class:`markov._sequential.SequentialOperator` (random-sequential update):
     rows regenerated per product; a rank hash table and one accumulator per
     thread.
 """

@@ -21,9 +21,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ._kernels import cars_of, digits_of, gap
+from .errors import InvalidParameterError
 from .ring import Ring
 from .rules import deterministic_velocity
-from .transition import _cars_of, _gap
 
 __all__ = ["cluster_probabilities", "velocity_densities", "gap_distribution", "expected_move"]
 
@@ -32,10 +33,7 @@ __all__ = ["cluster_probabilities", "velocity_densities", "gap_distribution", "e
 def _cluster_histogram(keys, weights, length, b, n, out):
     digits = np.empty(length, np.int64)
     for i in range(keys.shape[0]):
-        key = keys[i]
-        for x in range(length):
-            digits[x] = key % b
-            key //= b
+        digits_of(keys[i], length, b, digits)
         for x in range(length):
             idx = 0
             for j in range(n - 1, -1, -1):
@@ -59,7 +57,7 @@ def cluster_probabilities(ring: Ring, keys: np.ndarray, pi: np.ndarray, n: int) 
     0.5
     """
     if not 1 <= n <= ring.length:
-        raise ValueError(f"cluster size must be in 1..L = {ring.length}, got {n}")
+        raise InvalidParameterError(f"cluster size must be in 1..L = {ring.length}, got {n}")
     b = ring.vmax + 2
     out = np.zeros(b**n)
     _cluster_histogram(np.ascontiguousarray(keys, np.int64), np.ascontiguousarray(pi, np.float64),
@@ -78,15 +76,15 @@ def _gap_histogram(keys, weights, length, b, out):
     pos = np.empty(length, np.int64)
     vel = np.empty(length, np.int64)
     for i in range(keys.shape[0]):
-        n = _cars_of(keys[i], length, b, pos, vel)
+        n = cars_of(keys[i], length, b, pos, vel)
         for j in range(n):
-            out[_gap(pos, n, j, length)] += weights[i] / n
+            out[gap(pos, n, j, length)] += weights[i] / n
 
 
 def gap_distribution(ring: Ring, keys: np.ndarray, pi: np.ndarray) -> np.ndarray:
     """``P(g)``, ``g = 0..L-N``: headway distribution of a car (needs ``N >= 1``)."""
     if ring.cars == 0:
-        raise ValueError("the gap distribution needs at least one car")
+        raise InvalidParameterError("the gap distribution needs at least one car")
     out = np.zeros(ring.length - ring.cars + 1)
     _gap_histogram(np.ascontiguousarray(keys, np.int64), np.ascontiguousarray(pi, np.float64),
                    ring.length, ring.vmax + 2, out)
@@ -99,9 +97,9 @@ def _expected_move(keys, weights, length, vmax, p):
     vel = np.empty(length, np.int64)
     total = 0.0
     for i in range(keys.shape[0]):
-        n = _cars_of(keys[i], length, vmax + 2, pos, vel)
+        n = cars_of(keys[i], length, vmax + 2, pos, vel)
         for j in range(n):
-            u = deterministic_velocity(vel[j], _gap(pos, n, j, length), vmax)
+            u = deterministic_velocity(vel[j], gap(pos, n, j, length), vmax)
             if u > 0:
                 total += weights[i] * (u - p)
     return total

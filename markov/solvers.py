@@ -1,6 +1,10 @@
-"""Stationary distributions of a row-stochastic sparse matrix.
+"""Stationary distributions of a Markov chain: one entry point, :func:`stationary`.
 
-Every solver returns a :class:`StationaryResult` carrying the vector and its
+The chain is given as scipy gives linear maps: a sparse row-stochastic matrix
+``P`` (every method), or a ``scipy.sparse.linalg.LinearOperator`` ``A = P^T``
+in the column convention (``A @ x`` is ``x P`` as a column; the product
+methods only), such as the operators :attr:`markov.chain.RingChain.transition_operator`
+builds.  Every solver returns a :class:`StationaryResult` carrying the vector and its
 diagnostics (method, residual ``||pi P - pi||_1``, iterations, seconds), in the
 manner of :mod:`scipy.sparse.linalg`.  The solvers assume an irreducible
 matrix; :func:`check_irreducible` verifies it with a strongly-connected
@@ -17,7 +21,7 @@ Methods (:data:`SOLVERS`)
               ``(I - P^T + 1 1^T / n) pi = 1 / n`` from a few power steps:
               BiCGSTAB, falling back to GMRES(60) and then power iteration
               (the stage used is reported, e.g. ``iterative:bicgstab``).
-``gmres``, ``bicgstab``  one Krylov method alone (see :func:`iterate`).
+``gmres``, ``bicgstab``  one Krylov method alone.
 ``power``     power iteration ``pi <- pi P`` (the chain is aperiodic: the
               compact jam has a self-loop), stopped at the residual tolerance.
 ``aggregation`` two-level iterative aggregation/disaggregation
@@ -38,12 +42,10 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
-from .choices import (DEFAULT_MAXITER, DEFAULT_TOL, GMRES_RESTART, METHODS, PRODUCT_METHODS,
-                      SOLVERS)
+from .choices import DEFAULT_MAXITER, DEFAULT_TOL, GMRES_RESTART, METHODS, PRODUCT_METHODS
 from .errors import ConvergenceError, InvalidParameterError, NoUniqueStationaryStateError
 
-__all__ = ["SOLVERS", "METHODS", "PRODUCT_METHODS", "DIRECT_LIMIT", "GMRES_RESTART",
-           "Aggregates", "StationaryResult", "stationary", "iterate", "residual",
+__all__ = ["Aggregates", "StationaryResult", "stationary", "residual",
            "check_irreducible"]
 
 DIRECT_LIMIT = 1_000
@@ -242,7 +244,7 @@ def _aggregation_steps(product, x, tol, maxiter, count, agg: Aggregates):
             xi = _normalise(_direct(AT.T.tocsr(), tol, maxiter)[0])
         else:
             coarse_tol = max(0.01 * tol, 0.1 * min(res, 1.0))
-            xi, _, _, _ = iterate(lambda v: AT @ v, m, "iterative", coarse_tol, 100_000,
+            xi, _, _, _ = _iterate(lambda v: AT @ v, m, "iterative", coarse_tol, _COARSE_MAXITER,
                                   X if xi is None else xi)
         scale = xi / X
         z = _normalise(x * scale[agg.group])
@@ -258,11 +260,8 @@ def _aggregation_steps(product, x, tol, maxiter, count, agg: Aggregates):
     return x, res
 
 
-
-
-def iterate(product, n: int, method: str = "iterative", tol: float = 1e-13,
-            maxiter: int = 100_000, x0: np.ndarray | None = None,
-            aggregates: Aggregates | None = None):
+def _iterate(product, n: int, method: str, tol: float, maxiter: int,
+             x0: np.ndarray | None = None, aggregates: Aggregates | None = None):
     """Stationary vector from the product ``x -> x P`` alone.
 
     Parameters
@@ -297,9 +296,6 @@ def iterate(product, n: int, method: str = "iterative", tol: float = 1e-13,
     stage : str
         The method that produced ``x``.
     """
-    if method not in PRODUCT_METHODS:
-        raise InvalidParameterError(
-            f"method must be one of {', '.join(PRODUCT_METHODS)}, got {method!r}")
     x = np.full(n, 1.0 / n) if x0 is None else _normalise(np.asarray(x0, dtype=np.float64))
     count = [0]
 
@@ -307,8 +303,6 @@ def iterate(product, n: int, method: str = "iterative", tol: float = 1e-13,
         count[0] += 1
         return product(v)
 
-    if method == "aggregation" and aggregates is None:
-        raise InvalidParameterError("aggregation needs the aggregates of the states")
     stages = ("bicgstab", "gmres", "power") if method == "iterative" else (method,)
     res = np.inf
     for stage in stages:
@@ -326,11 +320,19 @@ def iterate(product, n: int, method: str = "iterative", tol: float = 1e-13,
 
 
 def _product_of(P):
-    """``x -> x P`` and ``n`` of a CSR matrix or of an operator with ``apply``/``n``."""
+    """``x -> x P`` and ``n`` of a sparse matrix ``P`` or of an operator ``A = P^T``."""
     if sp.issparse(P):
         PT = P.T.tocsr()
         return (lambda v: PT @ v), P.shape[0]
-    return P.apply, P.n
+    if isinstance(P, spla.LinearOperator) and P.shape[0] == P.shape[1]:
+        return P.matvec, P.shape[0]
+    raise InvalidParameterError(
+        "the chain must be a square sparse matrix P or a scipy LinearOperator for P^T,"
+        f" got {type(P).__name__}")
+
+
+# the coarse chain of aggregation is solved to its own tolerance in this many products
+_COARSE_MAXITER = 100_000
 
 
 #: What ``auto`` runs on an operator: aggregation when the aggregates are
@@ -347,11 +349,11 @@ def stationary(P, method: str = "auto", tol: float = DEFAULT_TOL,
 
     Parameters
     ----------
-    P : (n, n) sparse matrix or operator
-        Row-stochastic matrix, or an operator with ``n`` and ``apply(x) -> x P``
-        (:class:`markov._factored.FactoredOperator`,
-        :class:`markov._sequential.TransitionOperator`): then only the methods of
-        :data:`PRODUCT_METHODS` apply.
+    P : (n, n) sparse matrix or scipy.sparse.linalg.LinearOperator
+        The row-stochastic matrix ``P``, or an operator for ``P^T`` (column
+        convention: ``P @ x`` returns ``x P`` as a column), e.g. the
+        matrix-free operators of :attr:`markov.chain.RingChain.transition_operator`;
+        then only the methods of :data:`markov.choices.PRODUCT_METHODS` apply.
     method : {"auto", "direct", "eigs", "iterative", "gmres", "bicgstab", "power", "aggregation"}
         Solver (see the module docstring).  ``auto``: ``direct`` up to
         :data:`DIRECT_LIMIT` states, else ``eigs`` (``iterative`` if ARPACK
@@ -395,6 +397,13 @@ def stationary(P, method: str = "auto", tol: float = DEFAULT_TOL,
     >>> P = sp.csr_array([[0.5, 0.5], [0.25, 0.75]])
     >>> stationary(P, "direct").pi.round(6).tolist()
     [0.333333, 0.666667]
+
+    The same chain as an operator (``x -> x P`` as a column), solved by products:
+
+    >>> import scipy.sparse.linalg as spla
+    >>> A = spla.aslinearoperator(P.T)
+    >>> stationary(A, "power", tol=1e-12).pi.round(6).tolist()
+    [0.333333, 0.666667]
     """
     if method not in METHODS:
         raise InvalidParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -402,16 +411,18 @@ def stationary(P, method: str = "auto", tol: float = DEFAULT_TOL,
 
     tol = ensure_tol(tol)
     maxiter = ensure_int("maxiter", maxiter, 1)
+    product, n = _product_of(P)
     matrix = sp.issparse(P)
     if not matrix and method in ("direct", "eigs"):
         raise InvalidParameterError(
             f"{method} needs the assembled matrix; an operator is solved with"
             f" {', '.join(('auto',) + PRODUCT_METHODS)}")
-    product, n = _product_of(P)
     auto = method == "auto"
     start = time.perf_counter()
     if n == 1:
         return StationaryResult(np.ones(1), "direct" if auto else method, 0.0, 0, 0.0)
+    if method == "aggregation" and aggregates is None:
+        raise InvalidParameterError("aggregation needs the aggregates of the states")
     if matrix and check:
         check_irreducible(P)
     if auto:
@@ -442,7 +453,7 @@ def stationary(P, method: str = "auto", tol: float = DEFAULT_TOL,
             bar.update(1)
             return product(v)
 
-        x, res, products, stage = iterate(counted, n, method, tol, maxiter, x0, aggregates)
+        x, res, products, stage = _iterate(counted, n, method, tol, maxiter, x0, aggregates)
     if not res <= tol:
         raise ConvergenceError(f"{method} reached ||pi P - pi||_1 = {res:.3e} after"
                                f" {products} products, not {tol:g}", products, res, x)

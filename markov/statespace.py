@@ -15,13 +15,13 @@ import itertools
 import math
 
 import numpy as np
-from numba import njit
 
+from .encoding import (canonical_keys, check_encodable, compact_jam_key, encode, powers,
+                       unique_keys)
 from .errors import StateSpaceTooLargeError
 from .memory import gib, memory_limit, search_bytes_per_state
-from .ring import PARALLEL, Ring
 from .progress import progress_bar
-from .encoding import canonical, check_encodable, compact_jam_key, encode, powers, unique_keys
+from .ring import PARALLEL, Ring
 
 __all__ = ["recurrent_keys", "all_keys", "count_all"]
 
@@ -99,7 +99,6 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
     check_encodable(ring.length, ring.vmax)
     limit = memory_limit(max_memory)
     per_state = max(search_bytes_per_state(), per_state or 0.0)
-    pw = powers(ring.length, ring.vmax)
     start = compact_jam_key(ring.length, ring.cars, ring.vmax)
     if ring.cars == 1:
         # A lone car sees the gap L - 1 forever, so R1+R2 push its velocity up to
@@ -107,9 +106,9 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
         # w are recurrent; the stopped car (the "jam") is transient once w >= 2.
         top = min(ring.vmax, ring.length - 1)
         start = encode([top] + [-1] * (ring.length - 1), ring.vmax)
-    if lump:
-        start = canonical(np.int64(start), ring.length, pw)
     visited = np.array([start], dtype=np.int64)
+    if lump:
+        visited = canonical_keys(visited, ring.length, ring.vmax)
     frontier = visited
     with progress_bar(None, "recurrent class", "state") as bar:
         while frontier.size:
@@ -127,14 +126,6 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
                     f" at about {per_state:.0f} bytes per state that exceeds the memory"
                     f" limit of {gib(limit)}")
     return visited
-
-
-@njit(cache=True)
-def _canonicalise(keys, length, pw):
-    out = np.empty_like(keys)
-    for i in range(keys.shape[0]):
-        out[i] = canonical(keys[i], length, pw)
-    return out
 
 
 def all_keys(ring: Ring, lump: bool = False, max_memory: float | None = None) -> np.ndarray:
@@ -160,5 +151,5 @@ def all_keys(ring: Ring, lump: bool = False, max_memory: float | None = None) ->
     keys = np.concatenate([place_pw @ row for row in digits]) if len(places) < len(digits) \
         else (place_pw[:, None, :] * digits[None, :, :]).sum(axis=2).ravel()
     if lump:
-        keys = _canonicalise(keys, ring.length, pw)
+        keys = canonical_keys(keys, ring.length, ring.vmax)
     return unique_keys(keys)

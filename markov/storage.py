@@ -53,7 +53,8 @@ from .errors import InvalidParameterError, StateSpaceTooLargeError
 from .files import write_bytes_atomic
 from .ring import Ring
 from .solvers import StationaryResult
-from .encoding import base, check_encodable, orbit_size, powers, to_text
+from ._kernels import orbit_size, rotate
+from .encoding import base, check_encodable, powers, to_text
 from .validate import ensure_int
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "ENCODING", "save_solution", "read_solution",
@@ -108,8 +109,8 @@ def _expand(keys, pi, rot, length, pw, out_keys, out_pi):
     at = 0
     for i in range(keys.shape[0]):
         key, m = keys[i], rot[i]
-        for r in range(m):   # rotation by r cells: digit x moves to x - r (mod L)
-            out_keys[at] = key // pw[r] + (key % pw[r]) * pw[length - r]
+        for r in range(m):   # the m distinct rotations are the first m
+            out_keys[at] = rotate(key, r, length, pw)
             out_pi[at] = pi[i] / m
             at += 1
 
@@ -125,8 +126,6 @@ def rotation_counts(keys, length: int, vmax: int) -> np.ndarray:
     keys = np.asarray(keys, dtype=np.int64).ravel()
     pw = powers(length, vmax)
     out = np.empty(keys.size, dtype=np.int64)
-    # markov.encoding.orbit_size returns the smallest period r, which is the
-    # number of distinct rotations
     _rotation_counts(keys, length, pw, out)
     return out
 

@@ -1,14 +1,12 @@
 """Exact rational stationary states of tiny rings, with ``p`` a number or a symbol.
 
 The matrix comes from the same enumeration as the floating-point solver:
-:func:`markov.statespace.recurrent_keys` for the states and
-:func:`markov.transition.successors` for the transitions.  For parallel update
-a state with ``k`` cars able to move has ``2**k`` successor entries, one per
-brake mask, with probability ``q**a p**b`` (``a + b = k``, ``b`` = cars that
-brake).  The exponents are recovered exactly from one floating-point call at
-``p = 1/3``: the entry is ``2**a / 3**k``, so ``a = round(log2(prob * 3**k))``
-(exact in double precision for ``k`` up to ~30; checked).  Duplicated
-successors (after lumping by rotation) are summed as polynomials.
+:func:`markov.statespace.recurrent_keys` for the states and the row generator
+of :func:`markov.transition.successors` for the transitions.  For parallel
+update a state with ``k`` cars able to move has ``2**k`` successor entries,
+one per set of braking cars, with probability ``q**a p**b``: the row generator
+reports ``a`` (cars that moved) and ``b`` (cars that braked) of every entry.
+Duplicated successors (after lumping by rotation) are summed as polynomials.
 
 The stationary vector solves ``pi (P - I) = 0``, ``sum pi = 1`` over the field
 ``QQ`` (numeric rational ``p``) or ``QQ(p)`` (symbolic ``p``) with sympy's
@@ -17,7 +15,6 @@ function of ``p``.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from fractions import Fraction
 from functools import cached_property
@@ -51,27 +48,28 @@ def transition_polynomials(ring: Ring, keys: np.ndarray, lump: bool = True):
         A closed state set (e.g. :func:`markov.statespace.recurrent_keys`).
     lump : bool
         Whether ``keys`` are rotation classes.
+
+    Returns
+    -------
+    dict
+        ``{(i, j): {(a, b): count}}`` over the nonzero entries: ``a`` cars
+        moved and ``b`` braked on ``count`` of the ways from ``keys[i]`` to
+        ``keys[j]``.
     """
     if ring.update != PARALLEL:
         raise InvalidParameterError("exact rational solutions are implemented for parallel"
                                     f" update only, got {ring.update!r}")
-    indptr, succ, prob = successors(ring, keys, lump, p=1.0 / 3.0)
-    cols = np.searchsorted(keys, succ)
+    rows = successors(ring, keys, lump)
+    cols = np.searchsorted(keys, rows.keys)
     cols[cols == len(keys)] = 0
-    if not np.array_equal(keys[cols], succ):
+    if not np.array_equal(keys[cols], rows.keys):
         raise RuntimeError("a successor lies outside the state set: it is not closed")
     out: dict[tuple[int, int], dict[tuple[int, int], int]] = {}
     for i in range(len(keys)):
-        lo, hi = indptr[i], indptr[i + 1]
-        k = int(hi - lo).bit_length() - 1          # 2**k brake masks
-        if 1 << k != hi - lo:
-            raise RuntimeError("a parallel row does not have 2**k entries")
-        for j, pr in zip(cols[lo:hi], prob[lo:hi]):
-            a = int(round(math.log2(pr) + k * math.log2(3)))
-            if abs(pr - 2.0**a / 3.0**k) > 1e-9 * pr:
-                raise RuntimeError("a transition weight is not q**a p**b")
-            cell = out.setdefault((i, int(j)), {})
-            cell[(a, k - a)] = cell.get((a, k - a), 0) + 1
+        for e in range(rows.indptr[i], rows.indptr[i + 1]):
+            cell = out.setdefault((i, int(cols[e])), {})
+            ab = (int(rows.go[e]), int(rows.brake[e]))
+            cell[ab] = cell.get(ab, 0) + int(rows.multiplicity[e])
     return out
 
 

@@ -217,7 +217,7 @@ def test_each_order_automaton_equals_iterated_ring_images(L, N, vmax):
     keys = all_keys(ring)
     image = keys
     for n in range(1, vmax + 2):
-        image = np.unique(successors(ring, image, lump=False, p=0.5)[1])
+        image = np.unique(successors(ring, image, lump=False).keys)
         assert np.array_equal(keys[pattern_free_mask(keys, L, vmax, order=n)], image), n
 
 
@@ -269,8 +269,8 @@ def test_pattern_free_is_eventual_image_and_recurrent_is_that_minus_frozen(L, N,
 def test_frozen_configurations_are_isolated_transient_states(L, N, vmax):
     ring = Ring(L, N, vmax, 0.5)
     keys, _ = image_keys(ring)
-    indptr, succ, _ = successors(ring, keys, lump=False, p=0.5)
-    col = np.searchsorted(keys, succ)
+    rows = successors(ring, keys, lump=False)
+    indptr, col = rows.indptr, np.searchsorted(keys, rows.keys)
     rows = np.repeat(np.arange(len(keys)), np.diff(indptr))
     G = sp.csr_array((np.ones(len(col)), (rows, col)), shape=(len(keys),) * 2)
     n, lab = connected_components(G, directed=True, connection="strong")

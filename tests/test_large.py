@@ -10,7 +10,7 @@ from markov import (ConvergenceError, InvalidParameterError, Ring, RingChain, SO
 from markov.chain import AUTO_MATRIX_STATES
 from markov._factored import FactoredOperator
 from markov.memory import factored_bytes_per_state, memory_limit, solver_vectors
-from markov._sequential import TransitionOperator
+from markov._sequential import SequentialOperator
 from markov.statespace import recurrent_keys
 from markov.solvers import PRODUCT_METHODS
 from markov.transition import transition_matrix
@@ -27,7 +27,7 @@ def test_operator_solvers_reach_tolerance_and_the_direct_answer(method, L, N, vm
     ring = Ring(L, N, vmax, p, update)
     keys = recurrent_keys(ring)
     parallel = update == "parallel"
-    op = (FactoredOperator if parallel else TransitionOperator)(ring, keys, lump=True)
+    op = (FactoredOperator if parallel else SequentialOperator)(ring, keys, lump=True)
     chain = RingChain(ring)
     aggregates = chain.aggregates if method == "aggregation" else None
     res = stationary(op, method, tol=1e-11, aggregates=aggregates)
