@@ -8,6 +8,7 @@ one-call entry point used by the CLI.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -18,7 +19,6 @@ import scipy.sparse as sp
 from . import memory, observables
 from .choices import OPERATORS, PRODUCT_METHODS
 from .errors import InvalidParameterError, NoUniqueStationaryStateError
-from .goe_census import recurrent_class_count
 from .ring import PARALLEL, Ring
 from .statespace import count_all, recurrent_keys
 from .solvers import DEFAULT_TOL, StationaryResult, stationary
@@ -55,25 +55,6 @@ _LIGHTEST = "power"
 #: braking probability and with BiCGSTAB above (:meth:`RingChain._auto_method`).
 AGGREGATION_MAX_P = 0.3
 
-# the GoE automata behind the count grow fast with vmax (3.5 s at vmax = 6)
-_PREDICT_VMAX = 5
-
-
-def predicted_states(ring: Ring, lump: bool) -> int | None:
-    """Lower bound of the recurrent-class size before enumerating, if one is known.
-
-    Uses ``markov.goe.recurrent_class_count`` (configurations free of Garden of
-    Eden patterns, ``markov.goe.pattern_free_count``, minus the frozen ones: an
-    exact transfer-matrix count) for parallel update; lumping divides by at
-    most ``L``, so the lumped figure is a lower bound.  ``None`` when no
-    prediction is available.
-    """
-    if ring.update != PARALLEL or ring.trivial or ring.vmax > _PREDICT_VMAX:
-        return None
-    count = recurrent_class_count(ring.length, ring.cars, ring.vmax)
-    return -(-count // ring.length) if lump else count
-
-
 def _ensure_unique(ring: Ring) -> None:
     if ring.trivial:
         return
@@ -102,7 +83,14 @@ class RingChain:
     max_memory : float, optional
         Bytes allowed; default 75 % of physical memory.
     operator : {"auto", "matrix", "matrix-free"}
-        How ``x -> x P`` is applied (:data:`OPERATORS`).
+        How ``x -> x P`` is applied (:data:`markov.choices.OPERATORS`).
+    state_bound : callable, optional
+        ``state_bound(ring, lump)``: a lower bound of the number of states, or
+        ``None``, known before enumerating them, e.g.
+        :func:`markov.goe_census.recurrent_class_bound` (the ``nasch``
+        commands pass it).  A chain the bound already puts over the memory
+        limit is refused at once; without it the state-space search refuses
+        as soon as the states it has found do not fit.
 
     Examples
     --------
@@ -118,13 +106,15 @@ class RingChain:
     """
 
     def __init__(self, ring: Ring, lump: bool = True, max_memory: float | None = None,
-                 operator: str = "auto"):
+                 operator: str = "auto",
+                 state_bound: Callable[[Ring, bool], int | None] | None = None):
         ensure_chain_arguments(ring, max_memory=max_memory)
         self.ring = ring
         self.lump = lump
         self.max_memory = max_memory
         self.limit = memory.memory_limit(max_memory)
         self.operator = _ensure_operator(operator)
+        self.state_bound = state_bound
         self.build_seconds = 0.0
 
     def with_p(self, p) -> "RingChain":
@@ -133,7 +123,8 @@ class RingChain:
         The states, and the structure of the matrix-free operator, do not
         depend on ``p``; the CSR matrix does and is rebuilt.
         """
-        other = RingChain(self.ring.with_p(p), self.lump, self.max_memory, self.operator)
+        other = RingChain(self.ring.with_p(p), self.lump, self.max_memory, self.operator,
+                          self.state_bound)
         for name in ("keys", "transitions", "operator_kind", "aggregates"):
             if name in self.__dict__:
                 other.__dict__[name] = self.__dict__[name]
@@ -154,11 +145,13 @@ class RingChain:
         return self._matrix_free_bytes_per_state(_LIGHTEST)
 
     def _precheck(self) -> None:
-        """Refuse before enumerating when a known lower bound already does not fit."""
+        """Refuse before enumerating when the caller's lower bound already does not fit."""
+        if self.state_bound is None:
+            return
         per_state = self._guard_bytes_per_state()
         if count_all(self.ring) * per_state <= self.limit:
             return  # even every configuration would fit: no need to predict
-        n = predicted_states(self.ring, self.lump)
+        n = self.state_bound(self.ring, self.lump)
         if n is None:
             return
         r = self.ring
@@ -457,7 +450,8 @@ class Solution:
 
 
 def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFAULT_TOL,
-          max_memory: float | None = None, operator: str = "auto") -> Solution:
+          max_memory: float | None = None, operator: str = "auto",
+          state_bound: Callable[[Ring, bool], int | None] | None = None) -> Solution:
     """Exact stationary state of a NaSch ring.
 
     Parameters
@@ -475,6 +469,10 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     operator : {"auto", "matrix", "matrix-free"}
         Assemble ``P`` or apply it without storing it (``auto``: see
         :attr:`RingChain.operator_kind`).
+    state_bound : callable, optional
+        A lower bound of the number of states before enumerating them
+        (see :class:`RingChain`), e.g.
+        :func:`markov.goe_census.recurrent_class_bound`.
 
     Returns
     -------
@@ -501,8 +499,8 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     """
     _ensure_unique(ring)
     ensure_chain_arguments(ring, method=method, tol=tol, max_memory=max_memory)
-    return RingChain(ring, lump=lump, max_memory=max_memory,
-                     operator=operator).solution(method=method, tol=tol)
+    return RingChain(ring, lump=lump, max_memory=max_memory, operator=operator,
+                     state_bound=state_bound).solution(method=method, tol=tol)
 
 
 def load_solution(path) -> Solution:

@@ -33,10 +33,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from .goe_patterns import elementary_patterns, order_automaton, _ensure_vmax
-from .ring import Ring
+from .ring import PARALLEL, Ring
 from .statespace import count_all
 
-__all__ = ["pattern_free_count", "frozen_count", "recurrent_class_count"]
+__all__ = ["pattern_free_count", "frozen_count", "recurrent_class_count",
+           "recurrent_class_bound"]
+
+# the automata behind the count grow fast with vmax (3.5 s at vmax = 6)
+_BOUND_VMAX = 5
 
 
 def _ensure_ring_numbers(length, cars, vmax) -> tuple[int, int, int]:
@@ -207,3 +211,35 @@ def recurrent_class_count(length: int, cars: int, vmax: int) -> int:
     if cars == 1:
         return 2 * length
     return pattern_free_count(length, cars, vmax) - frozen_count(length, cars, vmax)
+
+
+def recurrent_class_bound(ring: Ring, lump: bool) -> int | None:
+    """Lower bound of the number of states of the exact chain, before enumerating it.
+
+    The size estimator of :class:`markov.chain.RingChain` (``state_bound=``):
+    :func:`recurrent_class_count` for parallel update, divided by ``L`` when
+    lumped (an orbit has at most ``L`` members).  ``None`` where no count is
+    offered: random-sequential update, ``vmax > 5`` (the automata take
+    seconds there), and the trivial rings.
+
+    Parameters
+    ----------
+    ring : Ring
+    lump : bool
+        Whether the states will be rotation classes.
+
+    Returns
+    -------
+    int or None
+
+    Examples
+    --------
+    >>> recurrent_class_bound(Ring(10, 5, 2, 0.5), lump=False)
+    2684
+    >>> recurrent_class_bound(Ring(10, 5, 2, 0.5), lump=True)     # at least 2684 / 10
+    269
+    """
+    if ring.update != PARALLEL or ring.trivial or ring.vmax > _BOUND_VMAX:
+        return None
+    count = recurrent_class_count(ring.length, ring.cars, ring.vmax)
+    return -(-count // ring.length) if lump else count

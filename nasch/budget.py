@@ -5,7 +5,7 @@ in ``1/L`` (:mod:`nasch.extrapolate`), so the largest rings one can afford
 are worth most.  Which ones one can afford follows from the size of the
 recurrent class, known *before* enumerating it: the Garden of Eden transfer
 matrix counts the recurrent configurations exactly
-(:func:`markov.chain.predicted_states`, parallel update, vmax <= 5), and the
+(:func:`markov.goe_census.recurrent_class_bound`, parallel update, vmax <= 5), and the
 exact solver's cost is close to linear in that count.
 
 Cost model (seconds, one core; measured by ``make bench-large``, see
@@ -78,11 +78,11 @@ def predicted_classes(length: int, cars: int, vmax: int, update: str = PARALLEL)
     Exact count / L (a lower bound by at most the periodic orbits) where the
     transfer-matrix count exists; otherwise every configuration over ``L``.
     """
-    from markov.chain import predicted_states
+    from markov.goe_census import recurrent_class_bound
     from markov.statespace import count_all
 
     ring = Ring(length, cars, vmax, 0.5, update)
-    n = predicted_states(ring, lump=True)
+    n = recurrent_class_bound(ring, lump=True)
     return n if n is not None else -(-count_all(ring) // length)
 
 

@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
 from markov import (ConvergenceError, InvalidParameterError, Ring, RingChain, SOLVERS,
                     StateSpaceTooLargeError, solve, stationary)
@@ -12,8 +13,9 @@ from markov._factored import FactoredOperator
 from markov.memory import factored_bytes_per_state, memory_limit, solver_vectors
 from markov._sequential import SequentialOperator
 from markov.statespace import recurrent_keys
-from markov.solvers import PRODUCT_METHODS
+from markov.choices import PRODUCT_METHODS
 from markov.transition import transition_matrix
+from nasch.cli import main
 
 SOLVER_CASES = [(m, *case) for m in PRODUCT_METHODS for case in [
     (11, 5, 2, 0.5, "parallel"), (10, 4, 1, 0.2, "parallel"), (7, 3, 2, 0.4, "random-sequential")]
@@ -150,10 +152,6 @@ def test_errors_say_what_is_allowed():
 
 
 def test_cli_solve_operator_and_method_options():
-    from click.testing import CliRunner
-
-    from nasch.cli import main
-
     args = ["solve", "-L", "14", "-N", "7", "--p", "0.5", "--json"]
     runner = CliRunner()
     ref = json.loads(runner.invoke(main, args + ["--operator", "matrix"]).output)
@@ -171,10 +169,33 @@ def test_cli_solve_operator_and_method_options():
     assert bad.exit_code == 2 and "assembled matrix" in bad.output
 
 
-def test_refused_before_enumerating_when_the_count_predicts_too_many_states():
-    from markov.goe_census import recurrent_class_count
+def test_refused_before_enumerating_when_the_count_predicts_too_many_states(monkeypatch):
+    from markov.goe_census import recurrent_class_bound, recurrent_class_count
 
+    monkeypatch.setattr("markov.chain.recurrent_keys",
+                        lambda *a, **k: pytest.fail("enumerated before the bound refused"))
     # L = 24 would take a minute to enumerate: the refusal must come from the count
     lower = -(-recurrent_class_count(24, 12, 2) // 24)  # orbits have at most L members
+    ring = Ring(24, 12, 2, 0.5)
     with pytest.raises(StateSpaceTooLargeError, match=f"at least {lower:,} states"):
-        RingChain(Ring(24, 12, 2, 0.5), max_memory=1e9).keys
+        RingChain(ring, max_memory=1e9, state_bound=recurrent_class_bound).keys
+    # the command line passes the bound
+    out = CliRunner().invoke(main, ["solve", "-L", "24", "-N", "12", "--p", "0.5",
+                                    "--max-memory", "0.9"])
+    assert out.exit_code == 2 and f"at least {lower:,} states" in out.output
+
+
+def test_the_solver_takes_its_size_bound_from_the_caller(monkeypatch):
+    # the exact chain does not reach into the Garden of Eden automata by itself
+    monkeypatch.setattr("markov.goe_census.recurrent_class_count",
+                        lambda *a: pytest.fail("the solver called the GoE count"))
+    calls = []
+
+    def bound(ring, lump):
+        calls.append((ring.length, lump))
+        return 10**12   # far too many for the limit below
+    ring = Ring(14, 7, 2, 0.5)
+    assert solve(ring).n_states > 0
+    with pytest.raises(StateSpaceTooLargeError, match="at least 1.00e+12 states"):
+        RingChain(ring, max_memory=1e6, state_bound=bound).keys
+    assert calls == [(14, True)]

@@ -52,6 +52,7 @@ def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_mem
     # every check before the work: the solver's own up-front checks, then the options
     from markov.chain import solve as solve_ring
     from markov.files import check_output_path
+    from markov.goe_census import recurrent_class_bound
     from markov.ring import Ring
     from markov.validate import ensure_int, ensure_max_memory
 
@@ -63,7 +64,7 @@ def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_mem
         save = check_output_path(save, suffixes=(".npz",))
     limit = None if max_memory is None else max_memory * 2**30
     sol = solve_ring(ring, method=method, lump=not no_lump, tol=tol, max_memory=limit,
-                     operator=operator)
+                     operator=operator, state_bound=recurrent_class_bound)
     data = sol.to_dict()
     rows = sol.top_configurations(top) if top else None
     if save is not None:
