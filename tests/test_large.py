@@ -196,6 +196,6 @@ def test_the_solver_takes_its_size_bound_from_the_caller(monkeypatch):
         return 10**12   # far too many for the limit below
     ring = Ring(14, 7, 2, 0.5)
     assert solve(ring).n_states > 0
-    with pytest.raises(StateSpaceTooLargeError, match="at least 1.00e+12 states"):
+    with pytest.raises(StateSpaceTooLargeError, match=r"at least 1\.00e\+12 states"):
         RingChain(ring, max_memory=1e6, state_bound=bound).keys
     assert calls == [(14, True)]
