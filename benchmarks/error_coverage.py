@@ -44,17 +44,18 @@ def measure(vmax: int, p: float, c: Fraction, budget: float, mc_length: int,
             mc_steps: int, seed: int) -> dict:
     """Exact rings within the budget, their extrapolation, and the reference."""
     from markov import Ring, solve
-    from nasch.budget import lengths_within_budget
-    from nasch.extrapolate import exact_vmax1_flux
     from markov.simulate import simulate
-    from nasch.tables import mc_ring
+    from nasch.budget import lengths_within_budget
+    from nasch.jobs import mc_ring
+    from symbolic import approximate
 
     start = time.perf_counter()
     lengths = lengths_within_budget(vmax, p, c, budget)
     fluxes = [solve(Ring(L, int(c * L), vmax, p)).flux for L in lengths]
     exact_s = time.perf_counter() - start
     if vmax == 1:
-        ref, ref_err, ref_kind = exact_vmax1_flux(p, float(c)), 0.0, "closed form"
+        # pMF is the exact infinite ring for vmax = 1 (closed form)
+        ref, ref_err, ref_kind = approximate("pmf", 1, p, float(c)).flux, 0.0, "closed form"
     else:
         Lm, Nm = mc_ring(c, mc_length)
         r = simulate(Ring(Lm, Nm, vmax, p), steps=mc_steps, warmup=mc_steps // 2, seed=seed,

@@ -38,13 +38,13 @@ def main() -> None:
     # One line of reading help: how far each approximation is from the best
     # estimate of the infinite system (the Monte Carlo value), per density.
     for row in table.rows:
-        if row["kind"] != "extrapolated":
+        if row.kind != "extrapolated":
             continue
-        ref = row["mc_flux"]
-        parts = [f"{name} {100 * (row[name] - ref) / ref:+.1f}%"
-                 for name in table.methods if row[name] is not None]
-        parts.append(f"exact L->inf {100 * (row['flux'] - ref) / ref:+.1f}%")
-        print(f"c = {row['density']:.2f}: deviation from Monte Carlo: " + ", ".join(parts))
+        ref = row.mc_flux
+        parts = [f"{name} {100 * (flux - ref) / ref:+.1f}%"
+                 for name, flux in row.approximations.items() if flux is not None]
+        parts.append(f"exact L->inf {100 * (row.flux - ref) / ref:+.1f}%")
+        print(f"c = {row.density:.2f}: deviation from Monte Carlo: " + ", ".join(parts))
     print(f"\n({time.perf_counter() - start:.1f} s)")
 
 

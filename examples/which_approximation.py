@@ -45,17 +45,17 @@ def main(vmax: int = 2) -> None:
     print("-" * len(head))
     wins, low, high = Counter(), Counter(), Counter()
     for r in table.rows:
-        if r["kind"] != "extrapolated":
+        if r.kind != "extrapolated":
             continue
-        use_mc = r["mc_error"] < r["flux_error"]
-        ref, err = (r["mc_flux"], r["mc_error"]) if use_mc else (r["flux"], r["flux_error"])
-        dev = {m: (r[m] - ref) / ref for m in methods}
+        use_mc = r.mc_error < r.flux_error
+        ref, err = (r.mc_flux, r.mc_error) if use_mc else (r.flux, r.flux_error)
+        dev = {m: (r.approximations[m] - ref) / ref for m in methods}
         best = min(methods, key=lambda m: abs(dev[m]))
         wins[best] += 1
-        (low if r["density"] < 0.45 else high)[best] += 1
-        agree = abs(r["flux"] - r["mc_flux"]) / math.hypot(r["flux_error"], r["mc_error"])
+        (low if r.density < 0.45 else high)[best] += 1
+        agree = abs(r.flux - r.mc_flux) / math.hypot(r.flux_error, r.mc_error)
         source = "MC" if use_mc else "exact"
-        print(f"{r['p']:5g} {r['density']:6.3f} {ref:9.5f} ± {err:.5f} {source:>6}  "
+        print(f"{r.p:5g} {r.density:6.3f} {ref:9.5f} ± {err:.5f} {source:>6}  "
               + "  ".join(f"{100 * dev[m]:+6.1f}%" for m in methods)
               + f"  {LABEL[best]:>5}  {agree:5.1f}σ")
     print("\nbest approximation (count of grid points): "

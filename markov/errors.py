@@ -1,8 +1,19 @@
-"""Exceptions raised by the package.
+"""Exceptions raised on purpose by the libraries and the command line.
 
-Every error that bad input can cause is a subclass of :class:`ValueError` whose
-message says what was received and what is allowed, so the command line can
-print it and exit with status 2 instead of showing a traceback.
+Every one is a :class:`NaschError`, whose message says what was received and
+what is allowed, so the command line prints it on one line and exits with
+status 2 instead of showing a traceback.  Each also derives from the builtin
+that says what kind of failure it is, as scipy's errors do:
+
+=============================== ============== ===========================================
+error                           builtin        when
+=============================== ============== ===========================================
+InvalidParameterError           ValueError     an argument outside its allowed range
+NoUniqueStationaryStateError    ValueError     ``p = 0`` or ``1``, a reducible chain
+StateSpaceTooLargeError         MemoryError    refused before allocating what does not fit
+ConvergenceError                RuntimeError   an iterative solver stopped short
+OutputError                     OSError        a result could not be written
+=============================== ============== ===========================================
 """
 from __future__ import annotations
 
@@ -16,23 +27,23 @@ __all__ = [
 ]
 
 
-class NaschError(ValueError):
+class NaschError(Exception):
     """Base class of every error this package raises on purpose."""
 
 
-class InvalidParameterError(NaschError):
+class InvalidParameterError(NaschError, ValueError):
     """A model or solver parameter is outside its allowed range."""
 
 
-class NoUniqueStationaryStateError(NaschError):
+class NoUniqueStationaryStateError(NaschError, ValueError):
     """The chain has more than one stationary distribution (``p = 0`` or ``p = 1``)."""
 
 
-class StateSpaceTooLargeError(NaschError):
-    """The requested chain would not fit in the memory allowed for it."""
+class StateSpaceTooLargeError(NaschError, MemoryError):
+    """The requested chain would not fit in the memory allowed for it (refused up front)."""
 
 
-class ConvergenceError(NaschError):
+class ConvergenceError(NaschError, RuntimeError):
     """An iterative solver stopped before reaching its tolerance.
 
     Attributes
@@ -52,5 +63,5 @@ class ConvergenceError(NaschError):
         self.partial = partial
 
 
-class OutputError(NaschError):
+class OutputError(NaschError, OSError):
     """A result could not be written to the path the user named."""

@@ -41,7 +41,7 @@ from .progress import progress_bar
 from .rules import deterministic_velocity, randomize
 
 __all__ = ["SimulationResult", "simulate", "evolve", "initial_configuration", "blocking_error",
-           "simulation_bytes", "DEFAULT_BATCHES"]
+           "simulation_bytes", "ensure_simulation_fits", "DEFAULT_BATCHES"]
 
 #: Batches of the batch-means error bar; a run needs at least one step per batch.
 DEFAULT_BATCHES = 32
@@ -266,7 +266,22 @@ def simulation_bytes(ring: Ring) -> int:
     return max(draw, 32 * cars) + 1_000_000
 
 
-def _ensure_memory(ring: Ring, max_memory: float | None) -> None:
+def ensure_simulation_fits(ring: Ring, max_memory: float | None = None) -> None:
+    """Refuse a ring the simulator cannot hold, before allocating anything.
+
+    Parameters
+    ----------
+    ring : Ring
+    max_memory : float, optional
+        Bytes allowed; default 75 % of physical memory.
+
+    Raises
+    ------
+    InvalidParameterError
+        For ``L`` beyond the 64-bit positions.
+    StateSpaceTooLargeError
+        When :func:`simulation_bytes` exceeds the limit.
+    """
     from .memory import check_fits, memory_limit
     from .validate import format_count
 
@@ -428,7 +443,7 @@ def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
         raise InvalidParameterError("an initial configuration allows only replicas = 1")
     warmup = steps // 10 if warmup is None else _ensure_steps("warmup", warmup, 0)
     _rng_state(seed)   # validates the seed before any work
-    _ensure_memory(ring, max_memory)
+    ensure_simulation_fits(ring, max_memory)
     start = time.perf_counter()
     fluxes, errors, all_batches = [], [], []
     counts = np.zeros(ring.vmax + 1, dtype=np.int64)

@@ -11,23 +11,19 @@ import importlib
 import json
 import signal
 import sys
-from pathlib import Path
 
 import click
 
 from markov.errors import InvalidParameterError, NaschError
 
 __all__ = ["handle_errors", "emit_json", "quiet_option", "NaschGroup", "run_console",
-           "number_list", "ensure_probabilities", "output_format", "ensure_dask_options",
+           "number_list", "ensure_probabilities", "ensure_dask_options",
            "EXIT_BAD_INPUT", "EXIT_INTERRUPTED"]
 
 #: Exit status of every refusal (bad option, bad value, too large): click's own.
 EXIT_BAD_INPUT = 2
 #: Exit status after Ctrl-C: 128 + SIGINT, as a shell reports it.
 EXIT_INTERRUPTED = 130
-
-# output format of a table written to a file, by the file's extension
-_EXT_FORMAT = {".csv": "csv", ".md": "md", ".tex": "latex", ".json": "json", ".txt": "text"}
 
 
 def number_list(name: str, text: str, kind: type = float) -> list:
@@ -79,22 +75,6 @@ def ensure_probabilities(values: list[float], name: str = "--p") -> list[float]:
     from markov.validate import ensure_open_probability
 
     return [ensure_open_probability(p, name) for p in values]
-
-
-def output_format(output: str | None) -> str:
-    """The table format implied by an output file's extension; ``text`` otherwise.
-
-    Parameters
-    ----------
-    output : str or None
-        The ``--output`` path.
-
-    Returns
-    -------
-    str
-        One of ``text, csv, md, latex, json``.
-    """
-    return _EXT_FORMAT.get(Path(output).suffix.lower(), "text") if output else "text"
 
 
 def ensure_dask_options(serial: bool, scheduler: str | None) -> None:

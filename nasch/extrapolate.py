@@ -46,24 +46,7 @@ import numpy as np
 from markov.errors import InvalidParameterError
 from markov.ring import PARALLEL, Ring
 
-__all__ = ["Extrapolation", "extrapolate", "commensurate_lengths", "extrapolate_flux",
-           "exact_vmax1_flux"]
-
-
-def exact_vmax1_flux(p: float, density: float) -> float:
-    """Exact infinite-ring flux for ``vmax = 1`` (parallel update).
-
-    .. math:: f = \\tfrac12 \\left(1 - \\sqrt{1 - 4 q c (1 - c)}\\right), \\quad q = 1 - p
-
-    (Schadschneider & Schreckenberg 1993; the paper's pMF result for vmax = 1.)
-
-    Examples
-    --------
-    >>> round(exact_vmax1_flux(0.0, 0.5), 12)   # deterministic: min(c, 1 - c)
-    0.5
-    """
-    q = 1.0 - float(p)
-    return 0.5 * (1.0 - math.sqrt(1.0 - 4.0 * q * density * (1.0 - density)))
+__all__ = ["Extrapolation", "extrapolate", "commensurate_lengths", "extrapolate_flux"]
 
 
 def _fit(lengths: np.ndarray, fluxes: np.ndarray, order: int) -> np.ndarray:
@@ -241,8 +224,9 @@ def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int] | None = None
 
     Examples
     --------
+    >>> from symbolic import approximate      # pMF: the exact infinite ring for vmax = 1
     >>> e = extrapolate_flux(1, 0.5, 0.5, [10, 12, 14, 16])
-    >>> abs(e.f_inf - exact_vmax1_flux(0.5, 0.5)) < e.error
+    >>> abs(e.f_inf - approximate("pmf", 1, 0.5, 0.5).flux) < e.error
     True
     """
     from markov.chain import solve

@@ -31,12 +31,15 @@ from typing import Sequence
 
 import numpy as np
 
-from markov.errors import InvalidParameterError, NaschError
-from .extrapolate import commensurate_lengths, extrapolate
+from markov.errors import InvalidParameterError
 from markov.files import write_bytes_atomic
+from markov.validate import ensure_open_probability
+from symbolic import approximate, supported
+
+from .extrapolate import commensurate_lengths, extrapolate
+from .jobs import (ExactJob, MonteCarloJob, ensure_mc_steps, job_cost, monte_carlo_job,
+                   preflight, run_job_keep_going)
 from .sweep import run_jobs
-from .tables import (_derived_seed, _task_cost, ensure_mc_steps, exact_job, mc_job, mc_ring,
-                     preflight)
 
 __all__ = ["fundamental_data", "fundamental_figure", "save_figure", "FIGURE_FORMATS",
            "EXTRAPOLATION_DENSITIES"]
@@ -52,18 +55,6 @@ _STYLE = {"pmf": ("pMF", "-", "C0"), "mf": ("MF", ":", "k"),
 # Colours of the finite rings: none shared with a curve, Monte Carlo or the extrapolation.
 _EXACT_COLORS = ("C1", "C7", "C5", "C8", "C9", "C6")
 _MARKERS = ("o", "s", "^", "v", "<", ">", "p", "h")
-
-
-def _job(task):
-    kind, point = task
-    if kind == "mc":
-        return mc_job(point)
-    try:
-        return exact_job(point)
-    except NaschError as exc:
-        # One failing ring (e.g. a chain the exact solver refuses) must not
-        # cost the whole figure: the point is dropped and reported.
-        return {"flux": float("nan"), "error": str(exc)}
 
 
 def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
@@ -127,10 +118,7 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     from markov.validate import ensure_int
 
     single = np.ndim(p) == 0
-    ps = [float(p)] if single else [float(x) for x in p]
-    for x in ps:
-        if not 0 < x < 1:
-            raise InvalidParameterError(f"p must lie strictly between 0 and 1, got {x}")
+    ps = [ensure_open_probability(float(x)) for x in ([p] if single else p)]
     vmax = ensure_int("vmax", vmax, 1)
     order = ensure_int("order", order, 1)
     seed = ensure_int("seed", seed, 0)
@@ -165,19 +153,18 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     # every extrapolated point has a simulation at exactly its density.
     mc_c = sorted({Fraction(k, mc_points + 1) for k in range(1, mc_points + 1)}
                   | {c for g in groups.values() for c in g}) if mc_steps else []
-    tasks, spans = [], []
+    jobs, spans = [], []
     for x in ps:
         points = sorted(shown | {(L, int(c * L)) for c, Ls in groups[x].items() for L in Ls})
-        first = len(tasks)
-        tasks += [("exact", (L, N, vmax, x, "parallel")) for L, N in points]
-        for c in mc_c:
-            Lm, Nm = mc_ring(c, mc_length)
-            s = _derived_seed(seed, c.numerator, c.denominator, vmax, round(x * 2**40))
-            tasks.append(("mc", (Lm, Nm, vmax, x, "parallel", mc_steps, mc_steps // 2, s)))
-        spans.append((first, len(tasks), points))
-    preflight([t for t in tasks if t[0] == "mc"])
-    results = run_jobs(_job, tasks, serial=serial, scheduler=scheduler, client=client,
-                       cost=_task_cost, desc="fundamental diagram")
+        first = len(jobs)
+        jobs += [ExactJob(L, N, vmax, x) for L, N in points]
+        jobs += [monte_carlo_job(c, vmax, x, mc_length=mc_length, steps=mc_steps,
+                                 warmup=mc_steps // 2, seed=seed) for c in mc_c]
+        spans.append((first, len(jobs), points))
+    # rings the exact solver refuses are left out of the figure, not refused up front
+    preflight([job for job in jobs if isinstance(job, MonteCarloJob)])
+    results = run_jobs(run_job_keep_going, jobs, serial=serial, scheduler=scheduler,
+                       client=client, cost=job_cost, desc="fundamental diagram")
     panels = [_panel(vmax, x, results[lo:hi], points, groups[x], mc_c, lengths, order,
                      methods, mc_length, mc_steps, curve_points)
               for x, (lo, hi, points) in zip(ps, spans)]
@@ -187,8 +174,8 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
 def _panel(vmax, p, results, exact_points, groups, mc_c, lengths, order, methods,
            mc_length, mc_steps, curve_points) -> dict:
     exact_res = results[:len(exact_points)]
-    flux = {pt: r["flux"] for pt, r in zip(exact_points, exact_res)}
-    failed = [(pt, r["error"]) for pt, r in zip(exact_points, exact_res) if "error" in r]
+    flux = {pt: r.flux for pt, r in zip(exact_points, exact_res)}
+    failed = [(pt, r.error) for pt, r in zip(exact_points, exact_res) if r.error]
     if failed:
         warnings.warn(f"p = {p:g}: exact solve failed for (L, N) = {[pt for pt, _ in failed]}:"
                       f" {failed[0][1]}; those points are left out", RuntimeWarning,
@@ -210,14 +197,10 @@ def _panel(vmax, p, results, exact_points, groups, mc_c, lengths, order, methods
         "vmax": int(vmax), "p": float(p), "order": order, "exact": exact,
         "extrapolated": (np.array([c for c, _ in ext]), np.array([e.f_inf for _, e in ext]),
                          np.array([e.error for _, e in ext])),
-        "mc": (np.array([float(c) for c in mc_c]), np.array([r["flux"] for r in mc_res]),
-               np.array([r["error"] for r in mc_res])),
+        "mc": (np.array([float(c) for c in mc_c]), np.array([r.flux for r in mc_res]),
+               np.array([r.error for r in mc_res])),
         "mc_length": mc_length, "mc_steps": mc_steps, "curves": {},
     }
-    try:
-        from symbolic import approximate, supported
-    except ImportError:  # the curves need the symbolic package; the rest does not
-        methods = ()
     # 120 points draw smooth curves: the n-cluster solves all at once (4-cluster: ~1 s),
     # COMF one by one (~20 s for vmax 2, mostly the lowest densities).
     grid = np.linspace(0.005, 0.995, int(curve_points))

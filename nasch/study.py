@@ -7,7 +7,7 @@ For each point ``(vmax, p, c)`` of a grid:
   enumerate, is left empty and the reason kept in ``notes``);
 * Monte Carlo: ``mc_replicas`` runs of ``mc_steps`` steps (after as many
   warm-up steps) on a ring of at least ``mc_length`` cells with density exactly
-  ``c`` (:func:`nasch.tables.mc_job`), flux and 1-sigma error of
+  ``c`` (:class:`nasch.jobs.MonteCarloJob`), flux and 1-sigma error of
   :func:`markov.simulate.simulate`; this is the reference;
 * the ``L -> infinity`` extrapolation of the exact fluxes of the rings among
   ``lengths`` with ``c L`` an integer and at most ``max_states`` rotation
@@ -36,46 +36,77 @@ from typing import Sequence
 import numpy as np
 
 from markov.errors import InvalidParameterError, NaschError
-
+from markov.validate import ensure_int, ensure_open_probability
 from symbolic import APPROXIMATIONS, approximate, label, method_name, supported
 
-__all__ = ["DEFAULT_DENSITIES", "DEFAULT_METHODS", "StudyTable", "convergence_study",
-           "deviation_figure"]
+from .jobs import ExactJob, density_fraction, job_cost, monte_carlo_job, run_job_keep_going
+from .formatting import RenderedTable, csv_number, plus_minus
+
+__all__ = ["DEFAULT_DENSITIES", "DEFAULT_METHODS", "StudyRow", "StudyTable",
+           "convergence_study", "deviation_figure"]
 
 DEFAULT_DENSITIES = tuple(sorted({k / 20 for k in range(1, 20)} | {1 / 3, 2 / 3}))
 DEFAULT_METHODS = APPROXIMATIONS
-FORMATS = ("text", "csv", "md", "latex", "json")
-
-
-def _job(task):
-    """One Monte Carlo run or exact ring (module level: travels to Dask workers)."""
-    from nasch.tables import exact_job, mc_job
-
-    kind, point = task
-    if kind == "mc":
-        return mc_job(point)
-    try:
-        return exact_job(point)
-    except NaschError as exc:    # a ring the solver refuses is left out, with the reason
-        return {"flux": float("nan"), "error": str(exc)}
-
-
-def _cost(task) -> float:
-    from nasch.tables import _task_cost
-    return _task_cost(task)
 
 
 @dataclass(frozen=True)
-class StudyTable:
+class StudyRow:
+    """One point ``(vmax, p, c)`` of a :class:`StudyTable`.
+
+    Attributes
+    ----------
+    vmax : int
+    p, density : float
+    mc_flux, mc_error : float
+        Monte Carlo flux (the reference) and its 1-sigma error.
+    mc_length : int
+    exact_flux, exact_error : float or None
+        The ``L -> infinity`` extrapolation of the exact rings and its bar.
+    exact_lengths : tuple of int
+        The rings extrapolated.
+    approximations : dict
+        Flux of each method (None where not available).
+    best : str or None
+        The method closest to Monte Carlo.
+    within_2sigma : tuple of str
+        The methods within two Monte Carlo errors of it.
+    """
+
+    vmax: int
+    p: float
+    density: float
+    mc_flux: float
+    mc_error: float
+    mc_length: int
+    exact_flux: float | None
+    exact_error: float | None
+    exact_lengths: tuple
+    approximations: dict
+    best: str | None
+    within_2sigma: tuple
+
+    def to_dict(self) -> dict:
+        """The row as in the JSON output: one key per method.
+
+        Returns
+        -------
+        dict
+        """
+        return {"vmax": self.vmax, "p": self.p, "density": self.density,
+                "mc_flux": self.mc_flux, "mc_error": self.mc_error, "mc_length": self.mc_length,
+                "exact_flux": self.exact_flux, "exact_error": self.exact_error,
+                "exact_lengths": list(self.exact_lengths), **self.approximations,
+                "best": self.best, "within_2sigma": list(self.within_2sigma)}
+
+
+@dataclass(frozen=True)
+class StudyTable(RenderedTable):
     """Result of :func:`convergence_study`.
 
     Attributes
     ----------
-    rows : tuple of dict
-        One per ``(vmax, p, c)``: ``vmax, p, density, mc_flux, mc_error,
-        mc_length, exact_flux, exact_error, exact_lengths``, one flux per
-        method (None where not available), ``best`` (closest to Monte Carlo)
-        and ``within_2sigma`` (the methods within two Monte Carlo errors of it).
+    rows : tuple of StudyRow
+        One per ``(vmax, p, c)``.
     methods : tuple of str
     mc_steps, mc_replicas : int
     notes : tuple of str
@@ -90,68 +121,68 @@ class StudyTable:
     notes: tuple = ()
     seconds: float = 0.0
 
-    def deviation(self, row: dict, method: str) -> float | None:
-        """``(f - f_MC) / f_MC`` of ``method`` at ``row`` (None when missing)."""
-        f = row[method]
-        return None if f is None else (f - row["mc_flux"]) / row["mc_flux"]
+    def deviation(self, row: StudyRow, method: str) -> float | None:
+        """``(f - f_MC) / f_MC`` of ``method`` at ``row`` (None when missing).
+
+        Parameters
+        ----------
+        row : StudyRow
+        method : str
+
+        Returns
+        -------
+        float or None
+        """
+        f = row.approximations[method]
+        return None if f is None else (f - row.mc_flux) / row.mc_flux
 
     def winners(self) -> dict:
         """``{(vmax, p): [(c, best method, its |deviation|), ...]}``."""
         out = {}
         for r in self.rows:
-            if r["best"] is not None:
-                out.setdefault((r["vmax"], r["p"]), []).append(
-                    (r["density"], r["best"], abs(self.deviation(r, r["best"]))))
+            if r.best is not None:
+                out.setdefault((r.vmax, r.p), []).append(
+                    (r.density, r.best, abs(self.deviation(r, r.best))))
         return out
-
-    def render(self, fmt: str = "text") -> str:
-        """The table as text in one of ``text, csv, md, latex, json``."""
-        if fmt not in FORMATS:
-            raise InvalidParameterError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
-        return getattr(self, f"to_{fmt}")()
 
     def to_dict(self) -> dict:
         return {"methods": list(self.methods), "mc_steps": self.mc_steps,
                 "mc_replicas": self.mc_replicas, "notes": list(self.notes),
                 "seconds": self.seconds,
-                "rows": [{**r, "exact_lengths": list(r["exact_lengths"]),
-                          "within_2sigma": list(r["within_2sigma"])} for r in self.rows]}
+                "rows": [r.to_dict() for r in self.rows]}
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2) + "\n"
 
     def to_csv(self) -> str:
-        from nasch.tables import _g
-
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(["vmax", "p", "density", "mc_length", "mc_flux", "mc_error", "exact_flux",
                     "exact_error", "exact_lengths"] + list(self.methods)
                    + ["best", "within_2sigma"])
         for r in self.rows:
-            w.writerow([r["vmax"], _g(r["p"]), _g(r["density"]), r["mc_length"],
-                        _g(r["mc_flux"]), _g(r["mc_error"]), _g(r["exact_flux"]),
-                        _g(r["exact_error"]), " ".join(map(str, r["exact_lengths"]))]
-                       + [_g(r[m]) for m in self.methods]
-                       + [r["best"] or "", " ".join(r["within_2sigma"])])
+            w.writerow([r.vmax, csv_number(r.p), csv_number(r.density), r.mc_length,
+                        csv_number(r.mc_flux), csv_number(r.mc_error), csv_number(r.exact_flux),
+                        csv_number(r.exact_error), " ".join(map(str, r.exact_lengths))]
+                       + [csv_number(r.approximations[m]) for m in self.methods]
+                       + [r.best or "", " ".join(r.within_2sigma)])
         return buf.getvalue()
 
     def _cells(self, latex: bool) -> tuple[list[str], list[list[str]]]:
-        from nasch.tables import _pm
-
         head = ["vmax", "p", "c", "Monte Carlo", "exact L->inf"] + [label(m) for m in
                                                                    self.methods] + ["best"]
         body = []
         for r in self.rows:
-            row = [str(r["vmax"]), f"{r['p']:g}", f"{r['density']:.4f}",
-                   _pm(r["mc_flux"], r["mc_error"], latex),
-                   "--" if r["exact_flux"] is None else _pm(r["exact_flux"], r["exact_error"],
+            row = [str(r.vmax), f"{r.p:g}", f"{r.density:.4f}",
+                   plus_minus(r.mc_flux, r.mc_error, latex),
+                   "--" if r.exact_flux is None else plus_minus(r.exact_flux, r.exact_error,
                                                              latex)]
             for m in self.methods:
                 dev = self.deviation(r, m)
                 pct = r"\%" if latex else "%"
-                row.append("--" if dev is None else f"{r[m]:.5f} ({100 * dev:+.1f}{pct})")
-            row.append("--" if r["best"] is None else label(r["best"]))
+                row.append("--" if dev is None
+                           else f"{r.approximations[m]:.5f} ({100 * dev:+.1f}{pct})")
+            row.append("--" if r.best is None else label(r.best))
             body.append(row)
         return head, body
 
@@ -184,7 +215,7 @@ class StudyTable:
         """``{method: max_c |deviation|}`` over the densities in ``[low, high]``."""
         out = {}
         for r in self.rows:
-            if r["vmax"] == vmax and r["p"] == p and low <= r["density"] <= high:
+            if r.vmax == vmax and r.p == p and low <= r.density <= high:
                 for m in self.methods:
                     dev = self.deviation(r, m)
                     if dev is not None:
@@ -217,8 +248,9 @@ class StudyTable:
 
 def _exact_rings(vmax: int, c: Fraction, lengths, max_states: int) -> list[tuple[int, int]]:
     """Rings ``(L, c L)`` among ``lengths`` with at most ``max_states`` rotation classes."""
-    from nasch.extrapolate import commensurate_lengths
     from markov.goe_census import recurrent_class_count
+
+    from .extrapolate import commensurate_lengths
 
     out = []
     for L in commensurate_lengths(c, lengths):
@@ -265,54 +297,46 @@ def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequen
     --------
     >>> t = convergence_study([1], [0.5], [0.5], methods=["mf", "comf"], mc_length=500,
     ...                       mc_steps=200, lengths=(), serial=True)
-    >>> t.rows[0]["best"]                   # COMF is exact for vmax = 1
+    >>> t.rows[0].best                      # COMF is exact for vmax = 1
     'comf'
     """
     import time
 
-    from nasch.extrapolate import extrapolate
-    from nasch.sweep import run_jobs
-    from nasch.tables import _derived_seed, mc_ring
+    from .extrapolate import extrapolate
+    from .sweep import run_jobs
 
     start = time.perf_counter()
-    vmaxes = [int(v) for v in vmax]
-    for v in vmaxes:
-        if v < 1:
-            raise InvalidParameterError(f"vmax must be >= 1, got {v}")
-    ps = [float(x) for x in p]
-    fracs = [Fraction(float(c)).limit_denominator(1000) for c in densities]
-    for name, values in (("p", ps), ("densities", fracs)):
-        if not values or not all(0 < x < 1 for x in values):
-            raise InvalidParameterError(f"{name} must lie strictly between 0 and 1, got"
-                                        f" {[float(x) for x in values]}")
+    vmaxes = [ensure_int("vmax", v, 1) for v in vmax]
+    ps = [ensure_open_probability(float(x)) for x in p]
+    fracs = sorted({density_fraction(float(c)) for c in densities})
+    if not ps or not fracs:
+        raise InvalidParameterError("the study needs at least one p and one density")
     names = [method_name(m) for m in methods]          # validates before any work
     if isinstance(mc_steps, bool) or int(mc_steps) < 20:
         raise InvalidParameterError(f"mc_steps must be at least 20, got {mc_steps}")
     if int(mc_replicas) < 1 or int(mc_length) < 2:
         raise InvalidParameterError("mc_replicas must be >= 1 and mc_length >= 2")
-    fracs = sorted(set(fracs))
 
-    tasks, keys = [], []
+    jobs, points = [], []    # points[i]: (vmax, p, c) of jobs[i]
     for v in vmaxes:
         rings = {c: _exact_rings(v, c, lengths, max_states) for c in fracs}
         for x in ps:
             for c in fracs:
-                Lm, Nm = mc_ring(c, mc_length)
-                s = _derived_seed(seed, c.numerator, c.denominator, v, round(x * 2**40))
-                tasks.append(("mc", (Lm, Nm, v, x, "parallel", int(mc_steps), int(mc_steps),
-                                     s, int(mc_replicas))))
-                keys.append(("mc", v, x, c))
+                jobs.append(monte_carlo_job(c, v, x, mc_length=int(mc_length),
+                                            steps=int(mc_steps), warmup=int(mc_steps),
+                                            replicas=int(mc_replicas), seed=seed))
+                points.append((v, x, c))
                 if len(rings[c]) >= order + 1:
-                    for L, N in rings[c]:
-                        tasks.append(("exact", (L, N, v, x, "parallel")))
-                        keys.append(("exact", v, x, c, L))
-    results = run_jobs(_job, tasks, serial=serial, scheduler=scheduler, cost=_cost,
-                       desc="convergence study")
-    mc = {k[1:]: r for k, r in zip(keys, results) if k[0] == "mc"}
-    exact = {}
-    for k, r in zip(keys, results):
-        if k[0] == "exact" and math.isfinite(r["flux"]):
-            exact.setdefault(k[1:4], []).append((k[4], r["flux"]))
+                    jobs += [ExactJob(L, N, v, x) for L, N in rings[c]]
+                    points += [(v, x, c)] * len(rings[c])
+    results = run_jobs(run_job_keep_going, jobs, serial=serial, scheduler=scheduler,
+                       cost=job_cost, desc="convergence study")
+    mc, exact = {}, {}
+    for job, point, r in zip(jobs, points, results):
+        if not isinstance(job, ExactJob):
+            mc[point] = r
+        elif math.isfinite(r.flux):   # a ring the solver refused is left out
+            exact.setdefault(point, []).append((job.length, r.flux))
 
     notes, approx = [], {}
     for v in vmaxes:
@@ -337,19 +361,15 @@ def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequen
                 ring = sorted(exact.get((v, x, c), []))
                 ext = (extrapolate([L for L, _ in ring], [f for _, f in ring], order=order)
                        if len(ring) >= order + 1 else None)
-                row = {"vmax": v, "p": x, "density": float(c), "mc_flux": m["flux"],
-                       "mc_error": m["error"], "mc_length": m["length"],
-                       "exact_flux": None if ext is None else ext.f_inf,
-                       "exact_error": None if ext is None else ext.error,
-                       "exact_lengths": tuple(L for L, _ in ring) if ext else ()}
-                for name in names:
-                    row[name] = approx.get((v, x, c, name))
-                scored = {n: abs(row[n] - m["flux"]) for n in names if row[n] is not None}
-                row["best"] = min(scored, key=scored.get) if scored else None
-                # methods that Monte Carlo cannot tell apart from the truth
-                row["within_2sigma"] = tuple(n for n in names if n in scored
-                                             and scored[n] <= 2 * m["error"])
-                rows.append(row)
+                fluxes = {name: approx.get((v, x, c, name)) for name in names}
+                scored = {n: abs(f - m.flux) for n, f in fluxes.items() if f is not None}
+                rows.append(StudyRow(
+                    v, x, float(c), m.flux, m.error, m.length,
+                    None if ext is None else ext.f_inf, None if ext is None else ext.error,
+                    tuple(L for L, _ in ring) if ext else (), fluxes,
+                    min(scored, key=scored.get) if scored else None,
+                    # methods that Monte Carlo cannot tell apart from the truth
+                    tuple(n for n in names if n in scored and scored[n] <= 2 * m.error)))
     return StudyTable(tuple(rows), tuple(names), int(mc_steps), int(mc_replicas), tuple(notes),
                       time.perf_counter() - start)
 
@@ -369,17 +389,17 @@ def deviation_figure(table: StudyTable, width: float = 3.6, height: float = 3.0)
     matplotlib.use("Agg")
     from matplotlib.figure import Figure
 
-    vmaxes = sorted({r["vmax"] for r in table.rows})
-    ps = sorted({r["p"] for r in table.rows})
+    vmaxes = sorted({r.vmax for r in table.rows})
+    ps = sorted({r.p for r in table.rows})
     fig = Figure(figsize=(width * len(ps), height * len(vmaxes) + 0.8), layout="constrained")
     axes = fig.subplots(len(vmaxes), len(ps), squeeze=False, sharex=True)
     for i, v in enumerate(vmaxes):
         for j, x in enumerate(ps):
             ax = axes[i, j]
-            rows = [r for r in table.rows if r["vmax"] == v and r["p"] == x]
-            c = np.array([r["density"] for r in rows])
-            mcf = np.array([r["mc_flux"] for r in rows])
-            band = 100 * np.array([r["mc_error"] for r in rows]) / mcf
+            rows = [r for r in table.rows if r.vmax == v and r.p == x]
+            c = np.array([r.density for r in rows])
+            mcf = np.array([r.mc_flux for r in rows])
+            band = 100 * np.array([r.mc_error for r in rows]) / mcf
             ax.fill_between(c, -band, band, color="0.8", lw=0, label="Monte Carlo 1σ")
             ax.axhline(0, color="0.5", lw=0.6)
             for m in table.methods:
@@ -389,16 +409,16 @@ def deviation_figure(table: StudyTable, width: float = 3.6, height: float = 3.0)
                 ls, color = _STYLE.get(m, ("-", None))
                 ax.plot(c, [np.nan if d is None else 100 * d for d in dev], ls=ls, color=color,
                         lw=1.3, marker=".", ms=3, label=label(m))
-            ext = [(r["density"], 100 * (r["exact_flux"] - r["mc_flux"]) / r["mc_flux"],
-                    100 * r["exact_error"] / r["mc_flux"]) for r in rows
-                   if r["exact_flux"] is not None]
+            ext = [(r.density, 100 * (r.exact_flux - r.mc_flux) / r.mc_flux,
+                    100 * r.exact_error / r.mc_flux) for r in rows
+                   if r.exact_flux is not None]
             if ext:
                 ec, ed, ee = map(np.array, zip(*ext))
                 ax.errorbar(ec, ed, yerr=ee, fmt="D", ms=4, color="k", mfc="w", capsize=2,
                             label=r"exact $L\to\infty$", zorder=5)
             ax.set_title(f"$v_\\mathrm{{max}} = {v}$, $p = {x:g}$", fontsize=9)
             devs = [100 * table.deviation(r, m) for r in rows for m in table.methods
-                    if r[m] is not None]
+                    if r.approximations[m] is not None]
             ax.set_ylim(max(-40.0, min(devs, default=-5) - 2), min(30.0, max(devs, default=5) + 2))
             ax.grid(alpha=0.25, lw=0.5)
             if i == len(vmaxes) - 1:

@@ -7,18 +7,17 @@ Monte Carlo flux with its batch-means error bar on a large ring of exactly the
 same density.  For every density with enough ring sizes an extra row holds the
 ``L -> infinity`` extrapolation of the exact fluxes (:mod:`nasch.extrapolate`).
 
-The work (exact chains, Monte Carlo runs) fans out over Dask through
-:func:`nasch.sweep.run_jobs`; every job is a pure function of its point, so
-the table is identical whichever way it was computed.
+The work (exact chains, Monte Carlo runs: :mod:`nasch.jobs`) fans out over
+Dask through :func:`nasch.sweep.run_jobs`; every job is a pure function of its
+point, so the table is identical whichever way it was computed.
 
-Exports: :meth:`FluxTable.render` with ``fmt`` in :data:`FORMATS`.
+Exports: :meth:`FluxTable.render` with ``fmt`` in :data:`nasch.formatting.FORMATS`.
 """
 from __future__ import annotations
 
 import csv
 import io
 import json
-import math
 import textwrap
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -28,113 +27,85 @@ from typing import Sequence
 import numpy as np
 
 from markov.errors import InvalidParameterError
-from .extrapolate import commensurate_lengths, extrapolate
 from markov.ring import PARALLEL, UPDATES, Ring
-from markov.simulate import DEFAULT_BATCHES
+from markov.validate import ensure_int, ensure_open_probability
+from symbolic import supported
+
+from .extrapolate import commensurate_lengths, extrapolate
+from .formatting import RenderedTable, csv_number, plus_minus
+from .jobs import (ExactJob, density_fraction, ensure_mc_steps, job_cost, monte_carlo_job,
+                   preflight, run_job)
 from .sweep import run_jobs
-from markov.validate import ensure_int
 
-__all__ = ["FORMATS", "APPROXIMATIONS", "FluxTable", "flux_table", "table_points",
-           "exact_job", "mc_job", "mc_ring", "ensure_mc_steps", "preflight"]
+__all__ = ["APPROXIMATIONS", "FluxRow", "FluxTable", "flux_table", "table_points"]
 
-FORMATS = ("text", "csv", "md", "latex", "json")
 APPROXIMATIONS = ("mf", "pmf", "pmf2", "cluster2")
 _LABELS = {"mf": "MF", "pmf": "pMF", "pmf2": "pMF2", "cluster2": "2-cluster"}
 
 
-# --- jobs (module level: they travel to Dask workers by pickle) -----------------
-
-
-def exact_job(point: tuple) -> dict:
-    """Exact stationary flux of one ring; ``point = (length, cars, vmax, p, update)``."""
-    from markov.chain import solve
-
-    length, cars, vmax, p, update = point
-    sol = solve(Ring(length, cars, vmax, p, update))
-    return {"flux": float(sol.flux), "c_v": [float(x) for x in sol.c_v],
-            "states": int(sol.n_states), "residual": float(sol.residual)}
-
-
-def mc_job(point: tuple) -> dict:
-    """Monte Carlo flux of one point.
-
-    ``point = (length, cars, vmax, p, update, steps, warmup, seed[, replicas])``.
-    """
-    from markov.simulate import simulate
-
-    length, cars, vmax, p, update, steps, warmup, seed, *rest = point
-    replicas = rest[0] if rest else 1
-    r = simulate(Ring(length, cars, vmax, p, update), steps=steps, warmup=warmup, seed=seed,
-                 replicas=replicas)
-    return {"flux": r.flux, "error": r.flux_error, "length": length, "steps": steps,
-            "replicas": replicas}
-
-
-def _job(task: tuple) -> dict:
-    kind, point = task
-    return exact_job(point) if kind == "exact" else mc_job(point)
-
-
-def mc_ring(density: Fraction, mc_length: int) -> tuple[int, int]:
-    """Smallest ring ``(L, N)`` with ``L >= mc_length`` and ``N / L == density`` exactly."""
-    k = max(1, math.ceil(mc_length / density.denominator))
-    return k * density.denominator, k * density.numerator
-
-
-def _derived_seed(seed: int, *parts) -> int:
-    """A 63-bit seed that depends only on ``seed`` and the point (never on the worker)."""
-    ints = [int(seed)] + [int(x) for x in parts]
-    state = np.random.SeedSequence(ints).generate_state(2, dtype=np.uint32)
-    return (int(state[0]) << 31) ^ int(state[1])
-
-
-def ensure_mc_steps(mc_steps) -> int:
-    """Monte Carlo steps of a table or figure: 0 (none) or at least the batches of
-    :func:`markov.simulate.simulate` (:data:`markov.simulate.DEFAULT_BATCHES`)."""
-    mc_steps = ensure_int("mc_steps", mc_steps, 0)
-    if 0 < mc_steps < DEFAULT_BATCHES:
-        raise InvalidParameterError(
-            f"mc_steps must be 0 (no Monte Carlo) or at least {DEFAULT_BATCHES} (one step per"
-            f" batch of the error bar), got {mc_steps}")
-    return mc_steps
-
-
-def preflight(tasks) -> None:
-    """Instant checks of every job before any runs: a ring beyond the exact
-    solver's 64-bit key, or a Monte Carlo ring too large for memory, is refused
-    here rather than after the other jobs have been computed."""
-    from markov.simulate import _ensure_memory
-    from markov.validate import ensure_chain_arguments
-
-    for kind, point in tasks:
-        ring = Ring(*point[:5])
-        if kind == "exact":
-            ensure_chain_arguments(ring)
-        else:
-            _ensure_memory(ring, None)
-
-
-def _task_cost(task: tuple) -> float:
-    kind, point = task
-    if kind == "exact":
-        from .budget import predicted_seconds
-
-        return predicted_seconds(*point[:5])
-    length, cars, _, _, update, steps, warmup, _, *rest = point
-    rate = 1e8 if update == PARALLEL else 2e7  # car updates per second, measured
-    return cars * (steps + warmup) * (rest[0] if rest else 1) / rate
-
-
 @lru_cache(maxsize=4096)
 def _approximation(method: str, vmax: int, p: float, density: float):
-    """Flux of one approximation, or None where it is not defined (or not installed)."""
-    try:
-        from symbolic import approximate, supported
-    except ImportError:
-        return None
+    """Flux of one approximation, or None where it is not defined for ``vmax``."""
+    from symbolic import approximate
+
     if not supported(method, vmax):
         return None
     return float(approximate(method, vmax, p, density).flux)
+
+
+@dataclass(frozen=True)
+class FluxRow:
+    """One row of a :class:`FluxTable`: a ring, or the extrapolation of a density.
+
+    Attributes
+    ----------
+    kind : {"exact", "extrapolated"}
+    p : float
+    length, cars : int or None
+        The ring; ``None`` for the ``L = inf`` row.
+    density : float
+    flux : float
+        Exact flux of the ring, or the extrapolated ``f_inf``.
+    flux_error : float
+        0 for a ring; the two-sigma bar of :func:`nasch.extrapolate.extrapolate`.
+    c_v : tuple of float or None
+        ``c_0 .. c_vmax`` of the ring.
+    states : int or None
+        States of the ring's chain.
+    approximations : dict
+        Flux of each approximation column at this density (None where undefined).
+    mc_flux, mc_error : float or None
+        Monte Carlo flux of the density and its 1-sigma error.
+    mc_length : int or None
+        The simulated ring.
+    """
+
+    kind: str
+    p: float
+    length: int | None
+    cars: int | None
+    density: float
+    flux: float
+    flux_error: float
+    c_v: tuple | None
+    states: int | None
+    approximations: dict = field(default_factory=dict)
+    mc_flux: float | None = None
+    mc_error: float | None = None
+    mc_length: int | None = None
+
+    def to_dict(self) -> dict:
+        """The row as in ``nasch table --format json``: one key per approximation.
+
+        Returns
+        -------
+        dict
+        """
+        return {"kind": self.kind, "p": self.p, "length": self.length, "cars": self.cars,
+                "density": self.density, "flux": self.flux, "flux_error": self.flux_error,
+                "c_v": None if self.c_v is None else list(self.c_v), "states": self.states,
+                **self.approximations, "mc_flux": self.mc_flux, "mc_error": self.mc_error,
+                "mc_length": self.mc_length}
 
 
 # --- the table ---------------------------------------------------------------------
@@ -167,9 +138,7 @@ def table_points(lengths: Sequence[int], cars: Sequence[int] | None = None,
         pts = {(L, int(N)) for L in lengths for N in cars if 0 < int(N) < L}
     else:
         for c in (densities if densities is not None else [0.5]):
-            if not 0 < c < 1:
-                raise InvalidParameterError(f"densities must lie in (0, 1), got {c}")
-            frac = Fraction(c).limit_denominator(1000)
+            frac = density_fraction(c)
             pts |= {(L, int(frac * L)) for L in commensurate_lengths(frac, lengths)}
     if not pts:
         raise InvalidParameterError(
@@ -179,18 +148,16 @@ def table_points(lengths: Sequence[int], cars: Sequence[int] | None = None,
 
 
 @dataclass(frozen=True)
-class FluxTable:
+class FluxTable(RenderedTable):
     """A computed flux table; render it with :meth:`render`.
 
     Attributes
     ----------
     vmax : int
     update : str
-    rows : tuple of dict
+    rows : tuple of FluxRow
         One per ring and one per extrapolation (``length`` = None, ``kind`` =
-        "extrapolated"); keys: ``kind, p, length, cars, density, flux,
-        flux_error, c_v, states`` and one per approximation in ``methods``,
-        ``mc_flux, mc_error, mc_length``.
+        "extrapolated").
     methods : tuple of str
         Approximation columns (those defined for this ``vmax``).
     mc_steps : int
@@ -206,20 +173,15 @@ class FluxTable:
 
     @property
     def ps(self) -> list[float]:
-        return sorted({r["p"] for r in self.rows})
-
-    def render(self, fmt: str = "text") -> str:
-        """The table as text in one of :data:`FORMATS`."""
-        if fmt not in FORMATS:
-            raise InvalidParameterError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
-        return getattr(self, f"to_{fmt}")()
+        """The braking probabilities of the table, increasing."""
+        return sorted({r.p for r in self.rows})
 
     # -- machine-readable
 
     def to_dict(self) -> dict:
         return {"vmax": self.vmax, "update": self.update, "methods": list(self.methods),
                 "mc_steps": self.mc_steps, "extrapolation_order": self.order,
-                "rows": [dict(r) for r in self.rows]}
+                "rows": [r.to_dict() for r in self.rows]}
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2) + "\n"
@@ -232,14 +194,14 @@ class FluxTable:
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(cols)
         for r in self.rows:
-            c_v = r["c_v"] or [None] * (self.vmax + 1)
-            w.writerow([r["kind"], _g(r["p"]), "inf" if r["length"] is None else r["length"],
-                        "" if r["cars"] is None else r["cars"], _g(r["density"]), _g(r["flux"]),
-                        _g(r["flux_error"])] + [_g(x) for x in c_v]
-                       + ["" if r["states"] is None else r["states"]]
-                       + [_g(r[m]) for m in self.methods]
-                       + ["" if r["mc_length"] is None else r["mc_length"], _g(r["mc_flux"]),
-                          _g(r["mc_error"])])
+            c_v = r.c_v or [None] * (self.vmax + 1)
+            w.writerow([r.kind, csv_number(r.p), "inf" if r.length is None else r.length,
+                        "" if r.cars is None else r.cars, csv_number(r.density), csv_number(r.flux),
+                        csv_number(r.flux_error)] + [csv_number(x) for x in c_v]
+                       + ["" if r.states is None else r.states]
+                       + [csv_number(r.approximations[m]) for m in self.methods]
+                       + ["" if r.mc_length is None else r.mc_length, csv_number(r.mc_flux),
+                          csv_number(r.mc_error)])
         return buf.getvalue()
 
     # -- human-readable
@@ -252,24 +214,25 @@ class FluxTable:
         body = []
         shown = set()   # (p, density) groups whose Monte Carlo value is already in the table
         for r in self.rows:
-            if r["kind"] == "extrapolated":
+            if r.kind == "extrapolated":
                 L = r"$\infty$" if latex else "inf"
                 N = "" if latex else "(extrap.)"
-                exact = _pm(r["flux"], r["flux_error"], latex)
+                exact = plus_minus(r.flux, r.flux_error, latex)
             else:
-                L, N, exact = str(r["length"]), str(r["cars"]), f"{r['flux']:.6f}"
-            row = [f"{r['p']:g}", L, N, f"{r['density']:.4f}", exact]
-            row += ["--" if r[m] is None else f"{r[m]:.6f}" for m in self.methods]
+                L, N, exact = str(r.length), str(r.cars), f"{r.flux:.6f}"
+            row = [f"{r.p:g}", L, N, f"{r.density:.4f}", exact]
+            row += ["--" if r.approximations[m] is None else f"{r.approximations[m]:.6f}"
+                    for m in self.methods]
             if self.mc_steps:
                 # one simulation per (p, density): printed on the group's first row only
-                group = (r["p"], round(r["density"], 12))
-                if r["mc_flux"] is None:
+                group = (r.p, round(r.density, 12))
+                if r.mc_flux is None:
                     row.append("--")
                 elif group in shown:
                     row.append("")
                 else:
                     shown.add(group)
-                    row.append(_pm(r["mc_flux"], r["mc_error"], latex))
+                    row.append(plus_minus(r.mc_flux, r.mc_error, latex))
             body.append(row)
         return head, body, align
 
@@ -280,10 +243,10 @@ class FluxTable:
         out = [self._caption(), line(head), "  ".join("-" * w for w in widths)]
         prev = None
         for r, cells in zip(self.rows, body):
-            key = (r["p"], round(r["density"], 12) if r["kind"] == "exact" else None)
-            if prev is not None and r["kind"] == "exact" and key != prev:
+            key = (r.p, round(r.density, 12) if r.kind == "exact" else None)
+            if prev is not None and r.kind == "exact" and key != prev:
                 out.append("")
-            prev = key if r["kind"] == "exact" else None
+            prev = key if r.kind == "exact" else None
             out.append(line(cells))
         out = [row.rstrip() for row in out]
         return "\n".join(out) + "\n" + textwrap.fill(self._footnote(), 100) + "\n"
@@ -320,19 +283,6 @@ class FluxTable:
                          " 1-sigma error (batch means with"
                          " blocking, and the spread of independent replicas)")
         return "; ".join(parts)
-
-
-def _g(x) -> str:
-    return "" if x is None else repr(float(x))
-
-
-def _pm(value: float, error: float, latex: bool) -> str:
-    """``value ± error`` with the error rounded to two significant digits."""
-    if error is None or not math.isfinite(error) or error <= 0:
-        return f"{value:.6f}"
-    digits = max(0, min(8, 1 - int(math.floor(math.log10(error)))))
-    sep = r" $\pm$ " if latex else " ± "
-    return f"{value:.{digits}f}{sep}{error:.{digits}f}"
 
 
 def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
@@ -373,7 +323,8 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
         Independent Monte Carlo runs per point; their spread enters the error
         bar (see :func:`markov.simulate.simulate`).
     seed : int
-        Base seed; each Monte Carlo run derives its own from it and its point.
+        Base seed; each Monte Carlo run derives its own from it and its point
+        (:func:`nasch.jobs.point_seed`, as a figure or the study does).
     methods : sequence of str
         Approximation columns among :data:`APPROXIMATIONS` (undefined ones for
         this ``vmax`` are dropped).
@@ -391,16 +342,10 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
     Examples
     --------
     >>> t = flux_table(1, 0.5, [4, 6, 8], mc_steps=0, methods=(), serial=True)
-    >>> [(r["length"], r["cars"], round(r["flux"], 6)) for r in t.rows]
+    >>> [(r.length, r.cars, round(r.flux, 6)) for r in t.rows]
     [(4, 2, 0.1875), (6, 3, 0.171053), (8, 4, 0.164063), (None, None, 0.148026)]
     """
-    ps = [p] if np.ndim(p) == 0 else list(p)
-    for x in ps:
-        if not 0 < float(x) < 1:
-            raise InvalidParameterError(
-                f"p must lie strictly between 0 and 1 for a table (p = 0 or 1 has no unique"
-                f" stationary state), got {x}")
-    ps = sorted({float(x) for x in ps})
+    ps = sorted({ensure_open_probability(float(x)) for x in ([p] if np.ndim(p) == 0 else p)})
     if update not in UPDATES:
         raise InvalidParameterError(f"update must be one of {', '.join(UPDATES)}, got {update!r}")
     for m in methods:
@@ -429,58 +374,36 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
         rings = table_points(lengths, cars, densities)
         rings_of = {p_: rings for p_ in ps}
 
-    # Methods defined for this vmax only (when symbolic is available at all);
-    # the approximations describe parallel update, so none for random-sequential.
-    methods = tuple(m for m in methods if update == PARALLEL and _method_available(m, vmax))
+    # Methods defined for this vmax only; the approximations describe parallel
+    # update, so none for random-sequential.
+    methods = tuple(m for m in methods if update == PARALLEL and supported(m, vmax))
 
-    exact_tasks = [("exact", (L, N, vmax, p_, update)) for p_ in ps for L, N in rings_of[p_]]
+    exact_jobs = [ExactJob(L, N, vmax, p_, update) for p_ in ps for L, N in rings_of[p_]]
     fractions = sorted({Fraction(N, L) for p_ in ps for L, N in rings_of[p_]})
-    mc_tasks = []
-    if mc_steps:
-        for p_ in ps:
-            for c in fractions:
-                Lm, Nm = mc_ring(c, mc_length)
-                s = _derived_seed(seed, c.numerator, c.denominator, vmax, round(p_ * 2**40),
-                                  UPDATES.index(update))
-                mc_tasks.append(("mc", (Lm, Nm, vmax, p_, update, mc_steps, mc_warmup, s,
-                                        int(mc_replicas))))
-    tasks = exact_tasks + mc_tasks
-    preflight(tasks)
-    results = run_jobs(_job, tasks, serial=serial, scheduler=scheduler, client=client,
-                       n_workers=n_workers, cost=_task_cost, desc="flux table")
-    exact = {t[1][:2] + (t[1][3],): r for t, r in zip(exact_tasks, results)}
-    mc = {(Fraction(t[1][1], t[1][0]), t[1][3]): r
-          for t, r in zip(mc_tasks, results[len(exact_tasks):])}
+    mc_jobs = [monte_carlo_job(c, vmax, p_, update=update, mc_length=mc_length,
+                               steps=mc_steps, warmup=mc_warmup, replicas=mc_replicas, seed=seed)
+               for p_ in ps for c in fractions] if mc_steps else []
+    preflight(exact_jobs + mc_jobs)
+    results = run_jobs(run_job, exact_jobs + mc_jobs, serial=serial, scheduler=scheduler,
+                       client=client, n_workers=n_workers, cost=job_cost, desc="flux table")
+    exact = {(j.length, j.cars, j.p): r for j, r in zip(exact_jobs, results)}
+    mc = {(Fraction(j.cars, j.length), j.p): r
+          for j, r in zip(mc_jobs, results[len(exact_jobs):])}
 
     rows = []
     for p_ in ps:
         for c in fractions:
             group = [(L, N) for L, N in rings_of[p_] if Fraction(N, L) == c]
-            base = _approx_cells(methods, vmax, p_, float(c))
+            approx = {m: _approximation(m, int(vmax), p_, float(c)) for m in methods}
             m = mc.get((c, p_))
-            mc_cells = {"mc_flux": m and m["flux"], "mc_error": m and m["error"],
-                        "mc_length": m and m["length"]}
+            mc_cells = dict(mc_flux=m.flux, mc_error=m.error, mc_length=m.length) if m else {}
             for L, N in group:
                 e = exact[(L, N, p_)]
-                rows.append({"kind": "exact", "p": p_, "length": L, "cars": N,
-                             "density": N / L, "flux": e["flux"], "flux_error": 0.0,
-                             "c_v": e["c_v"], "states": e["states"], **base, **mc_cells})
+                rows.append(FluxRow("exact", p_, L, N, N / L, e.flux, 0.0, e.c_v, e.states,
+                                    approx, **mc_cells))
             if extrapolation and len(group) >= order + 1:
-                ex = extrapolate([L for L, _ in group], [exact[(L, N, p_)]["flux"]
+                ex = extrapolate([L for L, _ in group], [exact[(L, N, p_)].flux
                                                          for L, N in group], order=order)
-                rows.append({"kind": "extrapolated", "p": p_, "length": None, "cars": None,
-                             "density": float(c), "flux": ex.f_inf, "flux_error": ex.error,
-                             "c_v": None, "states": None, **base, **mc_cells})
+                rows.append(FluxRow("extrapolated", p_, None, None, float(c), ex.f_inf,
+                                    ex.error, None, None, approx, **mc_cells))
     return FluxTable(int(vmax), update, tuple(rows), methods, mc_steps, int(order))
-
-
-def _method_available(method: str, vmax: int) -> bool:
-    try:
-        from symbolic import supported
-    except ImportError:
-        return False
-    return bool(supported(method, vmax))
-
-
-def _approx_cells(methods, vmax, p, density) -> dict:
-    return {m: _approximation(m, int(vmax), float(p), float(density)) for m in methods}

@@ -185,16 +185,15 @@ def approximate(method: str, vmax: int, p: float, density, order: int | None = N
     >>> float(a.c_v.sum()), round(a.flux, 6)    # f = q(1 + q d^2) d c / (1 - p d^2)
     (0.5, 0.160714)
     """
-    from .solve import ensure_open_unit, flux_of, solve_mf, solve_pmf
+    from markov.validate import ensure_open_probability, ensure_open_unit
+
+    from .solve import flux_of, solve_mf, solve_pmf
 
     base, order, vmax = _ensure_method(method, vmax, order)
-    p_arr = ensure_open_unit("p", p)
-    if p_arr.ndim:
-        raise InvalidParameterError(f"p must be a single number in (0, 1), got {p!r}")
-    c_arr = ensure_open_unit("density", density)
+    p_val = ensure_open_probability(p)
+    c_arr = np.asarray(ensure_open_unit("density", density), dtype=float)
     if c_arr.ndim > 1:
         raise InvalidParameterError("density must be a number or a 1-d array of numbers")
-    p_val = float(p_arr)
     if base == "mf":
         c_v = solve_mf(vmax, p_val, c_arr)
     elif base in ("pmf", "pmf2"):

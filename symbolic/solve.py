@@ -26,22 +26,9 @@ from .meanfield import c, d, mf_solution, p, q, velocity_symbols
 from .paradisical import paper_cubic, pmf_normalisation, pmf_rhs
 
 __all__ = [
-    "ensure_open_unit", "solve_mf", "solve_pmf_vmax1", "solve_pmf_cubic",
+    "solve_mf", "solve_pmf_vmax1", "solve_pmf_cubic",
     "cubic_roots", "solve_fixed_point", "solve_pmf", "flux_of",
 ]
-
-
-def ensure_open_unit(name: str, value) -> np.ndarray:
-    """``value`` as a float array, every entry strictly inside ``(0, 1)``."""
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InvalidParameterError(f"{name} must be a number in (0, 1), got {value!r}") from None
-    if arr.size == 0 or not np.all(np.isfinite(arr)) or np.any(arr <= 0) or np.any(arr >= 1):
-        raise InvalidParameterError(
-            f"{name} must lie strictly between 0 and 1 (the approximations are stationary"
-            f" states of 0 < {name} < 1 only), got {value!r}")
-    return arr
 
 
 def flux_of(c_v: np.ndarray) -> np.ndarray:

@@ -75,8 +75,8 @@ def test_extrapolation_and_table_use_the_chosen_rings():
     e = extrapolate_flux(1, 0.5, 0.25, budget=0.3)
     assert list(e.lengths) == Ls
     t = flux_table(1, 0.5, densities=[0.25], budget=0.3, mc_steps=0, methods=(), serial=True)
-    assert [r["length"] for r in t.rows if r["kind"] == "exact"] == Ls
-    assert t.rows[-1]["flux"] == pytest.approx(e.f_inf, abs=1e-12)
+    assert [r.length for r in t.rows if r.kind == "exact"] == Ls
+    assert t.rows[-1].flux == pytest.approx(e.f_inf, abs=1e-12)
     with pytest.raises(InvalidParameterError, match="lengths or a budget"):
         flux_table(1, 0.5, [8, 12], densities=[0.25], budget=0.3, mc_steps=0)
     with pytest.raises(InvalidParameterError, match="densities"):

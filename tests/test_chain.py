@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import naive
+from reference import vmax1_infinite_flux
 from markov import (NoUniqueStationaryStateError, Ring, RingChain, SOLVERS,
                     StateSpaceTooLargeError, solve)
 from markov.statespace import all_keys, count_all, recurrent_keys
@@ -155,7 +156,7 @@ def test_vmax1_parallel_flux_tends_to_the_exact_infinite_ring_value():
     # finite rings approach it from above like 1/L; a three-term Richardson fit
     # f(L) = f_inf + a/L + b/L^2 on L = 12, 14, 16 lands within 1e-4 (6e-5 seen).
     p, c = 0.5, 0.5
-    exact = (1 - np.sqrt(1 - 4 * (1 - p) * c * (1 - c))) / 2
+    exact = vmax1_infinite_flux(p, c)
     sizes = [6, 8, 10, 12, 14, 16]
     flux = [solve(Ring(L, L // 2, 1, p)).flux for L in sizes]
     errors = np.array(flux) - exact

@@ -6,9 +6,10 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
+from reference import vmax1_infinite_flux
+
 from markov import InvalidParameterError, Ring
-from nasch.extrapolate import (commensurate_lengths, exact_vmax1_flux, extrapolate,
-                                extrapolate_flux)
+from nasch.extrapolate import commensurate_lengths, extrapolate, extrapolate_flux
 from markov.simulate import simulate
 
 
@@ -90,7 +91,7 @@ def test_vmax1_extrapolation_hits_exact_infinite_flux(p, c, lengths):
     # Independent route: the exact infinite-ring flux for vmax = 1,
     # f = (1 - sqrt(1 - 4 q c (1 - c))) / 2 (Schadschneider & Schreckenberg 1993).
     e = extrapolate_flux(1, p, c, lengths)
-    exact = exact_vmax1_flux(p, float(c))
+    exact = vmax1_infinite_flux(p, float(c))
     assert abs(e.f_inf - exact) <= e.error
     assert e.error < 3e-3                           # and the estimate is informative
     assert abs(e.fluxes[-1] - exact) > abs(e.f_inf - exact)   # better than the largest ring

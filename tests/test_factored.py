@@ -92,7 +92,7 @@ def test_open_state_set_and_bad_input_are_refused():
     with pytest.raises(InvalidParameterError, match="62"):
         word_bits(Ring(40, 30, 1, 0.5))
     op = FactoredOperator(ring, keys, lump=True)
-    with pytest.raises(ValueError, match="shape"):
+    with pytest.raises(InvalidParameterError, match="shape"):
         op.apply(np.ones(op.n + 1))
 
 

@@ -34,3 +34,18 @@ def test_valid_input_is_normalised():
     assert ring.density == 0.5
     assert Ring(4, 0, 1, 0.5).trivial and Ring(4, 4, 1, 0.5).trivial
     assert not Ring(4, 2, 1, 0.5).trivial
+
+
+def test_error_kinds_follow_the_builtins():
+    from markov.errors import (ConvergenceError, NaschError, NoUniqueStationaryStateError,
+                               OutputError, StateSpaceTooLargeError)
+
+    kinds = {InvalidParameterError: ValueError, NoUniqueStationaryStateError: ValueError,
+             StateSpaceTooLargeError: MemoryError, ConvergenceError: RuntimeError,
+             OutputError: OSError}
+    for error, builtin in kinds.items():
+        assert issubclass(error, NaschError) and issubclass(error, builtin)
+    # a refusal for size or a solver that stops short is not a bad value
+    assert not issubclass(StateSpaceTooLargeError, ValueError)
+    assert not issubclass(ConvergenceError, ValueError)
+    assert str(OutputError("cannot write x")) == "cannot write x"

@@ -11,10 +11,12 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
+from reference import vmax1_infinite_flux
+
 from markov import Ring
 from markov.goe_patterns import elementary_patterns
 from markov.simulate import simulate
-from nasch.tables import mc_ring
+from nasch.jobs import mc_ring
 from symbolic import approximate
 from symbolic.cluster import cluster_fixed_point, word_probability
 from symbolic.comf import comf_state, comf_word_probability
@@ -146,5 +148,5 @@ def test_comf_is_exact_for_vmax1():
     # "Again we found that COMF is exact for vmax = 1": holds (closed form of the exact
     # infinite-ring flux; more points in tests/test_symbolic_comf.py)
     for pv, c in ((0.25, 0.35), (0.75, 0.8)):
-        exact = (1 - np.sqrt(1 - 4 * (1 - pv) * c * (1 - c))) / 2
+        exact = vmax1_infinite_flux(pv, c)
         assert abs(comf_state(1, pv, c).flux - exact) < 1e-13

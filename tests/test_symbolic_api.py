@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from reference import vmax1_infinite_flux
+
 from markov import InvalidParameterError
 from nasch.cli import main
 from symbolic import APPROXIMATIONS, Approximation, approximate, label, method_name, supported
@@ -35,7 +37,7 @@ def test_approximate_scalar_and_array(method, vmax):
 
 def test_vmax1_paradisical_cluster_and_comf_give_the_exact_flux_but_mf_does_not():
     pv, c = 0.25, 0.35
-    exact = (1 - np.sqrt(1 - 4 * (1 - pv) * c * (1 - c))) / 2
+    exact = vmax1_infinite_flux(pv, c)
     for method in APPROXIMATIONS[1:]:
         assert abs(approximate(method, 1, pv, c).flux - exact) < 1e-12
     assert approximate("mf", 1, pv, c).flux < exact - 0.01

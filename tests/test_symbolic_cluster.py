@@ -6,6 +6,8 @@ import pytest
 import sympy as sp
 
 import naive_cluster
+from reference import vmax1_infinite_flux
+
 from markov import InvalidParameterError, Ring, solve
 from symbolic.cluster import (MAX_WINDOWS, cluster_equations, cluster_fixed_point,
                               cluster_symbols, push, solve_cluster, transfer, window_count,
@@ -13,11 +15,6 @@ from symbolic.cluster import (MAX_WINDOWS, cluster_equations, cluster_fixed_poin
 from symbolic.meanfield import p
 from symbolic.paradisical import goe_patterns
 from symbolic.solve import solve_mf
-
-
-def exact_vmax1_flux(pv, c):
-    # Schadschneider & Schreckenberg (1993); paper, after eq. (pmf11)
-    return (1 - np.sqrt(1 - 4 * (1 - pv) * c * (1 - c))) / 2
 
 
 def as_dict(probs, vmax, n):
@@ -31,7 +28,7 @@ def test_every_cluster_size_from_two_is_exact_for_vmax1(pv, n):
     # the exact vmax = 1 measure is a 2-cluster chain, so its n-marginals are a fixed point
     cs = np.array([0.05, 0.3, 0.5, 0.77, 0.95])
     c_v = solve_cluster(1, n, pv, cs)
-    np.testing.assert_allclose(c_v[1], exact_vmax1_flux(pv, cs), atol=1e-13)
+    np.testing.assert_allclose(c_v[1], vmax1_infinite_flux(pv, cs), atol=1e-13)
     np.testing.assert_allclose(c_v.sum(axis=0), cs, atol=1e-13)
 
 

@@ -3,6 +3,8 @@ import numpy as np
 import pytest
 import sympy as sp
 
+from reference import vmax1_infinite_flux
+
 from markov import InvalidParameterError
 from symbolic.comf import comf_equations, comf_state, comf_word_probability, solve_comf
 from symbolic.meanfield import c as c_sym
@@ -10,15 +12,11 @@ from symbolic.meanfield import p as p_sym
 from symbolic.meanfield import q as q_sym
 
 
-def exact_vmax1_flux(pv, c):
-    return (1 - np.sqrt(1 - 4 * (1 - pv) * c * (1 - c))) / 2
-
-
 @pytest.mark.parametrize("pv", [0.05, 0.5, 0.9])
 def test_comf_is_exact_for_vmax1(pv):
     # the paper (and Schadschneider-Schreckenberg 1997): COMF is exact for vmax = 1
     for c in (0.02, 0.3, 0.5, 0.77, 0.95):
-        assert abs(comf_state(1, pv, c).flux - exact_vmax1_flux(pv, c)) < 1e-13
+        assert abs(comf_state(1, pv, c).flux - vmax1_infinite_flux(pv, c)) < 1e-13
 
 
 def naive_update(probs, vmax, pv):

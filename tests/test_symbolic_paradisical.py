@@ -80,6 +80,16 @@ def test_papers_cubic_follows_from_c0eq_and_c2eq():
     assert ratio == {-1}
 
 
+def test_vmax1_closed_form_equals_the_fixed_point_of_the_pmf_equations():
+    # the closed form c_1 = (1 - sqrt(1 - 4 q c d)) / 2 of solve_pmf against the
+    # iterated pMF map, an independent route to the same solution
+    axis = np.concatenate([[1e-4], np.linspace(0.02, 0.98, 25), [1 - 1e-4]])
+    P, Cg = np.meshgrid(axis, axis)
+    closed = solve_pmf(1, P, Cg)
+    iterated = solve_pmf(1, P, Cg, method="iterate")
+    np.testing.assert_allclose(closed, iterated, atol=1e-12)
+
+
 def test_physical_root_equals_the_fixed_point_on_a_grid_including_the_edges():
     axis = np.concatenate([[1e-6, 1e-3], np.linspace(0.01, 0.99, 33), [1 - 1e-3, 1 - 1e-6]])
     P, Cg = np.meshgrid(axis, axis)

@@ -12,11 +12,14 @@ import pytest
 from click.testing import CliRunner
 
 import naive
+from reference import vmax1_infinite_flux
 from markov import InvalidParameterError, OutputError
 from nasch.cli import main
-from nasch.extrapolate import exact_vmax1_flux
 from markov.files import write_atomic
-from nasch.tables import FORMATS, flux_table, mc_ring, table_points
+from nasch.formatting import FORMATS
+from nasch.jobs import mc_ring
+from nasch.tables import flux_table, table_points
+from symbolic.solve import solve_pmf
 
 
 @pytest.fixture(scope="module")
@@ -28,65 +31,70 @@ def small():
 
 def test_exact_column_matches_naive_chain(small):
     for r in small.rows:
-        if r["kind"] != "exact" or r["length"] > 8:
+        if r.kind != "exact" or r.length > 8:
             continue
-        dist = naive.stationary(r["length"], r["cars"], 1, r["p"])
+        dist = naive.stationary(r.length, r.cars, 1, r.p)
         c_v = naive.velocity_densities(dist, 1)
-        assert r["flux"] == pytest.approx(c_v[1], abs=1e-12)
-        assert r["c_v"] == pytest.approx(list(c_v), abs=1e-12)
+        assert r.flux == pytest.approx(c_v[1], abs=1e-12)
+        assert r.c_v == pytest.approx(list(c_v), abs=1e-12)
 
 
 def test_approximation_columns_from_closed_forms():
     # vmax = 2 MF closed form (paper): f = q (1 + q d^2) d c / (1 - p d^2);
-    # vmax = 1 pMF = exact infinite flux (1 - sqrt(1 - 4 q c d)) / 2.
+    # vmax = 1 pMF: the fixed point of the pMF equations, iterated (not the closed
+    # form the column comes from).
     t2 = flux_table(2, 0.3, [8, 12], densities=[0.25, 0.5], mc_steps=0, serial=True)
     for r in t2.rows:
-        c, p = r["density"], r["p"]
+        c, p = r.density, r.p
         q, d = 1 - p, 1 - c
-        assert r["mf"] == pytest.approx(q * (1 + q * d * d) * d * c / (1 - p * d * d), rel=1e-10)
-        assert 0 < r["cluster2"] < 0.5 and r["pmf"] > r["mf"]
+        a = r.approximations
+        assert a["mf"] == pytest.approx(q * (1 + q * d * d) * d * c / (1 - p * d * d), rel=1e-10)
+        assert 0 < a["cluster2"] < 0.5 and a["pmf"] > a["mf"]
     t1 = flux_table(1, 0.3, [8, 12], densities=[0.25], mc_steps=0, serial=True)
     for r in t1.rows:
-        assert r["pmf"] == pytest.approx(exact_vmax1_flux(0.3, r["density"]), rel=1e-10)
-        assert r["mf"] == pytest.approx(0.7 * r["density"] * (1 - r["density"]), rel=1e-10)
+        a = r.approximations
+        iterated = solve_pmf(1, 0.3, r.density, method="iterate")[1]
+        assert a["pmf"] == pytest.approx(float(iterated), rel=1e-10)
+        assert a["mf"] == pytest.approx(0.7 * r.density * (1 - r.density), rel=1e-10)
 
 
 def test_monte_carlo_column_same_density_and_plausible(small):
     for r in small.rows:
-        L = r["mc_length"]
+        L = r.mc_length
         assert L >= 600
-        assert Fraction(round(r["density"] * L), L) == Fraction(r["density"]).limit_denominator(50)
+        assert Fraction(round(r.density * L), L) == Fraction(r.density).limit_denominator(50)
         # vmax = 1: the infinite-ring flux is known exactly.
-        z = (r["mc_flux"] - exact_vmax1_flux(r["p"], r["density"])) / r["mc_error"]
+        z = (r.mc_flux - vmax1_infinite_flux(r.p, r.density)) / r.mc_error
         assert abs(z) < 5
 
 
 def test_extrapolated_rows(small):
-    ext = [r for r in small.rows if r["kind"] == "extrapolated"]
-    assert [(r["p"], r["density"]) for r in ext] == [(0.25, 0.5), (0.5, 0.5)]
+    ext = [r for r in small.rows if r.kind == "extrapolated"]
+    assert [(r.p, r.density) for r in ext] == [(0.25, 0.5), (0.5, 0.5)]
     for r in ext:
-        exact = exact_vmax1_flux(r["p"], 0.5)
-        finite = [x["flux"] for x in small.rows if x["kind"] == "exact" and x["p"] == r["p"]]
+        exact = vmax1_infinite_flux(r.p, 0.5)
+        finite = [x.flux for x in small.rows if x.kind == "exact" and x.p == r.p]
         # three sizes only (6, 8, 10): still closer than the largest ring
-        assert abs(r["flux"] - exact) < abs(finite[-1] - exact)
-        assert abs(r["flux"] - exact) <= r["flux_error"]
+        assert abs(r.flux - exact) < abs(finite[-1] - exact)
+        assert abs(r.flux - exact) <= r.flux_error
 
 
 def test_csv_round_trip(small):
     rows = list(csv.DictReader(io.StringIO(small.render("csv"))))
     assert len(rows) == len(small.rows)
     for got, want in zip(rows, small.rows):
-        assert float(got["flux_exact"]) == want["flux"]
-        assert got["L"] == ("inf" if want["length"] is None else str(want["length"]))
-        assert float(got["mc_flux"]) == want["mc_flux"]
+        assert float(got["flux_exact"]) == want.flux
+        assert got["L"] == ("inf" if want.length is None else str(want.length))
+        assert float(got["mc_flux"]) == want.mc_flux
         for m in small.methods:
-            assert float(got[m]) == want[m]
+            assert float(got[m]) == want.approximations[m]
 
 
 def test_json_round_trip(small):
     d = json.loads(small.render("json"))
     assert d["vmax"] == 1 and len(d["rows"]) == len(small.rows)
-    assert [r["flux"] for r in d["rows"]] == [r["flux"] for r in small.rows]
+    assert [r["flux"] for r in d["rows"]] == [r.flux for r in small.rows]
+    assert d["rows"] == [r.to_dict() for r in small.rows]
 
 
 def test_markdown_latex_text(small):
@@ -99,7 +107,7 @@ def test_markdown_latex_text(small):
     assert r"$\pm$" in tex and "±" not in tex
     text = small.render("text")
     first = small.rows[0]
-    assert f"{first['flux']:.6f}" in text and "inf" in text
+    assert f"{first.flux:.6f}" in text and "inf" in text
     with pytest.raises(InvalidParameterError):
         small.render("xls")
     assert set(FORMATS) == {"text", "csv", "md", "latex", "json"}
@@ -128,8 +136,8 @@ def test_random_sequential_table_has_no_approximations():
     t = flux_table(1, 0.5, [4, 6, 8], update="random-sequential", mc_steps=0, serial=True)
     assert t.methods == ()
     # vmax = 1 random-sequential: MF is exact on the infinite ring (paper, Sec. 2).
-    ext = [r for r in t.rows if r["kind"] == "extrapolated"][0]
-    assert abs(ext["flux"] - 0.5 * 0.5 * 0.5) < max(ext["flux_error"], 0.02)
+    ext = [r for r in t.rows if r.kind == "extrapolated"][0]
+    assert abs(ext.flux - 0.5 * 0.5 * 0.5) < max(ext.flux_error, 0.02)
 
 
 def test_write_atomic(tmp_path, monkeypatch):

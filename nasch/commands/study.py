@@ -7,8 +7,8 @@ import click
 
 from markov.errors import InvalidParameterError
 
-from ..cli_common import (ensure_probabilities, handle_errors, number_list, output_format,
-                          quiet_option)
+from ..cli_common import ensure_probabilities, handle_errors, number_list, quiet_option
+from ..formatting import format_for_path
 
 __all__ = ["study"]
 
@@ -68,7 +68,7 @@ def study(vmax_text, p_text, density_text, methods_text, mc_length, mc_steps, mc
     ps = number_list("--p", p_text)
     ensure_probabilities(ps)
     if fmt is None:
-        fmt = output_format(output)
+        fmt = format_for_path(output)
     methods = (DEFAULT_METHODS if methods_text is None
                else tuple(m.strip() for m in methods_text.split(",") if m.strip()))
     result = convergence_study(

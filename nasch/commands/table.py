@@ -6,7 +6,8 @@ import click
 from markov.errors import InvalidParameterError
 
 from ..cli_common import (ensure_dask_options, ensure_probabilities, handle_errors, number_list,
-                          output_format, quiet_option)
+                          quiet_option)
+from ..formatting import format_for_path
 
 __all__ = ["table"]
 
@@ -68,7 +69,7 @@ def table(vmax, p_text, lengths_text, budget_text, cars_text, density_text, upda
     if output is not None:
         check_output_path(output)   # before the work, not after it
     if fmt is None:
-        fmt = output_format(output)
+        fmt = format_for_path(output)
     if budget_text is not None and lengths_text is not None:
         raise InvalidParameterError("give either --lengths or --budget, not both")
     budget = None if budget_text is None else parse_budget(budget_text)

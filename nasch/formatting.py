@@ -1,0 +1,96 @@
+"""Text formats of the tables (flux table, convergence study): one set of rules.
+
+Nothing here imports numpy, so the command line can pick a format by the
+output file's extension before loading anything.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from markov.errors import InvalidParameterError
+
+__all__ = ["FORMATS", "RenderedTable", "format_for_path", "csv_number", "plus_minus"]
+
+#: Formats of :meth:`RenderedTable.render` (and ``--format``).
+FORMATS = ("text", "csv", "md", "latex", "json")
+_BY_EXTENSION = {".csv": "csv", ".md": "md", ".tex": "latex", ".json": "json", ".txt": "text"}
+
+
+class RenderedTable:
+    """A table that renders itself in every format of :data:`FORMATS` (``to_<format>``)."""
+
+    def render(self, fmt: str = "text") -> str:
+        """The table as text in one of :data:`FORMATS`.
+
+        Parameters
+        ----------
+        fmt : {"text", "csv", "md", "latex", "json"}
+
+        Returns
+        -------
+        str
+        """
+        if fmt not in FORMATS:
+            raise InvalidParameterError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+        return getattr(self, f"to_{fmt}")()
+
+
+def format_for_path(path) -> str:
+    """The format implied by an output file's extension; ``text`` otherwise (or for None).
+
+    Parameters
+    ----------
+    path : str, os.PathLike or None
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> format_for_path("flux.tex"), format_for_path(None)
+    ('latex', 'text')
+    """
+    return _BY_EXTENSION.get(Path(path).suffix.lower(), "text") if path else "text"
+
+
+def csv_number(x) -> str:
+    """A number in a CSV cell: its ``repr`` (round-trips exactly), empty for None.
+
+    Parameters
+    ----------
+    x : float or None
+
+    Returns
+    -------
+    str
+    """
+    return "" if x is None else repr(float(x))
+
+
+def plus_minus(value: float, error: float | None, latex: bool) -> str:
+    """``value ± error`` with the error rounded to two significant digits.
+
+    Parameters
+    ----------
+    value : float
+    error : float or None
+        No error (None, 0, not finite): the value alone, six decimals.
+    latex : bool
+        ``$\\pm$`` instead of ``±``.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> plus_minus(0.123456, 0.00123, latex=False)
+    '0.1235 ± 0.0012'
+    """
+    if error is None or not math.isfinite(error) or error <= 0:
+        return f"{value:.6f}"
+    digits = max(0, min(8, 1 - int(math.floor(math.log10(error)))))
+    sep = r" $\pm$ " if latex else " ± "
+    return f"{value:.{digits}f}{sep}{error:.{digits}f}"
