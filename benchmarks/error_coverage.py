@@ -46,7 +46,7 @@ def measure(vmax: int, p: float, c: Fraction, budget: float, mc_length: int,
     from markov import Ring, solve
     from markov.simulate import simulate
     from nasch.budget import lengths_within_budget
-    from nasch.jobs import mc_ring
+    from nasch.rings import mc_ring
     from symbolic import approximate
 
     start = time.perf_counter()

@@ -22,10 +22,11 @@ from __future__ import annotations
 
 import math
 import re
-from fractions import Fraction
 
 from markov.errors import InvalidParameterError
 from markov.ring import PARALLEL, Ring
+
+from .rings import density_fraction
 
 __all__ = ["parse_budget", "predicted_classes", "predicted_seconds", "lengths_within_budget",
            "MAX_BUDGET_LENGTH"]
@@ -157,9 +158,7 @@ def lengths_within_budget(vmax: int, p: float, density, budget: float, count: in
     >>> len(Ls), all(L % 2 == 0 for L in Ls), Ls == sorted(Ls)
     (4, True, True)
     """
-    c = Fraction(density).limit_denominator(1000)
-    if not 0 < c < 1:
-        raise InvalidParameterError(f"density must lie strictly between 0 and 1, got {density}")
+    c = density_fraction(density)
     candidates = [L for L in range(max(shortest, c.denominator), longest + 1)
                   if (c * L).denominator == 1 and _solvable(L, int(c * L), vmax, update)]
     if len(candidates) <= count:

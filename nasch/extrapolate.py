@@ -36,9 +36,7 @@ the bar is the least reliable.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
-from fractions import Fraction
 from typing import Sequence
 
 import numpy as np
@@ -46,7 +44,9 @@ import numpy as np
 from markov.errors import InvalidParameterError
 from markov.ring import PARALLEL, Ring
 
-__all__ = ["Extrapolation", "extrapolate", "commensurate_lengths", "extrapolate_flux"]
+from .rings import commensurate_lengths, density_fraction
+
+__all__ = ["Extrapolation", "extrapolate", "extrapolate_flux"]
 
 
 def _fit(lengths: np.ndarray, fluxes: np.ndarray, order: int) -> np.ndarray:
@@ -180,23 +180,6 @@ def extrapolate(lengths: Sequence[int], fluxes: Sequence[float], order: int = 2,
                          tuple(float(c) for c in coef), lower, higher, loo, error)
 
 
-def commensurate_lengths(density, lengths: Sequence[int]) -> list[int]:
-    """The lengths ``L`` among ``lengths`` for which ``density * L`` is an integer.
-
-    ``density`` may be a float (read as the nearest fraction with denominator
-    at most 1000) or a :class:`fractions.Fraction`.
-
-    Examples
-    --------
-    >>> commensurate_lengths(1/3, range(6, 16))
-    [6, 9, 12, 15]
-    """
-    c = Fraction(density).limit_denominator(1000)
-    if not 0 < c < 1:
-        raise InvalidParameterError(f"density must lie strictly between 0 and 1, got {density}")
-    return [int(L) for L in lengths if (c * int(L)).denominator == 1]
-
-
 def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int] | None = None,
                      order: int = 2, n_fit: int | None = None, update: str = PARALLEL,
                      budget: float | None = None) -> Extrapolation:
@@ -231,7 +214,7 @@ def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int] | None = None
     """
     from markov.chain import solve
 
-    c = Fraction(density).limit_denominator(1000)
+    c = density_fraction(density)
     if budget is not None:
         from .budget import lengths_within_budget
 

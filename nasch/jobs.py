@@ -17,7 +17,6 @@ any worker and in any order.
 """
 from __future__ import annotations
 
-import math
 from fractions import Fraction
 from typing import NamedTuple
 
@@ -25,11 +24,13 @@ import numpy as np
 
 from markov.errors import InvalidParameterError, NaschError
 from markov.ring import PARALLEL, UPDATES, Ring
-from markov.validate import ensure_int, ensure_open_unit
+from markov.validate import ensure_int
 
-__all__ = ["ExactJob", "MonteCarloJob", "ExactResult", "MonteCarloResult", "density_fraction",
-           "mc_ring", "point_seed", "monte_carlo_job", "run_job", "run_job_keep_going",
-           "job_cost", "preflight", "ensure_mc_steps"]
+from .rings import mc_ring
+
+__all__ = ["ExactJob", "MonteCarloJob", "ExactResult", "MonteCarloResult", "point_seed",
+           "monte_carlo_job", "run_job", "run_job_keep_going", "job_cost", "preflight",
+           "ensure_mc_steps"]
 
 # car updates per second of the simulator, measured on the 2-core VM
 _PARALLEL_RATE = 1e8
@@ -96,54 +97,6 @@ class MonteCarloResult(NamedTuple):
     length: int
     steps: int
     replicas: int
-
-
-def density_fraction(density) -> Fraction:
-    """A density as the nearest fraction with denominator at most 1000, strictly in (0, 1).
-
-    Rings of that density exactly are the ``L`` with ``density * L`` an integer.
-
-    Parameters
-    ----------
-    density : float or Fraction
-
-    Returns
-    -------
-    Fraction
-
-    Examples
-    --------
-    >>> density_fraction(1 / 3)
-    Fraction(1, 3)
-    """
-    if isinstance(density, Fraction):
-        c = density
-    else:
-        c = Fraction(ensure_open_unit("density", density)).limit_denominator(1000)
-    if not 0 < c < 1:
-        raise InvalidParameterError(f"density must lie strictly between 0 and 1, got {density}")
-    return c
-
-
-def mc_ring(density: Fraction, mc_length: int) -> tuple[int, int]:
-    """Smallest ring ``(L, N)`` with ``L >= mc_length`` and ``N / L == density`` exactly.
-
-    Parameters
-    ----------
-    density : Fraction
-    mc_length : int
-
-    Returns
-    -------
-    (int, int)
-
-    Examples
-    --------
-    >>> mc_ring(Fraction(1, 3), 1000)
-    (1002, 334)
-    """
-    k = max(1, math.ceil(mc_length / density.denominator))
-    return k * density.denominator, k * density.numerator
 
 
 def point_seed(seed: int, density: Fraction, vmax: int, p: float,

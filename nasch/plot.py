@@ -36,9 +36,10 @@ from markov.files import write_bytes_atomic
 from markov.validate import ensure_open_probability
 from symbolic import approximate, supported
 
-from .extrapolate import commensurate_lengths, extrapolate
+from .extrapolate import extrapolate
 from .jobs import (ExactJob, MonteCarloJob, ensure_mc_steps, job_cost, monte_carlo_job,
                    preflight, run_job_keep_going)
+from .rings import commensurate_lengths
 from .sweep import run_jobs
 
 __all__ = ["fundamental_data", "fundamental_figure", "save_figure", "FIGURE_FORMATS",

@@ -39,7 +39,8 @@ from markov.errors import InvalidParameterError, NaschError
 from markov.validate import ensure_int, ensure_open_probability
 from symbolic import APPROXIMATIONS, approximate, label, method_name, supported
 
-from .jobs import ExactJob, density_fraction, job_cost, monte_carlo_job, run_job_keep_going
+from .jobs import ExactJob, job_cost, monte_carlo_job, run_job_keep_going
+from .rings import commensurate_lengths, density_fraction
 from .formatting import RenderedTable, csv_number, plus_minus
 
 __all__ = ["DEFAULT_DENSITIES", "DEFAULT_METHODS", "StudyRow", "StudyTable",
@@ -250,7 +251,6 @@ def _exact_rings(vmax: int, c: Fraction, lengths, max_states: int) -> list[tuple
     """Rings ``(L, c L)`` among ``lengths`` with at most ``max_states`` rotation classes."""
     from markov.goe_census import recurrent_class_count
 
-    from .extrapolate import commensurate_lengths
 
     out = []
     for L in commensurate_lengths(c, lengths):

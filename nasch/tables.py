@@ -31,13 +31,13 @@ from markov.ring import PARALLEL, UPDATES, Ring
 from markov.validate import ensure_int, ensure_open_probability
 from symbolic import supported
 
-from .extrapolate import commensurate_lengths, extrapolate
+from .extrapolate import extrapolate
 from .formatting import RenderedTable, csv_number, plus_minus
-from .jobs import (ExactJob, density_fraction, ensure_mc_steps, job_cost, monte_carlo_job,
-                   preflight, run_job)
+from .jobs import ExactJob, ensure_mc_steps, job_cost, monte_carlo_job, preflight, run_job
+from .rings import table_points
 from .sweep import run_jobs
 
-__all__ = ["APPROXIMATIONS", "FluxRow", "FluxTable", "flux_table", "table_points"]
+__all__ = ["APPROXIMATIONS", "FluxRow", "FluxTable", "flux_table"]
 
 APPROXIMATIONS = ("mf", "pmf", "pmf2", "cluster2")
 _LABELS = {"mf": "MF", "pmf": "pMF", "pmf2": "pMF2", "cluster2": "2-cluster"}
@@ -109,42 +109,6 @@ class FluxRow:
 
 
 # --- the table ---------------------------------------------------------------------
-
-
-def table_points(lengths: Sequence[int], cars: Sequence[int] | None = None,
-                 densities: Sequence[float] | None = None) -> list[tuple[int, int]]:
-    """The ``(L, N)`` rings of a table.
-
-    ``cars`` gives ``N`` directly (pairs with ``0 < N < L`` are kept);
-    ``densities`` keeps, for each density ``c``, the lengths with ``c L`` an
-    integer (read ``c`` as the nearest fraction with denominator <= 1000), so
-    that every ring of a density group has exactly that density and the group
-    can be extrapolated.  Default: half filling.  The empty and the full ring
-    (zero flux, nothing to compare) are left out.
-
-    Examples
-    --------
-    >>> table_points([8, 10, 12], densities=[0.5, 0.25])
-    [(8, 2), (8, 4), (10, 5), (12, 3), (12, 6)]
-    """
-    if cars is not None and densities is not None:
-        raise InvalidParameterError("give either cars or densities, not both")
-    lengths = [int(L) for L in lengths]
-    for L in lengths:
-        if L < 2:
-            raise InvalidParameterError(f"ring lengths must be >= 2, got {L}")
-    pts = set()
-    if cars is not None:
-        pts = {(L, int(N)) for L in lengths for N in cars if 0 < int(N) < L}
-    else:
-        for c in (densities if densities is not None else [0.5]):
-            frac = density_fraction(c)
-            pts |= {(L, int(frac * L)) for L in commensurate_lengths(frac, lengths)}
-    if not pts:
-        raise InvalidParameterError(
-            f"no ring with 0 < N < L among lengths {lengths} and the requested"
-            f" {'cars' if cars is not None else 'densities (c L must be an integer)'}")
-    return sorted(pts)
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,8 @@ import pytest
 from reference import vmax1_infinite_flux
 
 from markov import InvalidParameterError, Ring
-from nasch.extrapolate import commensurate_lengths, extrapolate, extrapolate_flux
+from nasch.extrapolate import extrapolate, extrapolate_flux
+from nasch.rings import commensurate_lengths
 from markov.simulate import simulate
 
 

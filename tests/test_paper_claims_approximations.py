@@ -16,7 +16,7 @@ from reference import vmax1_infinite_flux
 from markov import Ring
 from markov.goe_patterns import elementary_patterns
 from markov.simulate import simulate
-from nasch.jobs import mc_ring
+from nasch.rings import mc_ring
 from symbolic import approximate
 from symbolic.cluster import cluster_fixed_point, word_probability
 from symbolic.comf import comf_state, comf_word_probability

@@ -17,8 +17,8 @@ from markov import InvalidParameterError, OutputError
 from nasch.cli import main
 from markov.files import write_atomic
 from nasch.formatting import FORMATS
-from nasch.jobs import mc_ring
-from nasch.tables import flux_table, table_points
+from nasch.rings import mc_ring, table_points
+from nasch.tables import flux_table
 from symbolic.solve import solve_pmf
 
 
