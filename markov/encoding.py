@@ -13,8 +13,18 @@ configurations sort and search as plain integers.  Rotating the ring is a
 cyclic shift of the digits; the *canonical* key of a configuration is the
 smallest key over its ``L`` rotations, which labels its rotation orbit.
 
-Text notation (used in docs and the CLI): ``.`` an empty cell, a digit a car
-with that velocity, cars moving to the right, e.g. ``"0..2"``.
+Two codes of a cell, each defined here once:
+
+* the *cell value*: :data:`EMPTY` (``-1``) for an empty cell, else the car's
+  velocity (:func:`encode`, :func:`decode`, :func:`from_text`);
+* the *digit*: ``cell + 1`` (:data:`EMPTY_DIGIT` = 0 for an empty cell), the
+  digit of the key and the index of a cell in the Garden of Eden automata and
+  in cluster-probability arrays.
+
+Text notation (docs, the CLI, GoE patterns, cluster words): ``.`` an empty
+cell, a digit a car with that velocity, cars moving to the right, e.g.
+``"0..2"``; :func:`from_text` is the one parser, :func:`to_text` the one
+formatter.
 """
 from __future__ import annotations
 
@@ -25,6 +35,8 @@ from ._kernels import canonical, digits_of, shift_bits
 from .errors import InvalidParameterError
 
 __all__ = [
+    "EMPTY",
+    "EMPTY_DIGIT",
     "base",
     "max_length",
     "check_encodable",
@@ -39,6 +51,12 @@ __all__ = [
 ]
 
 _INT64_MAX = np.iinfo(np.int64).max
+
+#: Cell value of an empty cell (a car's cell value is its velocity).
+EMPTY = -1
+#: Digit of an empty cell (a car's digit is its velocity + 1).
+EMPTY_DIGIT = EMPTY + 1
+_EMPTY_CHARACTERS = ".•_"
 
 
 def base(vmax: int) -> int:
@@ -104,22 +122,60 @@ def decode(key: int, length: int, vmax: int) -> np.ndarray:
 
 
 def from_text(text: str, vmax: int) -> list[int]:
-    """Parse ``"0..2"`` into cell values ``[0, -1, -1, 2]``."""
+    """Cell values of a configuration or word in text notation.
+
+    Parameters
+    ----------
+    text : str
+        ``.`` (or ``•``, ``_``) an empty cell, a digit ``0..vmax`` a car.
+    vmax : int
+
+    Returns
+    -------
+    list of int
+        :data:`EMPTY` or the velocity, per cell.
+
+    Raises
+    ------
+    InvalidParameterError
+        For any other character.
+
+    Examples
+    --------
+    >>> from_text("0..2", vmax=2)
+    [0, -1, -1, 2]
+    """
     cells = []
     for ch in text.strip():
-        if ch in ".•_":
-            cells.append(-1)
+        if ch in _EMPTY_CHARACTERS:
+            cells.append(EMPTY)
         elif ch.isdigit() and int(ch) <= vmax:
             cells.append(int(ch))
         else:
             raise InvalidParameterError(
-                f"pattern characters are '.' (empty) or a velocity 0..{vmax}, got {ch!r}")
+                f"configuration characters are '.' (empty) or a velocity 0..{vmax},"
+                f" got {ch!r} in {text!r}")
     return cells
 
 
 def to_text(cells) -> str:
-    """Format cell values as ``"0..2"`` (``.`` empty, digit velocity)."""
-    return "".join("." if int(c) < 0 else str(int(c)) for c in cells)
+    """Text notation of cell values.
+
+    Parameters
+    ----------
+    cells : sequence of int
+        :data:`EMPTY` or the velocity, per cell.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> to_text([0, -1, -1, 2])
+    '0..2'
+    """
+    return "".join("." if int(c) == EMPTY else str(int(c)) for c in cells)
 
 
 @njit(cache=True, parallel=True)

@@ -56,6 +56,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .encoding import EMPTY_DIGIT, from_text, to_text
 from .errors import InvalidParameterError
 from .rules import deterministic_velocity, randomize
 
@@ -71,12 +72,11 @@ __all__ = [
     "limit_order",
     "minimal_forbidden_words",
     "same_language",
-    "text_to_symbols",
-    "symbols_to_text",
     "MAX_VMAX",
 ]
 
-EMPTY = 0           # symbol of an empty cell; a car of velocity v is symbol v + 1
+# Words are read as digits (markov.encoding: 0 empty, v + 1 a car of velocity v),
+# the columns of the automata.
 #: Largest vmax the automata handle.  The subset construction of
 #: :func:`preimage_automaton` peaks at 3,595 states for vmax = 5 (0.8 s for all
 #: orders) and 34,380 for vmax = 6 (4.6 s) (measured 2026-11-26, 2-core x86_64
@@ -149,32 +149,19 @@ class WordAutomaton:
 
     def accepts(self, text: str) -> bool:
         """Whether the word (``"0..2"`` notation) is in the language."""
-        return self.run(text_to_symbols(text, self.vmax)) >= 0
+        return self.run(_digits(text, self.vmax)) >= 0
 
 
-def text_to_symbols(text: str, vmax: int) -> list[int]:
-    """``"0..2"`` -> ``[1, 0, 0, 3]`` (cell symbols)."""
-    out = []
-    for ch in text:
-        if ch in ".•_":
-            out.append(EMPTY)
-        elif ch.isdigit() and int(ch) <= vmax:
-            out.append(int(ch) + 1)
-        else:
-            raise InvalidParameterError(
-                f"word characters are '.' (empty) or a velocity 0..{vmax}, got {ch!r} in {text!r}")
-    return out
-
-
-def symbols_to_text(symbols) -> str:
-    return "".join("." if c == EMPTY else str(c - 1) for c in symbols)
+def _digits(text: str, vmax: int) -> list[int]:
+    """The digits of a word in text notation (``"0..2"`` -> ``[1, 0, 0, 3]``)."""
+    return [cell + 1 for cell in from_text(text, vmax)]
 
 
 def _saturation(delta: np.ndarray) -> int:
     """Smallest ``G`` with ``s.^(G+1) == s.^G`` for all states (empties saturate)."""
     cur = np.arange(delta.shape[0])
     for g in range(delta.shape[0] + 2):
-        nxt = np.where(cur >= 0, delta[np.maximum(cur, 0), EMPTY], -1)
+        nxt = np.where(cur >= 0, delta[np.maximum(cur, 0), EMPTY_DIGIT], -1)
         if np.array_equal(nxt, cur):
             return g
         cur = nxt
@@ -246,13 +233,13 @@ def preimage_automaton(prev: WordAutomaton) -> WordAutomaton:
     empt[:, 0] = np.arange(prev.n_states)
     for g in range(1, G + 1):
         last = empt[:, g - 1]
-        empt[:, g] = np.where(last >= 0, pd[np.maximum(last, 0), EMPTY], -1)
+        empt[:, g] = np.where(last >= 0, pd[np.maximum(last, 0), EMPTY_DIGIT], -1)
 
     START = (-1, -1, -1, -1)
 
     def moves(state, c):
         if state == START:
-            if c == EMPTY:
+            if c == EMPTY_DIGIT:
                 return [START]
             out = []
             for u in range(vmax + 1):
@@ -261,7 +248,7 @@ def preimage_automaton(prev: WordAutomaton) -> WordAutomaton:
                     out.append((q2, u, c - 1, 0))
             return out
         q, u, v, t = state
-        if c == EMPTY:
+        if c == EMPTY_DIGIT:
             return [(q, u, v, min(t + 1, T))]
         v2 = c - 1
         g = t + v - v2
@@ -586,7 +573,7 @@ def minimal_forbidden_words(auto: WordAutomaton, max_cells: int):
     for p, symbols in first.items():
         for a in symbols:
             walk(index[p], [a])
-    words = sorted(set(symbols_to_text(w) for w in words), key=lambda w: (len(w), w))
+    words = sorted({to_text([d - 1 for d in w]) for w in words}, key=lambda w: (len(w), w))
     return words, finite, (longest if finite else None)
 
 
@@ -619,7 +606,7 @@ def elementary_patterns(vmax: int, max_cells: int) -> PatternSearch:
     words, finite, longest = minimal_forbidden_words(autos[-1], max_cells)
     pats = []
     for w in words:
-        sym = text_to_symbols(w, vmax)
+        sym = _digits(w, vmax)
         order = next(n for n in range(1, len(autos)) if autos[n].run(sym) < 0)
         pats.append(Pattern(w, order))
     pats.sort(key=lambda p: (p.order, len(p.pattern), p.pattern))

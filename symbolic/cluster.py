@@ -816,9 +816,9 @@ def word_probability(vmax: int, n: int, probs: np.ndarray, word) -> np.ndarray:
     0.0
     """
     if isinstance(word, str):
-        from markov.goe_patterns import text_to_symbols
+        from markov.encoding import from_text
 
-        word = text_to_symbols(word, vmax)
+        word = [cell + 1 for cell in from_text(word, vmax)]   # digits: 0 empty, v + 1
     word = [int(x) for x in word]
     b = vmax + 2
     probs = np.atleast_2d(np.asarray(probs, float))

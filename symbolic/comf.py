@@ -47,6 +47,7 @@ from functools import lru_cache
 import numpy as np
 import scipy.sparse as sp_sparse
 
+from markov.encoding import EMPTY, from_text
 from markov.errors import ConvergenceError, InvalidParameterError
 from markov.rules import velocity_outcomes
 
@@ -358,11 +359,6 @@ def solve_comf(vmax: int, p_val, c_val) -> np.ndarray:
     return out.T.reshape((vmax + 1,) + c_b.shape)
 
 
-def _cars_of(word: str) -> list[tuple[int, int]]:
-    """``(velocity, position)`` of the cars of a word such as ``"0..2"``."""
-    return [(int(ch), i) for i, ch in enumerate(word) if ch not in ".•_"]
-
-
 def comf_word_probability(state: ComfState, word: str, after_update: bool = False) -> float:
     """Probability of ``word`` at a given place, for a word that starts and ends with a car.
 
@@ -380,11 +376,10 @@ def comf_word_probability(state: ComfState, word: str, after_update: bool = Fals
     >>> comf_word_probability(s, "11") > 0, comf_word_probability(s, "11", after_update=True)
     (True, 0.0)
     """
-    cars = _cars_of(word)
-    if len(cars) < 1 or word[0] in ".•_" or word[-1] in ".•_":
+    cells = from_text(word, state.vmax)       # refuses velocities beyond vmax
+    if not cells or cells[0] == EMPTY or cells[-1] == EMPTY:
         raise InvalidParameterError(f"word must start and end with a car, got {word!r}")
-    if any(v > state.vmax for v, _ in cars):
-        raise InvalidParameterError(f"velocities in {word!r} exceed vmax = {state.vmax}")
+    cars = [(v, x) for x, v in enumerate(cells) if v != EMPTY]
     probs = state.probs
     table = _moves(state.vmax, state.p)
     horizon = table.shape[1] - 1

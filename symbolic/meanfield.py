@@ -32,11 +32,12 @@ from functools import lru_cache
 
 import sympy as sp
 
+from markov.encoding import EMPTY
 from markov.errors import InvalidParameterError
 from markov.rules import deterministic_velocity, velocity_outcomes
 
 __all__ = [
-    "p", "q", "c", "d", "EMPTY", "ANY_CAR",
+    "p", "q", "c", "d", "ANY_CAR",
     "velocity_symbols", "gap_horizons", "reach", "CarEvent", "car_events",
     "word_weight", "mf_rhs", "mf_equations", "mf_solution", "on_constraint",
     "paper_mf_equations", "paper_mf_solution",
@@ -44,8 +45,7 @@ __all__ = [
 
 p, q, c, d = sp.symbols("p q c d", positive=True)
 
-EMPTY = -1        # an empty cell in a word
-ANY_CAR = None    # a car of any velocity (weight c in MF)
+ANY_CAR = None    # a car of any velocity (weight c in MF); EMPTY: markov.encoding
 
 
 def _ensure_vmax(vmax) -> int:

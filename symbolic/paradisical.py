@@ -43,14 +43,15 @@ from functools import lru_cache
 
 import sympy as sp
 
+from markov.encoding import EMPTY, from_text
 from markov.errors import InvalidParameterError
 from markov.goe_patterns import MAX_VMAX, elementary_patterns
 from markov.rules import velocity_outcomes
 
-from .meanfield import EMPTY, c, d, gap_horizons, mf_rhs, p, q, velocity_symbols, word_weight
+from .meanfield import c, d, gap_horizons, mf_rhs, p, q, velocity_symbols, word_weight
 
 __all__ = [
-    "GOE_PATTERNS", "SECOND_ORDER_PATTERNS", "goe_patterns", "parse_pattern",
+    "GOE_PATTERNS", "SECOND_ORDER_PATTERNS", "goe_patterns",
     "pmf_rhs", "pmf_normalisation", "pmf_equations",
     "paper_pmf_equations", "paper_pmf_normalisation", "paper_c2", "paper_cubic",
 ]
@@ -63,9 +64,7 @@ GOE_PATTERNS = {
     2: ("01", "02", "12", "0.2", "11", "21", "22", "1.2", "2.2"),
 }
 SECOND_ORDER_PATTERNS = {1: (), 2: ("0..2",)}
-def parse_pattern(text: str) -> tuple[int, ...]:
-    """``"0.2"`` -> ``(0, -1, 2)`` (``-1`` an empty cell)."""
-    return tuple(EMPTY if ch in ".•_" else int(ch) for ch in text)
+
 
 
 @lru_cache(maxsize=None)
@@ -89,7 +88,7 @@ def goe_patterns(vmax: int, second_order: bool = False) -> tuple[tuple[int, ...]
     if not search.complete:
         raise RuntimeError(f"GoE pattern search for vmax = {vmax} is not complete at 40 cells")
     top = 2 if second_order else 1
-    return tuple(parse_pattern(pt.pattern) for pt in search.patterns if pt.order <= top)
+    return tuple(tuple(from_text(pt.pattern, vmax)) for pt in search.patterns if pt.order <= top)
 
 
 def _gap(word) -> int:

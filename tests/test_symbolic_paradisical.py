@@ -211,11 +211,11 @@ def test_pmf_breaks_the_flux_bound_for_weak_noise():
 def test_patterns_used_are_the_papers_for_vmax_1_and_2():
     # the equations take their patterns from the automaton search; for vmax 1, 2 they are
     # exactly the paper's lists (order 1) plus (0,•,•,2) (order 2)
-    from symbolic.paradisical import parse_pattern
+    from markov.encoding import from_text
     for vmax in (1, 2):
-        assert set(goe_patterns(vmax)) == {parse_pattern(t) for t in GOE_PATTERNS[vmax]}
+        assert set(goe_patterns(vmax)) == {tuple(from_text(t, vmax)) for t in GOE_PATTERNS[vmax]}
         assert set(goe_patterns(vmax, True)) - set(goe_patterns(vmax)) == {
-            parse_pattern(t) for t in SECOND_ORDER_PATTERNS[vmax]}
+            tuple(from_text(t, vmax)) for t in SECOND_ORDER_PATTERNS[vmax]}
 
 
 def _enumerated_rhs(vmax, second, cv, pv):
