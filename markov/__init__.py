@@ -24,7 +24,8 @@ os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 __all__ = [
     "Ring", "RingChain", "Solution", "solve", "load_solution", "stationary",
-    "StationaryResult", "SOLVERS", "METHODS", "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL",
+    "StationaryResult", "simulate", "SimulationResult", "SOLVERS", "METHODS", "OPERATORS",
+    "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL",
     "NaschError", "InvalidParameterError", "NoUniqueStationaryStateError",
     "StateSpaceTooLargeError", "ConvergenceError", "OutputError",
 ]
@@ -35,7 +36,8 @@ _WHERE = {
     "RingChain": "chain", "Solution": "chain", "solve": "chain",
     "load_solution": "chain",
     "stationary": "solvers", "StationaryResult": "solvers", "SOLVERS": "choices",
-    "METHODS": "choices",
+    "METHODS": "choices", "OPERATORS": "choices",
+    "simulate": "simulate", "SimulationResult": "simulate",
     **{name: "errors" for name in ("NaschError", "InvalidParameterError",
                                     "NoUniqueStationaryStateError",
                                     "StateSpaceTooLargeError", "ConvergenceError",

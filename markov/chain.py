@@ -122,6 +122,14 @@ class RingChain:
 
         The states, and the structure of the matrix-free operator, do not
         depend on ``p``; the CSR matrix does and is rebuilt.
+
+        Parameters
+        ----------
+        p : float or Fraction
+
+        Returns
+        -------
+        RingChain
         """
         other = RingChain(self.ring.with_p(p), self.lump, self.max_memory, self.operator,
                           self.state_bound)
@@ -186,12 +194,30 @@ class RingChain:
         return int(successor_counts(self.ring, self.keys).sum())
 
     def matrix_bytes(self, method: str = "auto") -> float:
-        """Estimated peak bytes of assembling the CSR matrix and solving with ``method``."""
+        """Estimated peak bytes of assembling the CSR matrix and solving with ``method``.
+
+        Parameters
+        ----------
+        method : str
+
+        Returns
+        -------
+        float
+        """
         method = "eigs" if method == "auto" else method
         return memory.matrix_bytes(self.n_states, self.transitions, method)
 
     def matrix_free_bytes(self, method: str) -> float:
-        """Estimated peak bytes of the matrix-free operator and solving with ``method``."""
+        """Estimated peak bytes of the matrix-free operator and solving with ``method``.
+
+        Parameters
+        ----------
+        method : str
+
+        Returns
+        -------
+        float
+        """
         if "transition_operator" in self.__dict__:
             op = self.transition_operator
             return op.nbytes + 8 * self.n_states * memory.solver_vectors(method)
@@ -289,8 +315,22 @@ class RingChain:
         ``auto`` means LU or ARPACK on the matrix; matrix-free, the fastest
         method for ``p`` that fits in memory: aggregation/disaggregation up to
         :data:`AGGREGATION_MAX_P` (parallel update), else the BiCGSTAB ->
-        GMRES -> power ladder, else BiCGSTAB alone, else power iteration.  ``x0`` warm-starts the product
-        methods, e.g. with ``pi`` at a nearby ``p`` (:meth:`with_p`).
+        GMRES -> power ladder, else BiCGSTAB alone, else power iteration.
+        ``x0`` warm-starts the product methods, e.g. with ``pi`` at a nearby
+        ``p`` (:meth:`with_p`).
+
+        Parameters
+        ----------
+        method : str
+            A name of :data:`markov.choices.METHODS`.
+        tol : float
+            Target of ``||pi P - pi||_1``.
+        x0 : (n,) array, optional
+            Warm start of the product methods.
+
+        Returns
+        -------
+        Solution
 
         Raises
         ------
@@ -404,11 +444,26 @@ class Solution:
         return observables.gap_distribution(self.ring, self.keys, self.pi)
 
     def cluster_probabilities(self, n: int) -> np.ndarray:
-        """n-cluster probabilities, shape ``(vmax + 2,) * n``; index 0 = empty."""
+        """n-cluster probabilities, shape ``(vmax + 2,) * n``; index 0 = empty.
+
+        Parameters
+        ----------
+        n : int
+            Window length, ``1..L``.
+
+        Returns
+        -------
+        ndarray of shape ``(vmax + 2,) * n``
+        """
         return observables.cluster_probabilities(self.ring, self.keys, self.pi, n)
 
     def to_dict(self) -> dict:
-        """JSON-ready summary (the fields of ``nasch solve --json``)."""
+        """JSON-ready summary (the fields of ``nasch solve --json``).
+
+        Returns
+        -------
+        dict
+        """
         r = self.ring
         return {
             "length": r.length, "cars": r.cars, "vmax": r.vmax, "p": float(r.p),
@@ -432,19 +487,42 @@ class Solution:
 
         See :mod:`markov.storage` for the layout and the key encoding; read it
         back with :func:`markov.load_solution`.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+
+        Returns
+        -------
+        pathlib.Path
+            The file written.
         """
         from .storage import save_solution
         return save_solution(self, path)
 
     def top_configurations(self, k: int) -> list[dict]:
         """The ``k`` most probable states in text notation
-        (:func:`markov.storage.top_configurations`)."""
+        (:func:`markov.storage.top_configurations`).
+
+        Parameters
+        ----------
+        k : int
+
+        Returns
+        -------
+        list of dict
+        """
         from .storage import top_configurations
         return top_configurations(self, k)
 
     def unlumped(self) -> "Solution":
         """One state per configuration: a lumped solution's orbit sums spread over
-        their rotations (:func:`markov.storage.unlumped`); small rings only."""
+        their rotations (:func:`markov.storage.unlumped`); small rings only.
+
+        Returns
+        -------
+        Solution
+        """
         from .storage import unlumped
         return unlumped(self)
 

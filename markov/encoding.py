@@ -34,21 +34,9 @@ from numba import njit, prange
 from ._kernels import canonical, digits_of, shift_bits
 from .errors import InvalidParameterError
 
-__all__ = [
-    "EMPTY",
-    "EMPTY_DIGIT",
-    "base",
-    "max_length",
-    "check_encodable",
-    "powers",
-    "encode",
-    "decode",
-    "from_text",
-    "to_text",
-    "canonical_keys",
-    "compact_jam_key",
-    "unique_keys",
-]
+# base, powers, compact_jam_key and unique_keys serve the other modules of markov
+__all__ = ["EMPTY", "EMPTY_DIGIT", "max_length", "check_encodable", "encode", "decode",
+           "from_text", "to_text", "canonical_keys"]
 
 _INT64_MAX = np.iinfo(np.int64).max
 
@@ -65,7 +53,16 @@ def base(vmax: int) -> int:
 
 
 def max_length(vmax: int) -> int:
-    """Largest ``L`` with ``B**L`` (and twice it) inside a signed 64-bit key."""
+    """Largest ``L`` with ``B**L`` (and twice it) inside a signed 64-bit key.
+
+    Parameters
+    ----------
+    vmax : int
+
+    Returns
+    -------
+    int
+    """
     b = base(vmax)
     length = 1
     while 2 * b ** (length + 1) <= _INT64_MAX:
@@ -74,7 +71,13 @@ def max_length(vmax: int) -> int:
 
 
 def check_encodable(length: int, vmax: int) -> None:
-    """Raise :class:`InvalidParameterError` if keys of this ring overflow int64."""
+    """Raise :class:`InvalidParameterError` if keys of this ring overflow int64.
+
+    Parameters
+    ----------
+    length : int
+    vmax : int
+    """
     limit = max_length(vmax)
     if length > limit:
         raise InvalidParameterError(
@@ -99,6 +102,11 @@ def encode(cells, vmax: int) -> int:
     vmax : int
         Maximal velocity.
 
+    Returns
+    -------
+    int
+        ``sum_x (cell_x + 1) B**x``, ``B = vmax + 2``.
+
     Examples
     --------
     >>> encode([0, -1, 1], vmax=1)   # car v=0, empty, car v=1; B = 3
@@ -115,7 +123,19 @@ def encode(cells, vmax: int) -> int:
 
 
 def decode(key: int, length: int, vmax: int) -> np.ndarray:
-    """Cells of a key: ``-1`` for empty, else the velocity (int8 array of length L)."""
+    """Cells of a key: ``-1`` for empty, else the velocity (int8 array of length L).
+
+    Parameters
+    ----------
+    key : int
+    length : int
+    vmax : int
+
+    Returns
+    -------
+    (L,) int8 array
+        :data:`EMPTY` or the velocity, per cell.
+    """
     out = np.empty(length, dtype=np.int64)
     digits_of(np.int64(key), length, base(vmax), out)
     return (out - 1).astype(np.int8)

@@ -26,6 +26,12 @@ def check_output_path(path, suffixes: Sequence[str] | None = None) -> Path:
     by creating and removing a probe file (permission bits alone mislead for
     root, read-only mounts and ACLs).
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+    suffixes : sequence of str, optional
+        Allowed file extensions (lower case, with the dot).
+
     Returns
     -------
     pathlib.Path
@@ -83,6 +89,16 @@ def write_bytes_atomic(path, data: bytes) -> Path:
     reader never sees a half-written file and an interrupted run (Ctrl-C
     included) leaves the old file intact and no temporary file behind.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+    data : bytes
+
+    Returns
+    -------
+    pathlib.Path
+        The file written.
+
     Raises
     ------
     OutputError
@@ -124,6 +140,17 @@ def write_bytes_atomic(path, data: bytes) -> Path:
 
 def write_atomic(path, text: str, encoding: str = "utf-8") -> Path:
     """Write ``text`` to ``path`` atomically (see :func:`write_bytes_atomic`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+    text : str
+    encoding : str
+
+    Returns
+    -------
+    pathlib.Path
+        The file written.
 
     Examples
     --------

@@ -119,6 +119,10 @@ def is_goe(config, vmax: int) -> bool:
         ``"0..2"`` notation, or cells (``-1`` empty, else the velocity).
     vmax : int
 
+    Returns
+    -------
+    bool
+
     Examples
     --------
     >>> is_goe("0.2.", 2), is_goe("0..2..", 2)
@@ -162,6 +166,17 @@ def pattern_free_mask(keys, length: int, vmax: int, order: int | None = None) ->
     Equivalently: every finite window of the ring (read around it as often as
     needed) occurs at times ``>= order`` in some evolution.
 
+    Parameters
+    ----------
+    keys : (n,) int64 array
+    length, vmax : int
+    order : int, optional
+        Highest pattern order checked; ``None``: all orders.
+
+    Returns
+    -------
+    (n,) bool array
+
     Examples
     --------
     >>> from markov.encoding import encode
@@ -179,6 +194,18 @@ def pattern_free_mask(keys, length: int, vmax: int, order: int | None = None) ->
 
 def is_pattern_free(config, vmax: int, order: int | None = None) -> bool:
     """Whether a ring configuration avoids all elementary GoE patterns (cyclically).
+
+    Parameters
+    ----------
+    config : str or sequence of int
+        ``"0..2"`` notation, or cells (``-1`` empty, else the velocity).
+    vmax : int
+    order : int, optional
+        Highest pattern order checked; ``None``: all orders.
+
+    Returns
+    -------
+    bool
 
     Examples
     --------
@@ -198,6 +225,13 @@ def image_keys(ring: Ring, order: int | None = None) -> tuple[np.ndarray, int]:
     step ``order`` times (``None``: until the set stops shrinking -- the
     configurations lying on arbitrarily long backward paths).  Exact, but it
     enumerates all ``C(L, N) (vmax+1)^N`` configurations: small rings only.
+
+    Parameters
+    ----------
+    ring : Ring
+        Parallel update.
+    order : int, optional
+        Steps to apply; ``None`` until the set stops shrinking.
 
     Returns
     -------
@@ -231,6 +265,20 @@ def census(length: int, cars: int, vmax: int, enumerate_limit: int = 2_000_000) 
     most ``enumerate_limit`` configurations (else ``None``); the pattern-free
     count always comes from the transfer matrix, and is also checked against
     the enumeration when there is one.
+
+    Parameters
+    ----------
+    length, cars, vmax : int
+        The ring (vmax 1..6).
+    enumerate_limit : int
+        Enumerate (GoE, recurrent class) up to this many configurations.
+
+    Returns
+    -------
+    dict
+        ``length, cars, vmax, all, goe, pattern_free, frozen, recurrent,
+        recurrent_predicted``; ``goe`` and ``recurrent`` are ``None`` beyond
+        ``enumerate_limit``.
 
     Examples
     --------

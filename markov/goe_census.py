@@ -145,6 +145,10 @@ def pattern_free_count(length: int, cars: int, vmax: int) -> int:
     vmax : int
         1..6 (:data:`markov.goe_patterns.MAX_VMAX`).
 
+    Returns
+    -------
+    int
+
     Examples
     --------
     >>> pattern_free_count(6, 2, 1)
@@ -179,6 +183,14 @@ def frozen_count(length: int, cars: int, vmax: int) -> int:
     anything else.  Count: ``L/N * C(L - 2N - 1, N - 1)`` (cars placed around the
     ring with gaps ``>= 2``); zero for vmax = 1, where a moving car can stop.
 
+    Parameters
+    ----------
+    length, cars, vmax : int
+
+    Returns
+    -------
+    int
+
     Examples
     --------
     >>> frozen_count(9, 2, 2)    # 0..0....., 0...0...., ... : gaps (2,5), (3,4), ... x 9 / 2
@@ -199,6 +211,16 @@ def recurrent_class_count(length: int, cars: int, vmax: int) -> int:
     ``2 L`` states (for ``vmax >= 3`` the velocities ``1..w-2`` are transient
     without being frozen).  ``N = 0`` and ``N = L`` give 1.  Verified against
     the enumeration in the tests.
+
+    Parameters
+    ----------
+    length, cars, vmax : int
+        The ring (vmax 1..6).
+
+    Returns
+    -------
+    int
+        Configurations (not rotation classes) of the recurrent class.
 
     Examples
     --------

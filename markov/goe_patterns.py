@@ -60,20 +60,10 @@ from .encoding import EMPTY_DIGIT, from_text, to_text
 from .errors import InvalidParameterError
 from .rules import deterministic_velocity, randomize
 
-__all__ = [
-    "WordAutomaton",
-    "Pattern",
-    "PatternSearch",
-    "outcome_set",
-    "order_automaton",
-    "preimage_automaton",
-    "elementary_patterns",
-    "word_allowed",
-    "limit_order",
-    "minimal_forbidden_words",
-    "same_language",
-    "MAX_VMAX",
-]
+# the construction steps (outcome_set, preimage_automaton, same_language,
+# minimal_forbidden_words) are documented for readers of docs/goe.md
+__all__ = ["WordAutomaton", "Pattern", "PatternSearch", "order_automaton", "elementary_patterns",
+           "word_allowed", "limit_order", "MAX_VMAX"]
 
 # Words are read as digits (markov.encoding: 0 empty, v + 1 a car of velocity v),
 # the columns of the automata.
@@ -140,7 +130,19 @@ class WordAutomaton:
         return int(self.delta.shape[0])
 
     def run(self, symbols, state: int = 0) -> int:
-        """State after reading ``symbols`` (``-1`` once out of the language)."""
+        """State after reading ``symbols`` (``-1`` once out of the language).
+
+        Parameters
+        ----------
+        symbols : sequence of int
+            Digits (0 empty, ``v + 1`` a car).
+        state : int
+            Start state.
+
+        Returns
+        -------
+        int
+        """
         for c in symbols:
             if state < 0:
                 return -1
@@ -148,7 +150,16 @@ class WordAutomaton:
         return state
 
     def accepts(self, text: str) -> bool:
-        """Whether the word (``"0..2"`` notation) is in the language."""
+        """Whether the word (``"0..2"`` notation) is in the language.
+
+        Parameters
+        ----------
+        text : str
+
+        Returns
+        -------
+        bool
+        """
         return self.run(_digits(text, self.vmax)) >= 0
 
 
@@ -379,6 +390,17 @@ def order_automaton(vmax: int, order: int | None = None) -> WordAutomaton:
     ``order=None`` gives the limit language ``L_inf`` (words that occur at
     arbitrarily late times), reached when ``L_{n+1} == L_n``.
 
+    Parameters
+    ----------
+    vmax : int
+        1..6 (:data:`MAX_VMAX`).
+    order : int, optional
+        ``n >= 0``; ``None`` for the limit language.
+
+    Returns
+    -------
+    WordAutomaton
+
     Examples
     --------
     >>> order_automaton(2, 1).accepts("0.2"), order_automaton(2, 1).accepts("0..2")
@@ -396,12 +418,32 @@ def order_automaton(vmax: int, order: int | None = None) -> WordAutomaton:
 
 
 def limit_order(vmax: int) -> int:
-    """Smallest ``n`` with ``L_n == L_inf`` (the highest order of any GoE pattern)."""
+    """Smallest ``n`` with ``L_n == L_inf`` (the highest order of any GoE pattern).
+
+    Parameters
+    ----------
+    vmax : int
+
+    Returns
+    -------
+    int
+    """
     return len(_orders(_ensure_vmax(vmax))) - 1
 
 
 def word_allowed(text: str, vmax: int, order: int | None = None) -> bool:
     """Whether the word occurs at times ``>= order`` (``None``: arbitrarily late).
+
+    Parameters
+    ----------
+    text : str
+        The word, ``"0..2"`` notation.
+    vmax : int
+    order : int, optional
+
+    Returns
+    -------
+    bool
 
     Examples
     --------
@@ -423,6 +465,12 @@ class Pattern:
         return sum(ch != "." for ch in self.pattern)
 
     def to_dict(self) -> dict:
+        """JSON-ready dict of the result.
+
+        Returns
+        -------
+        dict
+        """
         return {"pattern": self.pattern, "order": self.order}
 
 
@@ -458,6 +506,12 @@ class PatternSearch:
     seconds: float
 
     def to_dict(self) -> dict:
+        """JSON-ready dict of the result.
+
+        Returns
+        -------
+        dict
+        """
         return {"vmax": self.vmax, "max_cells": self.max_cells,
                 "patterns": [p.to_dict() for p in self.patterns],
                 "complete": self.complete, "longest": self.longest,
@@ -588,9 +642,13 @@ def elementary_patterns(vmax: int, max_cells: int) -> PatternSearch:
     Parameters
     ----------
     vmax : int
-        Maximal velocity, 1..9.
+        Maximal velocity, 1..6 (:data:`MAX_VMAX`).
     max_cells : int
         Longest word searched (``K``), >= 2.
+
+    Returns
+    -------
+    PatternSearch
 
     Examples
     --------

@@ -31,8 +31,7 @@ from .choices import GMRES_RESTART
 
 __all__ = ["DEFAULT_MEMORY_FRACTION", "LEVEL_WORDS_PER_STATE", "available_memory",
            "memory_limit", "solver_vectors", "search_bytes_per_state",
-           "factored_bytes_per_state", "rows_bytes_per_state", "matrix_bytes", "check_fits",
-           "expected_row_length", "gib"]
+           "factored_bytes_per_state", "rows_bytes_per_state", "matrix_bytes", "check_fits"]
 
 DEFAULT_MEMORY_FRACTION = 0.75
 
@@ -47,12 +46,25 @@ _KEY = 8
 
 
 def available_memory() -> int:
-    """Physical memory of this machine in bytes."""
+    """Physical memory of this machine in bytes.
+
+    Returns
+    -------
+    int
+    """
     return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
 def memory_limit(max_memory: float | None) -> float:
     """Bytes allowed: ``max_memory``, or 75 % of physical memory when ``None``.
+
+    Parameters
+    ----------
+    max_memory : float or None
+
+    Returns
+    -------
+    float
 
     Raises
     ------
@@ -78,6 +90,15 @@ def solver_vectors(method: str) -> int:
     three int32 maps of the states (group, source, coarse entry: 1.5) and the
     coarse matrix, at most one entry per state (value, column, the entry's
     mass: 2.5); ``direct`` and ``eigs`` are counted by the matrix path.
+
+    Parameters
+    ----------
+    method : str
+        A name of :data:`markov.choices.METHODS`.
+
+    Returns
+    -------
+    int
     """
     return {"gmres": GMRES_RESTART + 6, "bicgstab": 10, "power": 4,
             "iterative": GMRES_RESTART + 6, "aggregation": 9,
@@ -89,6 +110,10 @@ def search_bytes_per_state() -> float:
 
     The sorted keys found so far and their merged copy, the frontier and its
     successor words (about two keys more).
+
+    Returns
+    -------
+    float
     """
     return 4 * _KEY
 
@@ -106,6 +131,10 @@ def factored_bytes_per_state(method: str, words_per_state: float = LEVEL_WORDS_P
         figure, :attr:`markov._factored.FactoredOperator.edges` / n).
     first_level : float
         Level-0 words per state (at most 1).
+
+    Returns
+    -------
+    float
     """
     links = 8 * words_per_state                # two int32 parents per word
     level0 = 4 + 8 * first_level               # int32 permutation, int64 offsets
@@ -115,7 +144,19 @@ def factored_bytes_per_state(method: str, words_per_state: float = LEVEL_WORDS_P
 
 
 def rows_bytes_per_state(method: str, threads: int = 2) -> float:
-    """Peak bytes per state of the row operator (random-sequential) and a solver."""
+    """Peak bytes per state of the row operator (random-sequential) and a solver.
+
+    Parameters
+    ----------
+    method : str
+        Stationary solver (its work vectors, :func:`solver_vectors`).
+    threads : int
+        numba threads (one accumulator each).
+
+    Returns
+    -------
+    float
+    """
     return _KEY + 48 + 8 * max(2, threads) + 8 * solver_vectors(method)
 
 
@@ -131,13 +172,35 @@ def expected_row_length(ring) -> float:
 
 
 def matrix_bytes(states: int, transitions: int, method: str = "auto") -> float:
-    """Peak bytes of assembling the CSR matrix and solving with ``method``."""
+    """Peak bytes of assembling the CSR matrix and solving with ``method``.
+
+    Parameters
+    ----------
+    states : int
+    transitions : int
+        Entries before summing duplicates.
+    method : str
+
+    Returns
+    -------
+    float
+    """
     return transitions * _MATRIX_BYTES_PER_NONZERO + states * (
         _KEY + 8 * solver_vectors(method))
 
 
 def check_fits(what: str, need: float, limit: float, hint: str = "") -> None:
-    """Raise :class:`StateSpaceTooLargeError` when ``need`` bytes exceed ``limit``."""
+    """Raise :class:`StateSpaceTooLargeError` when ``need`` bytes exceed ``limit``.
+
+    Parameters
+    ----------
+    what : str
+        What needs the memory, for the message.
+    need, limit : float
+        Bytes.
+    hint : str
+        Appended to the message.
+    """
     if need > limit:
         raise StateSpaceTooLargeError(
             f"{what} needs about {gib(need)}, which exceeds the memory limit of"

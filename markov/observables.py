@@ -47,6 +47,20 @@ def cluster_probabilities(ring: Ring, keys: np.ndarray, pi: np.ndarray, n: int) 
     Index ``0`` is an empty cell and ``v + 1`` a car of velocity ``v``; axis
     ``j`` is the ``j``-th cell of the window in the driving direction.
 
+    Parameters
+    ----------
+    ring : Ring
+    keys : (m,) int64 array
+        State keys (canonical rotations if the chain was lumped).
+    pi : (m,) float array
+        Their probabilities.
+    n : int
+        Window length, ``1..L``.
+
+    Returns
+    -------
+    ndarray of shape ``(vmax + 2,) * n``
+
     Examples
     --------
     >>> import numpy as np
@@ -67,7 +81,18 @@ def cluster_probabilities(ring: Ring, keys: np.ndarray, pi: np.ndarray, n: int) 
 
 
 def velocity_densities(ring: Ring, keys: np.ndarray, pi: np.ndarray) -> np.ndarray:
-    """``c_v`` for ``v = 0..vmax`` (the 1-cluster probabilities of cars)."""
+    """``c_v`` for ``v = 0..vmax`` (the 1-cluster probabilities of cars).
+
+    Parameters
+    ----------
+    ring : Ring
+    keys : (m,) int64 array
+    pi : (m,) float array
+
+    Returns
+    -------
+    (vmax + 1,) float array
+    """
     return cluster_probabilities(ring, keys, pi, 1)[1:]
 
 
@@ -82,7 +107,18 @@ def _gap_histogram(keys, weights, length, b, out):
 
 
 def gap_distribution(ring: Ring, keys: np.ndarray, pi: np.ndarray) -> np.ndarray:
-    """``P(g)``, ``g = 0..L-N``: headway distribution of a car (needs ``N >= 1``)."""
+    """``P(g)``, ``g = 0..L-N``: headway distribution of a car (needs ``N >= 1``).
+
+    Parameters
+    ----------
+    ring : Ring
+    keys : (m,) int64 array
+    pi : (m,) float array
+
+    Returns
+    -------
+    (L - N + 1,) float array
+    """
     if ring.cars == 0:
         raise InvalidParameterError("the gap distribution needs at least one car")
     out = np.zeros(ring.length - ring.cars + 1)
@@ -112,6 +148,16 @@ def expected_move(ring: Ring, keys: np.ndarray, pi: np.ndarray) -> float:
     stationary state it equals ``sum_v v c_v``; for random-sequential update
     every car is updated once per time step on average, so it is the flux per
     time step (``L`` sub-steps).
+
+    Parameters
+    ----------
+    ring : Ring
+    keys : (m,) int64 array
+    pi : (m,) float array
+
+    Returns
+    -------
+    float
     """
     total = _expected_move(np.ascontiguousarray(keys, np.int64),
                            np.ascontiguousarray(pi, np.float64), ring.length, ring.vmax,

@@ -7,13 +7,18 @@ import sys
 # drawn only when stderr is a terminal anyway (and it costs 15 ms of start-up)
 from tqdm.std import tqdm
 
-__all__ = ["progress_bar", "progress_enabled"]
+__all__ = ["progress_bar", "set_quiet"]
 
 _quiet = False
 
 
 def set_quiet(quiet: bool) -> None:
-    """Silence (or re-enable) every progress bar of this process (``--quiet``)."""
+    """Silence (or re-enable) every progress bar of this process (``--quiet``).
+
+    Parameters
+    ----------
+    quiet : bool
+    """
     global _quiet
     _quiet = bool(quiet)
 
@@ -24,6 +29,18 @@ def progress_enabled() -> bool:
 
 
 def progress_bar(total=None, desc: str = "", unit: str = "it"):
-    """A tqdm bar on stderr, disabled when :func:`progress_enabled` is false."""
+    """A tqdm bar on stderr, disabled when :func:`progress_enabled` is false.
+
+    Parameters
+    ----------
+    total : int, optional
+        Expected count; ``None`` for a counter.
+    desc : str
+    unit : str
+
+    Returns
+    -------
+    tqdm.std.tqdm
+    """
     return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr,
                 disable=not progress_enabled(), leave=False, dynamic_ncols=True)

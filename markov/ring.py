@@ -88,5 +88,14 @@ class Ring:
         return self.cars == 0 or self.cars == self.length
 
     def with_p(self, p) -> "Ring":
-        """The same ring with another braking probability."""
+        """The same ring with another braking probability.
+
+        Parameters
+        ----------
+        p : float or Fraction
+
+        Returns
+        -------
+        Ring
+        """
         return Ring(self.length, self.cars, self.vmax, p, self.update)

@@ -167,6 +167,15 @@ def blocking_error(batch_means, min_blocks: int = 8) -> float:
     (it grows with the block length until blocks are independent).  With fewer
     than ``min_blocks`` batches the naive error of the batches is returned.
 
+    Parameters
+    ----------
+    batch_means : sequence of float
+    min_blocks : int
+
+    Returns
+    -------
+    float
+
     Examples
     --------
     Independent means: the levels agree roughly; alternating (anti-correlated)
@@ -188,6 +197,16 @@ def initial_configuration(ring: Ring, seed: int) -> tuple[np.ndarray, np.ndarray
     """Random start: ``N`` distinct cells drawn uniformly, all cars at rest.
 
     Returns ``(positions, velocities)``, int64 arrays in driving order.
+
+    Parameters
+    ----------
+    ring : Ring
+    seed : int
+
+    Returns
+    -------
+    positions, velocities : int64 arrays
+        Cars in driving order, all at velocity 0.
 
     Examples
     --------
@@ -260,6 +279,14 @@ def simulation_bytes(ring: Ring) -> int:
     and keeps a set of ``N`` indices otherwise; sorting and the car arrays
     (positions, velocities) add ``8 N`` each.  Measured: ``L = 10**9``,
     ``N = 2 * 10**8`` peaked at 9.6 GB resident, this gives 9.6e9.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    int
     """
     length, cars = int(ring.length), int(ring.cars)
     draw = 8 * length + 8 * cars if cars > length // 50 else 24 * cars
@@ -375,7 +402,12 @@ class SimulationResult:
         return work / self.seconds if self.seconds else math.inf
 
     def to_dict(self) -> dict:
-        """JSON-ready summary (the fields of ``nasch simulate --json``)."""
+        """JSON-ready summary (the fields of ``nasch simulate --json``).
+
+        Returns
+        -------
+        dict
+        """
         d = asdict(self)
         d["p"] = float(self.p)
         d["density"] = self.density

@@ -78,12 +78,27 @@ class StationaryResult:
 
 
 def residual(P: sp.csr_array, pi: np.ndarray) -> float:
-    """``||pi P - pi||_1``."""
+    """``||pi P - pi||_1``.
+
+    Parameters
+    ----------
+    P : sparse matrix
+    pi : (n,) float array
+
+    Returns
+    -------
+    float
+    """
     return float(np.abs(P.T @ pi - pi).sum())
 
 
 def check_irreducible(P: sp.csr_array) -> None:
-    """Raise :class:`NoUniqueStationaryStateError` unless ``P`` is irreducible."""
+    """Raise :class:`NoUniqueStationaryStateError` unless ``P`` is irreducible.
+
+    Parameters
+    ----------
+    P : sparse matrix
+    """
     n, _ = connected_components(P, directed=True, connection="strong")
     if n != 1:
         raise NoUniqueStationaryStateError(

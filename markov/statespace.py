@@ -31,7 +31,16 @@ _CHUNK = 1 << 22
 
 
 def count_all(ring: Ring) -> int:
-    """Number of configurations with ``N`` cars: ``C(L, N) (vmax + 1)**N``."""
+    """Number of configurations with ``N`` cars: ``C(L, N) (vmax + 1)**N``.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    int
+    """
     return math.comb(ring.length, ring.cars) * (ring.vmax + 1) ** ring.cars
 
 
@@ -133,6 +142,16 @@ def all_keys(ring: Ring, lump: bool = False, max_memory: float | None = None) ->
 
     Refuses (:class:`StateSpaceTooLargeError`) when ``count_all(ring)`` keys
     would not fit in ``max_memory`` bytes (default 75 % of physical memory).
+
+    Parameters
+    ----------
+    ring : Ring
+    lump : bool
+    max_memory : float, optional
+
+    Returns
+    -------
+    (n,) int64 array, sorted
     """
     check_encodable(ring.length, ring.vmax)
     total = count_all(ring)

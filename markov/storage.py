@@ -83,6 +83,15 @@ def _package_version() -> str:
 def decode_keys(keys, length: int, vmax: int) -> np.ndarray:
     """Cells of many keys at once: ``(n, L)`` int8, ``-1`` empty, else the velocity.
 
+    Parameters
+    ----------
+    keys : array_like of int
+    length, vmax : int
+
+    Returns
+    -------
+    (n, L) int8 array
+
     Examples
     --------
     >>> decode_keys([19], 3, 1).tolist()      # 1 + 0 * 3 + 2 * 9: car v=0, empty, car v=1
@@ -118,6 +127,15 @@ def _expand(keys, pi, rot, length, pw, out_keys, out_pi):
 def rotation_counts(keys, length: int, vmax: int) -> np.ndarray:
     """Number of distinct rotations of each configuration (1..L).
 
+    Parameters
+    ----------
+    keys : array_like of int
+    length, vmax : int
+
+    Returns
+    -------
+    (n,) int64 array
+
     Examples
     --------
     >>> rotation_counts([1 + 9, 1 + 3], 4, 1).tolist()   # "0.0." has 2, "00.." has 4
@@ -142,6 +160,15 @@ def top_configurations(sol, k: int) -> list[dict]:
     (of the state: the class sum when lumped), ``rotations`` (class size) and
     ``probability_each`` (``probability / rotations`` when lumped, else
     ``probability``).  Ties are ordered by key, so the list is reproducible.
+
+    Parameters
+    ----------
+    sol : Solution
+    k : int
+
+    Returns
+    -------
+    list of dict
 
     Examples
     --------
@@ -174,6 +201,15 @@ def unlumped(sol, max_states: int = UNLUMP_LIMIT):
     Each rotation class of weight ``w`` and size ``m`` contributes its ``m``
     distinct rotations with probability ``w / m`` each.  An unlumped solution
     is returned unchanged.
+
+    Parameters
+    ----------
+    sol : Solution
+    max_states : int
+
+    Returns
+    -------
+    Solution
 
     Raises
     ------
@@ -210,6 +246,16 @@ def unlumped(sol, max_states: int = UNLUMP_LIMIT):
 
 def save_solution(sol, path) -> Path:
     """Write a solution to ``path`` (``.npz``) atomically; see the module docstring.
+
+    Parameters
+    ----------
+    sol : Solution
+    path : str or os.PathLike
+
+    Returns
+    -------
+    pathlib.Path
+        The file written.
 
     Examples
     --------

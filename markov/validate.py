@@ -27,6 +27,17 @@ TOL_RANGE = (1e-15, 1e-3)
 def ensure_int(name: str, value, minimum: int | None = None, maximum: int | None = None) -> int:
     """``value`` as an ``int`` in ``[minimum, maximum]``; integral floats are accepted.
 
+    Parameters
+    ----------
+    name : str
+        The argument, for the message.
+    value : int
+    minimum, maximum : int, optional
+
+    Returns
+    -------
+    int
+
     Examples
     --------
     >>> ensure_int("steps", 10.0, 1)
@@ -60,6 +71,18 @@ def ensure_real(name: str, value, low: float | None = None, high: float | None =
 
     ``low_open``/``high_open`` exclude the end points.  NaN and infinities are
     always refused: no numeric option of this package means anything there.
+
+    Parameters
+    ----------
+    name : str
+        The argument, for the message.
+    value : number
+    low, high : float, optional
+    low_open, high_open : bool
+
+    Returns
+    -------
+    float
 
     Examples
     --------
@@ -172,6 +195,16 @@ def ensure_open_probability(value, name: str = "p") -> float:
 def ensure_tol(tol, name: str = "tol") -> float:
     """A residual target in :data:`TOL_RANGE`.
 
+    Parameters
+    ----------
+    tol : float
+    name : str
+        The argument, for the message.
+
+    Returns
+    -------
+    float
+
     Examples
     --------
     >>> ensure_tol(1e-10)
@@ -182,6 +215,18 @@ def ensure_tol(tol, name: str = "tol") -> float:
 
 def ensure_max_memory(value, name: str = "max_memory", unit: str = "bytes") -> float | None:
     """``None`` (the default limit) or a positive, finite amount of memory.
+
+    Parameters
+    ----------
+    value : float or None
+    name : str
+        The argument, for the message.
+    unit : str
+        Its unit, for the message.
+
+    Returns
+    -------
+    float or None
 
     Examples
     --------
@@ -201,6 +246,13 @@ def ensure_chain_arguments(ring, method: str | None = None, tol=None,
     The ring must fit the 64-bit key (:func:`markov.encoding.check_encodable`),
     ``method`` be a solver name, ``tol`` lie in :data:`TOL_RANGE` and
     ``max_memory`` (bytes) be ``None`` or positive and finite.
+
+    Parameters
+    ----------
+    ring : Ring
+    method : str, optional
+    tol : float, optional
+    max_memory : float, optional
     """
     from .encoding import check_encodable
     from .choices import METHODS
@@ -217,6 +269,14 @@ def format_count(n) -> str:
     """An integer for a message: ``12,345`` up to 12 digits, else ``1.23e+64``.
 
     Works for integers of any size (no conversion to float).
+
+    Parameters
+    ----------
+    n : int
+
+    Returns
+    -------
+    str
 
     Examples
     --------

@@ -48,6 +48,15 @@ _SEQUENTIAL_FACTOR = 20.0
 def parse_budget(text) -> float:
     """Seconds from ``"90"``, ``"90s"``, ``"2.5m"``, ``"1h"`` (or a number).
 
+    Parameters
+    ----------
+    text : str or number
+
+    Returns
+    -------
+    float
+        Seconds.
+
     Raises
     ------
     InvalidParameterError
@@ -78,6 +87,15 @@ def predicted_classes(length: int, cars: int, vmax: int, update: str = PARALLEL)
 
     Exact count / L (a lower bound by at most the periodic orbits) where the
     transfer-matrix count exists; otherwise every configuration over ``L``.
+
+    Parameters
+    ----------
+    length, cars, vmax : int
+    update : str
+
+    Returns
+    -------
+    int
     """
     from markov.goe_census import recurrent_class_bound
     from markov.statespace import count_all
@@ -100,7 +118,18 @@ def _products(p: float) -> float:
 
 def predicted_seconds(length: int, cars: int, vmax: int, p: float,
                       update: str = PARALLEL) -> float:
-    """Predicted seconds of one exact solve (search, operator, solver), one core."""
+    """Predicted seconds of one exact solve (search, operator, solver), one core.
+
+    Parameters
+    ----------
+    length, cars, vmax : int
+    p : float
+    update : str
+
+    Returns
+    -------
+    float
+    """
     if cars in (0, length):
         return 0.0
     n = predicted_classes(length, cars, vmax, update)

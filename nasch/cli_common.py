@@ -97,6 +97,16 @@ def handle_errors(func):
 
     ``MemoryError`` gets the same treatment: the guards estimate memory before
     the work, but an estimate can fall short, and a traceback would say less.
+
+    Parameters
+    ----------
+    func : callable
+        A command body.
+
+    Returns
+    -------
+    callable
+        The command body, refusing with one line and status 2.
     """
 
     @functools.wraps(func)
@@ -115,7 +125,13 @@ def handle_errors(func):
 
 
 def emit_json(obj) -> None:
-    """Print ``obj`` as indented JSON on stdout (NaN written as null: strict JSON)."""
+    """Print ``obj`` as indented JSON on stdout (NaN written as null: strict JSON).
+
+    Parameters
+    ----------
+    obj : dict or list
+        JSON-ready data.
+    """
     click.echo(json.dumps(_nan_to_none(obj), indent=2, allow_nan=False))
 
 
@@ -130,7 +146,18 @@ def _nan_to_none(obj):
 
 
 def quiet_option(func):
-    """``--quiet``: no progress bars (they are off anyway when stderr is not a TTY)."""
+    """``--quiet``: no progress bars (they are off anyway when stderr is not a TTY).
+
+    Parameters
+    ----------
+    func : callable
+        A click command.
+
+    Returns
+    -------
+    callable
+        The command with the option.
+    """
 
     def callback(ctx, param, value):
         from markov.progress import set_quiet
@@ -162,6 +189,10 @@ def run_console(group: click.Group) -> None:
     again) must not end the process by the signal or with a traceback while
     the interpreter shuts down, so SIGINT is ignored from here on.  Only the
     real program does this; click's test runner calls the group itself.
+
+    Parameters
+    ----------
+    group : click.Group
     """
     try:
         group()

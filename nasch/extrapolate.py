@@ -99,11 +99,26 @@ class Extrapolation:
         return self.coefficients[0]
 
     def predict(self, length) -> np.ndarray:
-        """The fitted series at ``length`` (scalar or array; ``inf`` allowed)."""
+        """The fitted series at ``length`` (scalar or array; ``inf`` allowed).
+
+        Parameters
+        ----------
+        length : float or array_like
+
+        Returns
+        -------
+        ndarray
+        """
         x = 1.0 / np.asarray(length, dtype=float)
         return np.polyval(np.asarray(self.coefficients[::-1]), x)
 
     def to_dict(self) -> dict:
+        """JSON-ready dict of the result.
+
+        Returns
+        -------
+        dict
+        """
         return {"f_inf": self.f_inf, "error": self.error, "order": self.order,
                 "coefficients": list(self.coefficients), "lower_order": self.lower_order, "higher_order": self.higher_order,
                 "leave_one_out": list(self.leave_one_out), "lengths": list(self.lengths),

@@ -217,6 +217,17 @@ def _panel(vmax, p, results, exact_points, groups, mc_c, lengths, order, methods
 def fundamental_figure(panels: Sequence[dict], width: float = 4.6, height: float = 4.2):
     """Draw one panel per :func:`fundamental_data` result; returns the Figure.
 
+    Parameters
+    ----------
+    panels : sequence of dict
+        Results of :func:`fundamental_data`.
+    width, height : float
+        Inches per panel.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
     Examples
     --------
     >>> d = fundamental_data(1, 0.5, lengths=[6], extrapolation_lengths=[6, 8, 10],
@@ -273,6 +284,16 @@ def fundamental_figure(panels: Sequence[dict], width: float = 4.6, height: float
 
 def save_figure(fig, path) -> Path:
     """Write ``fig`` to ``path`` (``.png`` or ``.pdf``) atomically.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+    path : str or os.PathLike
+
+    Returns
+    -------
+    pathlib.Path
+        The file written.
 
     Raises
     ------

@@ -98,6 +98,17 @@ def table_points(lengths: Sequence[int], cars: Sequence[int] | None = None,
     can be extrapolated.  Default: half filling.  The empty and the full ring
     (zero flux, nothing to compare) are left out.
 
+    Parameters
+    ----------
+    lengths : sequence of int
+    cars : sequence of int, optional
+    densities : sequence of float, optional
+
+    Returns
+    -------
+    list of (int, int)
+        ``(L, N)``, sorted.
+
     Examples
     --------
     >>> table_points([8, 10, 12], densities=[0.5, 0.25])

@@ -138,7 +138,12 @@ class StudyTable(RenderedTable):
         return None if f is None else (f - row.mc_flux) / row.mc_flux
 
     def winners(self) -> dict:
-        """``{(vmax, p): [(c, best method, its |deviation|), ...]}``."""
+        """``{(vmax, p): [(c, best method, its |deviation|), ...]}``.
+
+        Returns
+        -------
+        dict
+        """
         out = {}
         for r in self.rows:
             if r.best is not None:
@@ -147,15 +152,33 @@ class StudyTable(RenderedTable):
         return out
 
     def to_dict(self) -> dict:
+        """JSON-ready dict of the result.
+
+        Returns
+        -------
+        dict
+        """
         return {"methods": list(self.methods), "mc_steps": self.mc_steps,
                 "mc_replicas": self.mc_replicas, "notes": list(self.notes),
                 "seconds": self.seconds,
                 "rows": [r.to_dict() for r in self.rows]}
 
     def to_json(self) -> str:
+        """The table as indented JSON.
+
+        Returns
+        -------
+        str
+        """
         return json.dumps(self.to_dict(), indent=2) + "\n"
 
     def to_csv(self) -> str:
+        """The table as CSV, one line per row, numbers in full precision.
+
+        Returns
+        -------
+        str
+        """
         buf = io.StringIO()
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(["vmax", "p", "density", "mc_length", "mc_flux", "mc_error", "exact_flux",
@@ -193,7 +216,12 @@ class StudyTable(RenderedTable):
                 f" extrapolated to L = inf")
 
     def summary(self) -> list[str]:
-        """One line per (vmax, p): the best method over runs of densities; then the notes."""
+        """One line per (vmax, p): the best method over runs of densities; then the notes.
+
+        Returns
+        -------
+        list of str
+        """
         lines = []
         for (vmax, p), items in sorted(self.winners().items()):
             runs = []
@@ -213,7 +241,19 @@ class StudyTable(RenderedTable):
 
     def largest_deviation(self, vmax: int, p: float, low: float = 0.0,
                           high: float = 1.0) -> dict:
-        """``{method: max_c |deviation|}`` over the densities in ``[low, high]``."""
+        """``{method: max_c |deviation|}`` over the densities in ``[low, high]``.
+
+        Parameters
+        ----------
+        vmax : int
+        p : float
+        low, high : float
+            The density range.
+
+        Returns
+        -------
+        dict
+        """
         out = {}
         for r in self.rows:
             if r.vmax == vmax and r.p == p and low <= r.density <= high:
@@ -224,6 +264,12 @@ class StudyTable(RenderedTable):
         return out
 
     def to_text(self) -> str:
+        """The table as aligned plain text with its caption and footnote.
+
+        Returns
+        -------
+        str
+        """
         head, body = self._cells(False)
         widths = [max(len(x) for x in col) for col in zip(head, *body)]
         line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731
@@ -232,6 +278,12 @@ class StudyTable(RenderedTable):
         return "\n".join(out + [""] + self.summary()) + "\n"
 
     def to_md(self) -> str:
+        """The table as a Markdown table with its caption and footnote.
+
+        Returns
+        -------
+        str
+        """
         head, body = self._cells(False)
         out = [f"*{self._caption()}*", "", "| " + " | ".join(head) + " |",
                "|" + "|".join("---:" for _ in head) + "|"]
@@ -239,6 +291,12 @@ class StudyTable(RenderedTable):
         return "\n".join(out + [""] + [f"* {x}" for x in self.summary()]) + "\n"
 
     def to_latex(self) -> str:
+        """The table as a LaTeX ``tabular`` (booktabs rules).
+
+        Returns
+        -------
+        str
+        """
         head, body = self._cells(True)
         out = [f"% {self._caption()}", r"\begin{tabular}{" + "r" * len(head) + "}",
                r"\toprule", " & ".join(head).replace("->", r"$\to$") + r" \\", r"\midrule"]
@@ -384,6 +442,16 @@ def deviation_figure(table: StudyTable, width: float = 3.6, height: float = 3.0)
 
     The grey band is the Monte Carlo 1-sigma error; diamonds are the exact
     ``L -> infinity`` extrapolations with their error estimate.
+
+    Parameters
+    ----------
+    table : StudyTable
+    width, height : float
+        Inches per panel.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     import matplotlib
     matplotlib.use("Agg")

@@ -47,8 +47,7 @@ from urllib.parse import urlsplit
 from markov.errors import InvalidParameterError, NaschError
 from markov.progress import progress_bar
 
-__all__ = ["run_jobs", "default_workers", "single_threaded", "parse_scheduler_address",
-           "SINGLE_THREADED_ENV", "CONNECT_TIMEOUT"]
+__all__ = ["run_jobs", "parse_scheduler_address", "single_threaded"]
 
 #: Seconds allowed to reach a scheduler (the whole connection, probe included).
 CONNECT_TIMEOUT = 10.0
@@ -72,6 +71,8 @@ def single_threaded():
     BLAS through :func:`threadpoolctl.threadpool_limits` (it works on a
     library already loaded, where the environment variables no longer do),
     numba through :func:`numba.set_num_threads`; both restored on exit.
+
+
     """
     import numba
     from threadpoolctl import threadpool_limits
@@ -165,6 +166,14 @@ def parse_scheduler_address(address: str) -> tuple[str, str, int]:
     """``(protocol, host, port)`` of a scheduler address, or a clear error.
 
     Accepts ``tcp://HOST:PORT``, ``tls://HOST:PORT`` and ``HOST:PORT`` (tcp).
+
+    Parameters
+    ----------
+    address : str
+
+    Returns
+    -------
+    (str, str, int)
 
     Examples
     --------

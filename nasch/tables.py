@@ -143,14 +143,32 @@ class FluxTable(RenderedTable):
     # -- machine-readable
 
     def to_dict(self) -> dict:
+        """JSON-ready dict of the result.
+
+        Returns
+        -------
+        dict
+        """
         return {"vmax": self.vmax, "update": self.update, "methods": list(self.methods),
                 "mc_steps": self.mc_steps, "extrapolation_order": self.order,
                 "rows": [r.to_dict() for r in self.rows]}
 
     def to_json(self) -> str:
+        """The table as indented JSON.
+
+        Returns
+        -------
+        str
+        """
         return json.dumps(self.to_dict(), indent=2) + "\n"
 
     def to_csv(self) -> str:
+        """The table as CSV, one line per row, numbers in full precision.
+
+        Returns
+        -------
+        str
+        """
         buf = io.StringIO()
         cols = (["kind", "p", "L", "N", "density", "flux_exact", "flux_exact_error"]
                 + [f"c_{v}" for v in range(self.vmax + 1)] + ["states"] + list(self.methods)
@@ -201,6 +219,12 @@ class FluxTable(RenderedTable):
         return head, body, align
 
     def to_text(self) -> str:
+        """The table as aligned plain text with its caption and footnote.
+
+        Returns
+        -------
+        str
+        """
         head, body, _ = self._cells(False)
         widths = [max(len(x) for x in col) for col in zip(head, *body)]
         line = lambda cells: "  ".join(c.rjust(w) for c, w in zip(cells, widths))  # noqa: E731
@@ -216,6 +240,12 @@ class FluxTable(RenderedTable):
         return "\n".join(out) + "\n" + textwrap.fill(self._footnote(), 100) + "\n"
 
     def to_md(self) -> str:
+        """The table as a Markdown table with its caption and footnote.
+
+        Returns
+        -------
+        str
+        """
         head, body, _ = self._cells(False)
         out = [f"*{self._caption()}*", "", "| " + " | ".join(head) + " |",
                "|" + "|".join("---:" for _ in head) + "|"]
@@ -223,6 +253,12 @@ class FluxTable(RenderedTable):
         return "\n".join(out) + "\n\n" + self._footnote() + "\n"
 
     def to_latex(self) -> str:
+        """The table as a LaTeX ``tabular`` (booktabs rules).
+
+        Returns
+        -------
+        str
+        """
         head, body, align = self._cells(True)
         head = [{"p": "$p$", "L": "$L$", "N": "$N$", "c": "$c$"}.get(h, h) for h in head]
         out = [f"% {self._caption()}", f"% {self._footnote()}",

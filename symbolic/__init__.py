@@ -30,12 +30,16 @@ from markov.errors import InvalidParameterError
 from markov.goe_patterns import MAX_VMAX
 
 __all__ = ["APPROXIMATIONS", "METHODS", "MAX_PMF_VMAX", "Approximation", "approximate",
-           "supported", "method_name", "label"]
+           "equations", "supported", "method_name", "label", "ExactSolution", "exact_solution"]
 
 METHODS = ("mf", "pmf", "pmf2", "cluster", "comf")
 # the named methods offered in tables, figures and help texts
 APPROXIMATIONS = ("mf", "pmf", "pmf2", "cluster2", "cluster3", "cluster4", "cluster5",
                   "cluster6", "comf")
+# Sympy builds a cluster's equations with one product per transfer row: beyond
+# this many rows they take megabytes and minutes.
+_MAX_EQUATION_TERMS = 20_000
+
 #: Largest vmax for pMF: that of the automaton search for the GoE patterns
 #: (0.3-0.8 s up to vmax 5, 8 s for vmax 6, docs/goe.md).
 MAX_PMF_VMAX = MAX_VMAX
@@ -69,6 +73,15 @@ def _split(method, order=None) -> tuple[str, int | None]:
 def method_name(method: str, order: int | None = None) -> str:
     """Canonical name: ``"cluster4"`` for ``("cluster", 4)``, else the method.
 
+    Parameters
+    ----------
+    method : str
+    order : int, optional
+
+    Returns
+    -------
+    str
+
     Examples
     --------
     >>> method_name("cluster", 4), method_name("cluster2"), method_name("comf")
@@ -80,6 +93,14 @@ def method_name(method: str, order: int | None = None) -> str:
 
 def label(method: str) -> str:
     """Human label: ``MF``, ``pMF``, ``pMF2``, ``4-cluster``, ``COMF``.
+
+    Parameters
+    ----------
+    method : str
+
+    Returns
+    -------
+    str
 
     Examples
     --------
@@ -95,6 +116,16 @@ def supported(method: str, vmax: int, order: int | None = None) -> bool:
 
     Cluster sizes too large for the window enumeration are refused by
     :func:`approximate` itself (:class:`InvalidParameterError`).
+
+    Parameters
+    ----------
+    method : str
+    vmax : int
+    order : int, optional
+
+    Returns
+    -------
+    bool
 
     Examples
     --------
@@ -135,7 +166,12 @@ class Approximation:
     flux: float | np.ndarray
 
     def to_dict(self) -> dict:
-        """JSON-ready dict with keys ``method, vmax, p, density, c_v, flux``."""
+        """JSON-ready dict with keys ``method, vmax, p, density, c_v, flux``.
+
+        Returns
+        -------
+        dict
+        """
         dens = self.density.tolist() if isinstance(self.density, np.ndarray) else self.density
         flux = self.flux.tolist() if isinstance(self.flux, np.ndarray) else self.flux
         return {"method": self.method, "vmax": self.vmax, "p": self.p, "density": dens,
@@ -210,3 +246,68 @@ def approximate(method: str, vmax: int, p: float, density, order: int | None = N
     if c_arr.ndim == 0:
         return Approximation(name, vmax, p_val, float(c_arr), c_v, float(flux))
     return Approximation(name, vmax, p_val, c_arr.copy(), c_v, flux)
+
+
+def equations(method: str, vmax: int, order: int | None = None) -> list:
+    """The equations a method solves, derived from the rules (sympy ``Eq``).
+
+    ``mf``: ``c_w = F_w``; ``pmf``/``pmf2``: ``c_w = N F_w`` with ``N`` written
+    out; ``clusterN``: one equation per cluster word (zero outside the
+    support) and the marginals; ``comf``: the car-ahead moves ``g_a``, the
+    balance of ``P[v, d]`` for ``d < 2 vmax`` and for a general ``n``, and the
+    normalisation and mean-gap conditions.
+
+    Parameters
+    ----------
+    method : str
+        As for :func:`approximate`.
+    vmax : int
+    order : int, optional
+        Cluster size of ``method="cluster"``.
+
+    Returns
+    -------
+    list of sympy.Eq
+
+    Raises
+    ------
+    InvalidParameterError
+        For a method not offered for ``vmax``, or a cluster whose equations
+        have more than 20,000 terms.
+
+    Examples
+    --------
+    >>> equations("mf", 1)[1]
+    Eq(c_1, c_0*d*q + c_1*d*q)
+    """
+    name = method_name(method, order)
+    if not supported(name, vmax):
+        raise InvalidParameterError(
+            f"method {name!r} is not available for vmax = {vmax!r} (mf, cluster, comf: any"
+            f" vmax >= 1; pmf, pmf2: 1..6)")
+    if name == "mf":
+        from .meanfield import mf_equations
+        return mf_equations(vmax)
+    if name in ("pmf", "pmf2"):
+        from .paradisical import pmf_equations
+        return pmf_equations(vmax, second_order=(name == "pmf2"))
+    if name == "comf":
+        from .comf import comf_equations
+        return comf_equations(vmax)
+    from .cluster import cluster_equations, transfer
+    n = int(name[len("cluster"):])
+    rows = len(transfer(vmax, n).src)
+    if rows > _MAX_EQUATION_TERMS:
+        raise InvalidParameterError(
+            f"the {n}-cluster equations for vmax = {vmax} have {rows:,} terms; at most"
+            f" {_MAX_EQUATION_TERMS:,} are built (use a smaller order)")
+    return cluster_equations(vmax, n)
+
+
+def __getattr__(name: str):
+    # the exact rational solver needs sympy: loaded on first use
+    if name in ("ExactSolution", "exact_solution"):
+        from . import exact
+
+        return getattr(exact, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -41,6 +41,10 @@ _OFF = {"off", "0", "none", "no", "false"}
 def cache_dir() -> Path | None:
     """The cache directory (not created here), or None when disabled.
 
+    Returns
+    -------
+    pathlib.Path or None
+
     Examples
     --------
     >>> import os
@@ -71,6 +75,18 @@ def _source_digest(module_name: str) -> str:
 
 def cache_key(module_name: str, **params) -> str:
     """Digest of the rules, the deriving module's source and ``params``.
+
+    Parameters
+    ----------
+    module_name : str
+        The deriving module, e.g. ``"symbolic.cluster"``.
+    **params
+        The derivation's parameters.
+
+    Returns
+    -------
+    str
+        64 hexadecimal digits.
 
     Examples
     --------

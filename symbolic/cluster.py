@@ -363,6 +363,15 @@ def window_count(vmax: int, n: int, limit: int | None = None) -> int:
 
     An upper bound of the final count (the support only shrinks).
 
+    Parameters
+    ----------
+    vmax, n : int
+    limit : int, optional
+
+    Returns
+    -------
+    int
+
     Raises
     ------
     InvalidParameterError
@@ -445,12 +454,30 @@ class Transfer:
         return self.vmax + 2
 
     def weights(self, p_val) -> np.ndarray:
-        """Entry weights, shape ``(k, nnz)`` for ``k`` values of ``p``."""
+        """Entry weights, shape ``(k, nnz)`` for ``k`` values of ``p``.
+
+        Parameters
+        ----------
+        p_val : float or (k,) array
+
+        Returns
+        -------
+        (k, nnz) float array
+        """
         p_val = np.atleast_1d(np.asarray(p_val, float))[:, None]
         return self.mult * (1 - p_val) ** self.nq * p_val ** self.np_
 
     def matrix(self, p_val: float) -> sp_sparse.csr_array:
-        """Sparse ``(|S|, W)`` update at one ``p``: support word <- window."""
+        """Sparse ``(|S|, W)`` update at one ``p``: support word <- window.
+
+        Parameters
+        ----------
+        p_val : float
+
+        Returns
+        -------
+        scipy.sparse.csr_array
+        """
         key = float(p_val)
         if key not in self._matrices:
             if len(self._matrices) > 64:
@@ -595,6 +622,16 @@ def push(vmax: int, n: int, probs: np.ndarray, p_val) -> np.ndarray:
     Exact for measures supported on ``transfer(vmax, n).support`` (every fixed
     point, and every image of such a measure); for ``n = 1`` the support is
     every cell state, so any product measure may be pushed.
+
+    Parameters
+    ----------
+    vmax, n : int
+    probs : (k, B**n) float array
+    p_val : float or (k,) array
+
+    Returns
+    -------
+    (k, B**n) float array
     """
     t = transfer(vmax, n)
     probs = np.atleast_2d(np.asarray(probs, float))
@@ -768,6 +805,21 @@ def cluster_fixed_point(vmax: int, n: int, p_val, c_val, tol: float = 1e-14,
     and density ``c``, until the max change is below ``tol``; points still not
     converged after ``anderson_steps`` (slow modes, ``p`` near 0 or 1) get
     Newton steps with the analytic Jacobian.
+
+    Parameters
+    ----------
+    vmax, n : int
+    p_val, c_val : float or array_like
+        Braking probabilities and densities, broadcast together.
+    tol : float
+        Largest change of a probability at convergence.
+    anderson_steps : int
+        Accelerated steps before Newton takes over.
+
+    Returns
+    -------
+    (k, B**n) float array
+        One row per ``(p, c)`` point, ``B = vmax + 2``.
     """
     t = transfer(vmax, n)
     p_val, c_val = (np.ravel(a) for a in np.broadcast_arrays(np.asarray(p_val, float),
@@ -777,6 +829,16 @@ def cluster_fixed_point(vmax: int, n: int, p_val, c_val, tol: float = 1e-14,
 
 def solve_cluster(vmax: int, n: int, p_val, c_val) -> np.ndarray:
     """``c_v`` (axis 0) of the n-cluster approximation, broadcast over ``p`` and ``c``.
+
+    Parameters
+    ----------
+    vmax, n : int
+    p_val, c_val : float or array_like
+
+    Returns
+    -------
+    ndarray
+        ``c_v`` on axis 0, then the broadcast shape of ``p`` and ``c``.
 
     Examples
     --------
@@ -844,6 +906,17 @@ def _label(code: int) -> str:
 def cluster_symbols(vmax: int, n: int = 2) -> dict:
     """Symbols ``P_<cells>`` for the n-cluster probabilities (``e`` = empty cell).
 
+    Parameters
+    ----------
+    vmax : int
+    n : int
+        Cluster size.
+
+    Returns
+    -------
+    dict
+        Cell tuple (digits) -> sympy Symbol.
+
     Examples
     --------
     >>> sorted(map(str, cluster_symbols(1, 2).values()))[:3]
@@ -865,6 +938,16 @@ def cluster_equations(vmax: int, n: int = 2) -> list:
     and the ``(n-1)``-cluster marginals are the symbols ``P_<cells>`` with one
     cell fewer, defined by the extra equations ``P_<cells> = sum_s P_<cells s>``
     returned after the fixed-point equations (``n >= 2``).
+
+    Parameters
+    ----------
+    vmax : int
+    n : int
+        Cluster size.
+
+    Returns
+    -------
+    list of sympy.Eq
     """
     import sympy as sp
 

@@ -316,6 +316,15 @@ def _update(vmax: int, p: float, cut: int, x: np.ndarray) -> np.ndarray:
 def comf_state(vmax: int, p: float, c: float) -> ComfState:
     """The COMF fixed point at braking probability ``p`` and density ``c``.
 
+    Parameters
+    ----------
+    vmax : int
+    p, c : float
+
+    Returns
+    -------
+    ComfState
+
     Examples
     --------
     >>> s = comf_state(1, 0.5, 0.5)        # exact for vmax = 1
@@ -349,6 +358,16 @@ def comf_state(vmax: int, p: float, c: float) -> ComfState:
 def solve_comf(vmax: int, p_val, c_val) -> np.ndarray:
     """``c_v`` (axis 0) of COMF, broadcast over ``p`` and ``c``.
 
+    Parameters
+    ----------
+    vmax : int
+    p_val, c_val : float or array_like
+
+    Returns
+    -------
+    ndarray
+        ``c_v`` on axis 0, then the broadcast shape of ``p`` and ``c``.
+
     Examples
     --------
     >>> solve_comf(2, 0.5, [0.25, 0.5]).shape
@@ -369,6 +388,17 @@ def comf_word_probability(state: ComfState, word: str, after_update: bool = Fals
     the COMF equations compute before they drop the correlation between
     neighbours): car ``j`` moved ``v_j`` from the gap ``d_j + v_j - v_{j+1}``,
     so ``c prod_j [sum_u P(u, d_j + v_j - v_{j+1}) T(v_j | u, .)] g_{v_last}``.
+
+    Parameters
+    ----------
+    state : ComfState
+    word : str
+        ``"0..2"`` notation, a car at both ends.
+    after_update : bool
+
+    Returns
+    -------
+    float
 
     Examples
     --------
@@ -406,6 +436,14 @@ def comf_equations(vmax: int) -> list:
     Returned: the ``g_a`` (tail sums from the horizon ``H`` on), the equations
     for the gaps ``0 .. 2 vmax - 1``, the general one for ``n``, and the two
     conditions (normalisation, mean gap).
+
+    Parameters
+    ----------
+    vmax : int
+
+    Returns
+    -------
+    list of sympy.Eq
 
     Examples
     --------

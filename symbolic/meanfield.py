@@ -38,8 +38,8 @@ from markov.rules import deterministic_velocity, velocity_outcomes
 
 __all__ = [
     "p", "q", "c", "d", "ANY_CAR",
-    "velocity_symbols", "gap_horizons", "reach", "CarEvent", "car_events",
-    "word_weight", "mf_rhs", "mf_equations", "mf_solution", "on_constraint",
+    "velocity_symbols", "gap_horizons", "reach", "CarEvent", "car_events", "mf_rhs",
+    "mf_equations", "mf_solution", "on_constraint",
     "paper_mf_equations", "paper_mf_solution",
 ]
 
@@ -56,6 +56,14 @@ def _ensure_vmax(vmax) -> int:
 
 def velocity_symbols(vmax: int) -> tuple[sp.Symbol, ...]:
     """The unknowns ``c_0 .. c_vmax``.
+
+    Parameters
+    ----------
+    vmax : int
+
+    Returns
+    -------
+    tuple of sympy.Symbol
 
     Examples
     --------
@@ -91,7 +99,16 @@ def gap_horizons(vmax: int) -> tuple[int, ...]:
 
 
 def reach(vmax: int) -> int:
-    """Farthest move in one step (from the rules): ``max_v deterministic_velocity(v, inf)``."""
+    """Farthest move in one step (from the rules): ``max_v deterministic_velocity(v, inf)``.
+
+    Parameters
+    ----------
+    vmax : int
+
+    Returns
+    -------
+    int
+    """
     far = 2 * vmax + 2
     return max(deterministic_velocity(v, far, vmax) for v in range(vmax + 1))
 
@@ -150,6 +167,14 @@ def mf_rhs(vmax: int) -> tuple[sp.Expr, ...]:
 def mf_equations(vmax: int) -> list[sp.Eq]:
     """MF stationarity equations ``c_w = F_w(c_0..c_vmax; c, d, p, q)``.
 
+    Parameters
+    ----------
+    vmax : int
+
+    Returns
+    -------
+    list of sympy.Eq
+
     Examples
     --------
     >>> mf_equations(1)[1]
@@ -164,6 +189,15 @@ def on_constraint(expr, vmax: int) -> sp.Expr:
 
     Two expressions are equal on the physical manifold iff their difference
     maps to 0 here.
+
+    Parameters
+    ----------
+    expr : sympy expression
+    vmax : int
+
+    Returns
+    -------
+    sympy.Expr
     """
     cv = velocity_symbols(vmax)
     sub = {q: 1 - p, d: 1 - c, cv[-1]: c - sum(cv[:-1])}
@@ -186,7 +220,17 @@ def mf_solution(vmax: int) -> dict:
 
 
 def paper_mf_equations(vmax: int) -> list[sp.Eq]:
-    """The paper's MF equations (mf1a, mf1b) for ``vmax = 1``, (mf2a-c) for ``vmax = 2``."""
+    """The paper's MF equations (mf1a, mf1b) for ``vmax = 1``, (mf2a-c) for ``vmax = 2``.
+
+    Parameters
+    ----------
+    vmax : int
+        1 or 2.
+
+    Returns
+    -------
+    list of sympy.Eq
+    """
     if vmax == 1:
         c0, c1 = velocity_symbols(1)
         return [sp.Eq(c0, (c + p * d) * c), sp.Eq(c1, q * c * d)]
@@ -199,7 +243,14 @@ def paper_mf_equations(vmax: int) -> list[sp.Eq]:
 
 
 def paper_mf_solution() -> tuple[dict, sp.Expr]:
-    """The paper's closed-form MF solution for ``vmax = 2`` and its flux ``f_MF^(2)``."""
+    """The paper's closed-form MF solution for ``vmax = 2`` and its flux ``f_MF^(2)``.
+
+    Returns
+    -------
+    solution : dict
+        ``{c_v: expr}``.
+    flux : sympy.Expr
+    """
     c0, c1, c2 = velocity_symbols(2)
     den = 1 - p * d**2
     sol = {c0: (1 + p * d) * c**2 / den,

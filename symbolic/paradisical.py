@@ -143,13 +143,35 @@ def pmf_rhs(vmax: int, second_order: bool = False,
 
 def pmf_normalisation(vmax: int, second_order: bool = False,
                       anchored: bool = True) -> sp.Expr:
-    """``N = c / sum_w F_w`` (makes ``sum_w c_w = c``)."""
+    """``N = c / sum_w F_w`` (makes ``sum_w c_w = c``).
+
+    Parameters
+    ----------
+    vmax : int
+    second_order : bool
+    anchored : bool
+        See :func:`pmf_rhs`.
+
+    Returns
+    -------
+    sympy.Expr
+    """
     # p + q = 1 lets the sum factor (vmax = 1: (c_0 + c_1)(c_0 + d))
     return c / sp.factor(sp.expand(sum(pmf_rhs(vmax, second_order, anchored)).subs(q, 1 - p)))
 
 
 def pmf_equations(vmax: int, second_order: bool = False) -> list[sp.Eq]:
     """pMF equations ``c_w = N F_w`` with ``N`` written out.
+
+    Parameters
+    ----------
+    vmax : int
+    second_order : bool
+        Also remove the patterns of order 2 (pMF2).
+
+    Returns
+    -------
+    list of sympy.Eq
 
     Examples
     --------
@@ -170,6 +192,18 @@ def paper_pmf_equations(vmax: int, second_order: bool = False) -> tuple[tuple[sp
     (c0eq)-(c2eq) with the *second* expression ``N = 1/(c_0 + d(1 - c_2))``;
     ``second_order`` applies the replacement in the text after Fig. 2 (the
     paper gives no ``N`` for it: ``c / sum F_w`` is returned).
+
+    Parameters
+    ----------
+    vmax : int
+        1 or 2.
+    second_order : bool
+
+    Returns
+    -------
+    rhs : tuple of sympy.Expr
+        ``F_0 .. F_vmax``.
+    norm : sympy.Expr
     """
     cv = velocity_symbols(vmax)
     if vmax == 1:
@@ -189,19 +223,33 @@ def paper_pmf_normalisation() -> tuple[sp.Expr, sp.Expr]:
 
     ``1/(c_0 + d c_1 + d^2 c_2)`` and ``1/(c_0 + d(1 - c_2))``; they are not
     equal (the first lacks a factor ``c``, see ``docs/symbolic.md``).
+
+    Returns
+    -------
+    tuple of sympy.Expr
     """
     c0, c1, c2 = velocity_symbols(2)
     return 1 / (c0 + d * c1 + d**2 * c2), 1 / (c0 + d * (1 - c2))
 
 
 def paper_c2() -> sp.Expr:
-    """Eq. (c2): ``c_2`` through ``c_0`` and ``c`` (vmax = 2, first-order pMF)."""
+    """Eq. (c2): ``c_2`` through ``c_0`` and ``c`` (vmax = 2, first-order pMF).
+
+    Returns
+    -------
+    sympy.Expr
+    """
     c0 = velocity_symbols(2)[0]
     return (c0 + d - sp.sqrt((c0 + d)**2 - 4 * q * d**3 * (c - c0))) / (2 * d)
 
 
 def paper_cubic() -> tuple[sp.Expr, sp.Expr, sp.Expr, sp.Expr]:
-    """The paper's coefficients ``(alpha, beta, gamma, delta)`` of eq. (poly), as printed."""
+    """The paper's coefficients ``(alpha, beta, gamma, delta)`` of eq. (poly), as printed.
+
+    Returns
+    -------
+    tuple of sympy.Expr
+    """
     alpha = -q * d**3 - p * d**2 + q * d - q
     beta = ((3 * p**2 - p - 1) * d**4 + (-p**2 - 3 * p + 1) * d**3 + (-p**2 + p + 2) * d**2
             - 3 * q * d + q)

@@ -32,7 +32,17 @@ __all__ = [
 
 
 def flux_of(c_v: np.ndarray) -> np.ndarray:
-    """``f = sum_v v c_v`` along axis 0."""
+    """``f = sum_v v c_v`` along axis 0.
+
+    Parameters
+    ----------
+    c_v : ndarray
+        ``c_v`` on axis 0.
+
+    Returns
+    -------
+    ndarray
+    """
     v = np.arange(c_v.shape[0]).reshape((-1,) + (1,) * (c_v.ndim - 1))
     return (v * c_v).sum(axis=0)
 
@@ -50,6 +60,16 @@ def _mf_functions(vmax: int):
 def solve_mf(vmax: int, p_val, c_val) -> np.ndarray:
     """MF ``c_v`` (axis 0: ``v = 0..vmax``), broadcast over ``p`` and ``c``.
 
+    Parameters
+    ----------
+    vmax : int
+    p_val, c_val : float or array_like
+
+    Returns
+    -------
+    ndarray
+        ``c_v`` on axis 0, then the broadcast shape of ``p`` and ``c``.
+
     Examples
     --------
     >>> solve_mf(1, 0.5, 0.5)      # c_1 = q c d
@@ -61,7 +81,17 @@ def solve_mf(vmax: int, p_val, c_val) -> np.ndarray:
 
 
 def solve_pmf_vmax1(p_val, c_val) -> np.ndarray:
-    """pMF for ``vmax = 1``: ``c_1 = (1 - sqrt(1 - 4 q c (1 - c))) / 2``, ``c_0 = c - c_1``."""
+    """pMF for ``vmax = 1``: ``c_1 = (1 - sqrt(1 - 4 q c (1 - c))) / 2``, ``c_0 = c - c_1``.
+
+    Parameters
+    ----------
+    p_val, c_val : float or array_like
+
+    Returns
+    -------
+    ndarray
+        ``c_0, c_1`` on axis 0.
+    """
     p_val, c_val = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
     c1 = 0.5 * (1 - np.sqrt(1 - 4 * (1 - p_val) * c_val * (1 - c_val)))
     return np.array([c_val - c1, c1])
@@ -87,7 +117,16 @@ def _cubic_functions():
 
 
 def cubic_roots(p_val, c_val) -> np.ndarray:
-    """The three complex roots of the paper's cubic (poly) in ``c_0``, shape ``(3,) + shape``."""
+    """The three complex roots of the paper's cubic (poly) in ``c_0``, shape ``(3,) + shape``.
+
+    Parameters
+    ----------
+    p_val, c_val : float or array_like
+
+    Returns
+    -------
+    complex ndarray
+    """
     p_val, c_val = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
     coeffs = _cubic_functions()[0]
     a, b, g, dl = (np.broadcast_to(f(c_val, p_val), c_val.shape).astype(float) for f in coeffs)
@@ -109,6 +148,17 @@ def solve_pmf_cubic(p_val, c_val, tol: float = 1e-7) -> np.ndarray:
     smallest residual of (c0eq) is taken and polished by Newton steps on that
     residual.  Raises :class:`~markov.errors.ConvergenceError` if a point has no
     admissible root or the polished root fails (c0eq).
+
+    Parameters
+    ----------
+    p_val, c_val : float or array_like
+    tol : float
+        Tolerance of the admissibility tests of a root.
+
+    Returns
+    -------
+    ndarray
+        ``c_0, c_1, c_2`` on axis 0.
     """
     p_val, c_val = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
     _, c2_fn, g_fn, dg_fn = _cubic_functions()
@@ -246,6 +296,20 @@ def solve_pmf(vmax: int, p_val, c_val, second_order: bool = False,
     ``method="iterate"`` always iterates (the independent route of the tests);
     ``anchored=False`` solves the non-paper variant (patterns removed anywhere
     in the window; always iterated).
+
+    Parameters
+    ----------
+    vmax : int
+    p_val, c_val : float or array_like
+    second_order : bool
+        pMF2: also without the patterns of order 2.
+    method : {"auto", "iterate"}
+    anchored : bool
+
+    Returns
+    -------
+    ndarray
+        ``c_v`` on axis 0, then the broadcast shape of ``p`` and ``c``.
     """
     p_val, c_val = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
     if method not in ("auto", "iterate"):

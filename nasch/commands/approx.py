@@ -6,20 +6,16 @@ from __future__ import annotations
 
 import click
 
-from markov.errors import InvalidParameterError
-from symbolic import approximate, method_name, supported
+from symbolic import approximate, equations, method_name
 
 from ..cli_common import emit_json, handle_errors
 
-__all__ = ["approx", "derive", "derived_equations"]
+__all__ = ["approx", "derive"]
 
 # the names of symbolic.METHODS (clusterN: the N-cluster without --order)
 _METHOD_METAVAR = "[mf|pmf|pmf2|cluster|clusterN|comf]"
 _METHOD_HELP = ("Approximation: mf, pmf, pmf2, cluster (with --order N; cluster2, cluster3"
                 " ... also work), comf.")
-# Sympy prints a cluster's equations with one product per transfer row: beyond this
-# many rows the output is megabytes and takes minutes.
-_MAX_PRINTED_ROWS = 20_000
 
 
 @click.command()
@@ -52,44 +48,6 @@ def approx(method, order, vmax, p, density, as_json):
         click.echo(f"  c_{v}            {cv:.15g}")
 
 
-def derived_equations(method: str, vmax: int, order: int | None = None) -> list:
-    """The equations a method solves, as derived from the rules (sympy ``Eq``).
-
-    ``mf``: ``c_w = F_w``; ``pmf``/``pmf2``: ``c_w = N F_w`` with ``N`` written
-    out; ``clusterN``: one equation per cluster word (zero outside the
-    support) and the marginals; ``comf``: the car-ahead moves ``g_a``, the
-    balance of ``P[v, d]`` for ``d < 2 vmax`` and for a general ``n``, and the
-    normalisation and mean-gap conditions.
-
-    Examples
-    --------
-    >>> derived_equations("mf", 1)[1]
-    Eq(c_1, c_0*d*q + c_1*d*q)
-    """
-    name = method_name(method, order)
-    if not supported(name, vmax):
-        raise InvalidParameterError(
-            f"method {name!r} is not available for vmax = {vmax!r} (mf, cluster, comf: any"
-            f" vmax >= 1; pmf, pmf2: 1..6)")
-    if name == "mf":
-        from symbolic.meanfield import mf_equations
-        return mf_equations(vmax)
-    if name in ("pmf", "pmf2"):
-        from symbolic.paradisical import pmf_equations
-        return pmf_equations(vmax, second_order=(name == "pmf2"))
-    if name == "comf":
-        from symbolic.comf import comf_equations
-        return comf_equations(vmax)
-    from symbolic.cluster import cluster_equations, transfer
-    n = int(name[len("cluster"):])
-    rows = len(transfer(vmax, n).src)
-    if rows > _MAX_PRINTED_ROWS:
-        raise InvalidParameterError(
-            f"the {n}-cluster equations for vmax = {vmax} have {rows:,} terms; sympy prints"
-            f" at most {_MAX_PRINTED_ROWS:,} (use a smaller --order)")
-    return cluster_equations(vmax, n)
-
-
 @click.command()
 @click.option("--method", type=str, required=True, metavar=_METHOD_METAVAR,
               help=_METHOD_HELP)
@@ -113,5 +71,5 @@ def derive(method, order, vmax, latex):
     """
     import sympy as sp
 
-    for eq in derived_equations(method, vmax, order):
+    for eq in equations(method, vmax, order):
         click.echo(sp.latex(eq) if latex else f"{eq.lhs} = {eq.rhs}")
