@@ -47,14 +47,12 @@ onto the same state; the final segmented sum adds them.
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
-import scipy.sparse.linalg as spla
 from numba import njit, prange
 
+from ._chain_operator import ChainOperator
 from ._kernels import canonical, cars_of, gap, rotate_mask, shift_bits, term
-from .encoding import check_encodable, powers, unique_keys
+from .encoding import powers, unique_keys
 from .errors import InvalidParameterError
 from .ring import PARALLEL, Ring
 from .rules import deterministic_velocity
@@ -265,12 +263,10 @@ def _gather_last(a, b, offsets, z, p, q, out):
         out[s] = acc
 
 
-class FactoredOperator(spla.LinearOperator):
-    """The parallel-update chain as a scipy ``LinearOperator``, applied through the per-car levels.
+class FactoredOperator(ChainOperator):
+    """The parallel-update chain as a ``LinearOperator`` (``A = P^T``), through the per-car levels.
 
-    As an operator it is ``A = P^T`` (scipy's column convention: ``A @ x`` is
-    ``x P`` written as a column), so :func:`markov.solvers.stationary` and
-    ``scipy.sparse.linalg`` accept it as they are.
+    See :class:`markov._chain_operator.ChainOperator` for the convention.
 
     Parameters
     ----------
@@ -311,14 +307,7 @@ class FactoredOperator(spla.LinearOperator):
             raise InvalidParameterError("the factored operator is for parallel update")
         if ring.cars < 1:
             raise InvalidParameterError("the factored operator needs at least one car")
-        check_encodable(ring.length, ring.vmax)
-        self.ring = ring
-        self.lump = bool(lump)
-        self.keys = np.ascontiguousarray(keys, dtype=np.int64)
-        self.n = self.keys.shape[0]
-        super().__init__(np.float64, (self.n, self.n))
-        self.products = 0
-        self.seconds = 0.0
+        super().__init__(ring, keys, lump)
         if _levels is None:
             _levels = self._build()
         (self._perm, self._offsets0, self._links, self._offsets_last,
@@ -382,29 +371,7 @@ class FactoredOperator(spla.LinearOperator):
                   self.level_sizes)
         return FactoredOperator(self.ring.with_p(p), self.keys, self.lump, _levels=levels)
 
-    def apply(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """``x P`` (a row vector times the transition matrix).
-
-        Parameters
-        ----------
-        x : (n,) float64 array
-        out : (n,) float64 array, optional
-            Where to write the result.
-
-        Returns
-        -------
-        (n,) float64 array
-
-        Raises
-        ------
-        InvalidParameterError
-            For ``x`` of another shape.
-        """
-        x = np.ascontiguousarray(x, dtype=np.float64)
-        if x.shape != (self.n,):
-            raise InvalidParameterError(f"x must have shape ({self.n},), got {x.shape}")
-        out = np.empty(self.n) if out is None else out
-        start = time.perf_counter()
+    def _product(self, x: np.ndarray, out: np.ndarray) -> None:
         p = float(self.ring.p)
         q = 1.0 - p
         which = 0  # ping-pong between the two level buffers
@@ -416,21 +383,3 @@ class FactoredOperator(spla.LinearOperator):
             _gather_level(a, b, parents, p, q, z)
         a, b = self._links[-1]
         _gather_last(a, b, self._offsets_last, z, p, q, out)
-        self.products += 1
-        self.seconds += time.perf_counter() - start
-        return out
-
-    _matvec = apply
-
-    def residual(self, pi: np.ndarray) -> float:
-        """``||pi P - pi||_1``.
-
-        Parameters
-        ----------
-        pi : (n,) float64 array
-
-        Returns
-        -------
-        float
-        """
-        return float(np.abs(self.apply(pi) - pi).sum())

@@ -19,15 +19,13 @@ the end.
 """
 from __future__ import annotations
 
-import time
-
 import numba
 import numpy as np
-import scipy.sparse.linalg as spla
 from numba import njit, prange
 
+from ._chain_operator import ChainOperator
 from ._kernels import canonical, row_length, shift_bits, successor_row
-from .encoding import check_encodable, powers
+from .encoding import powers
 from .errors import InvalidParameterError
 from .ring import PARALLEL, Ring
 
@@ -124,22 +122,24 @@ def _rank_many(tkeys, tvals, hbits, query, out):
         out[i] = _rank(tkeys, tvals, hbits, query[i])
 
 
+@njit(cache=True)
+def _row_buffers(length):
+    """Scratch of :func:`markov._kernels.successor_row` for one random-sequential row."""
+    cap = 2 * length + 1   # the empty cells, then one or two entries per car
+    return (np.empty(length, np.int64), np.empty(length, np.int64), np.empty(length, np.int64),
+            np.empty(cap, np.int64), np.empty(cap, np.int8), np.empty(cap, np.int8),
+            np.empty(cap, np.int32))
+
+
 @njit(cache=True, parallel=True)
 def _apply_rows(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, lump, weight,
                 bad):
     """``acc[thread] += x_i P[i, :]``; ``weight[go, brake]`` = ``q**go p**brake / L``."""
     n = keys.shape[0]
     nblocks = (n + _BLOCK - 1) // _BLOCK
-    cap = 2 * length + 1
     for blk in prange(nblocks):
         t = numba.get_thread_id()
-        pos = np.empty(length, np.int64)
-        vel = np.empty(length, np.int64)
-        deltas = np.empty(length, np.int64)
-        succ = np.empty(cap, np.int64)
-        go = np.empty(cap, np.int8)
-        brake = np.empty(cap, np.int8)
-        mult = np.empty(cap, np.int32)
+        pos, vel, deltas, succ, go, brake, mult = _row_buffers(length)
         row = acc[t]
         for i in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
             xi = x[i]
@@ -161,14 +161,8 @@ def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, out):
     """Random-sequential successors of ``keys[i]`` into ``out[indptr[i]:indptr[i+1]]``."""
     n = keys.shape[0]
     nblocks = (n + _BLOCK - 1) // _BLOCK
-    cap = 2 * length + 1
     for blk in prange(nblocks):
-        pos = np.empty(length, np.int64)
-        vel = np.empty(length, np.int64)
-        deltas = np.empty(length, np.int64)
-        go = np.empty(cap, np.int8)
-        brake = np.empty(cap, np.int8)
-        mult = np.empty(cap, np.int32)
+        pos, vel, deltas, _, go, brake, mult = _row_buffers(length)
         for i in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
             lo, hi = indptr[i], indptr[i + 1]
             successor_row(keys[i], length, vmax, pw, False, pos, vel, deltas, out[lo:hi], go,
@@ -230,12 +224,10 @@ def _sum_rows(acc, out):
         out[i] = s
 
 
-class SequentialOperator(spla.LinearOperator):
-    """The random-sequential sub-step chain as a scipy ``LinearOperator``, ``P`` not stored.
+class SequentialOperator(ChainOperator):
+    """The random-sequential sub-step chain as a ``LinearOperator`` (``A = P^T``), ``P`` not stored.
 
-    As an operator it is ``A = P^T`` (scipy's column convention: ``A @ x`` is
-    ``x P`` written as a column), so :func:`markov.solvers.stationary` and
-    ``scipy.sparse.linalg`` accept it as they are.
+    See :class:`markov._chain_operator.ChainOperator` for the convention.
 
     Parameters
     ----------
@@ -279,13 +271,8 @@ class SequentialOperator(spla.LinearOperator):
             raise InvalidParameterError(
                 "the row operator is for random-sequential update; parallel update is"
                 " applied by the factored operator (markov._factored.FactoredOperator)")
-        check_encodable(ring.length, ring.vmax)
-        self.ring = ring
-        self.lump = bool(lump)
-        self.index = KeyIndex(keys)
-        self.keys = self.index.keys
-        self.n = self.keys.shape[0]
-        super().__init__(np.float64, (self.n, self.n))
+        super().__init__(ring, keys, lump)
+        self.index = KeyIndex(self.keys)
         self.threads = numba.get_num_threads()
         self._pw = powers(ring.length, ring.vmax)
         self._bits = shift_bits(ring.vmax)
@@ -294,8 +281,6 @@ class SequentialOperator(spla.LinearOperator):
         self._weight = np.array([[1.0, p], [1.0 - p, 0.0]]) / length
         self._acc = np.zeros((self.threads, self.n))
         self._bad = np.zeros(self.threads, dtype=np.int64)
-        self.products = 0
-        self.seconds = 0.0
 
     @property
     def nbytes(self) -> int:
@@ -315,32 +300,7 @@ class SequentialOperator(spla.LinearOperator):
         """
         return SequentialOperator(self.ring.with_p(p), self.keys, self.lump)
 
-    def apply(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """``x P`` (a row vector times the transition matrix).
-
-        Parameters
-        ----------
-        x : (n,) float64 array
-        out : (n,) float64 array, optional
-            Where to write the result.
-
-        Returns
-        -------
-        (n,) float64 array
-
-        Raises
-        ------
-        InvalidParameterError
-            For ``x`` of another shape.
-        RuntimeError
-            If a successor is not among the keys (the set is not closed): a bug,
-            not bad input.
-        """
-        x = np.ascontiguousarray(x, dtype=np.float64)
-        if x.shape != (self.n,):
-            raise InvalidParameterError(f"x must have shape ({self.n},), got {x.shape}")
-        out = np.empty(self.n) if out is None else out
-        start = time.perf_counter()
+    def _product(self, x: np.ndarray, out: np.ndarray) -> None:
         r, idx = self.ring, self.index
         self._bad[:] = 0
         if self.threads != numba.get_num_threads():  # the thread count changed under us
@@ -350,24 +310,6 @@ class SequentialOperator(spla.LinearOperator):
         _apply_rows(idx.keys, idx.tkeys, idx.tvals, np.int64(idx.hbits), x, self._acc,
                     r.length, r.vmax, self._pw, self._bits, self.lump, self._weight, self._bad)
         _sum_rows(self._acc, out)
-        self.products += 1
-        self.seconds += time.perf_counter() - start
         if self._bad.sum():
             raise RuntimeError(f"{int(self._bad.sum())} successors lie outside the state set:"
                                " it is not closed")
-        return out
-
-    _matvec = apply
-
-    def residual(self, pi: np.ndarray) -> float:
-        """``||pi P - pi||_1``.
-
-        Parameters
-        ----------
-        pi : (n,) float64 array
-
-        Returns
-        -------
-        float
-        """
-        return float(np.abs(self.apply(pi) - pi).sum())

@@ -5,6 +5,7 @@ output file's extension before loading anything.
 """
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -18,7 +19,19 @@ _BY_EXTENSION = {".csv": "csv", ".md": "md", ".tex": "latex", ".json": "json", "
 
 
 class RenderedTable:
-    """A table that renders itself in every format of :data:`FORMATS` (``to_<format>``)."""
+    """A table that renders itself in every format of :data:`FORMATS` (``to_<format>``).
+
+    A subclass provides ``to_dict`` and the text formats.
+    """
+
+    def to_json(self) -> str:
+        """The table as indented JSON (of ``to_dict()``).
+
+        Returns
+        -------
+        str
+        """
+        return json.dumps(self.to_dict(), indent=2) + "\n"
 
     def render(self, fmt: str = "text") -> str:
         """The table as text in one of :data:`FORMATS`.

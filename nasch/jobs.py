@@ -28,9 +28,9 @@ from markov.validate import ensure_int
 
 from .rings import mc_ring
 
-__all__ = ["ExactJob", "MonteCarloJob", "ExactResult", "MonteCarloResult", "point_seed",
-           "monte_carlo_job", "run_job", "run_job_keep_going", "job_cost", "preflight",
-           "ensure_mc_steps"]
+__all__ = ["ExactJob", "MonteCarloJob", "ExactResult", "MonteCarloResult", "job_ring",
+           "point_seed", "monte_carlo_job", "run_job", "run_job_keep_going", "job_cost",
+           "preflight", "ensure_mc_steps"]
 
 # car updates per second of the simulator, measured on the 2-core VM
 _PARALLEL_RATE = 1e8
@@ -46,15 +46,6 @@ class ExactJob(NamedTuple):
     p: float
     update: str = PARALLEL
 
-    def ring(self) -> Ring:
-        """The ring of this job.
-
-        Returns
-        -------
-        Ring
-        """
-        return Ring(self.length, self.cars, self.vmax, self.p, self.update)
-
 
 class MonteCarloJob(NamedTuple):
     """A simulation of one large ring: ``replicas`` runs of ``steps`` after ``warmup``."""
@@ -68,15 +59,6 @@ class MonteCarloJob(NamedTuple):
     warmup: int
     seed: int
     replicas: int = 1
-
-    def ring(self) -> Ring:
-        """The ring of this job.
-
-        Returns
-        -------
-        Ring
-        """
-        return Ring(self.length, self.cars, self.vmax, self.p, self.update)
 
 
 class ExactResult(NamedTuple):
@@ -97,6 +79,20 @@ class MonteCarloResult(NamedTuple):
     length: int
     steps: int
     replicas: int
+
+
+def job_ring(job: ExactJob | MonteCarloJob) -> Ring:
+    """The ring a job computes.
+
+    Parameters
+    ----------
+    job : ExactJob or MonteCarloJob
+
+    Returns
+    -------
+    Ring
+    """
+    return Ring(job.length, job.cars, job.vmax, job.p, job.update)
 
 
 def point_seed(seed: int, density: Fraction, vmax: int, p: float,
@@ -165,13 +161,13 @@ def run_job(job: ExactJob | MonteCarloJob) -> ExactResult | MonteCarloResult:
     if isinstance(job, MonteCarloJob):
         from markov.simulate import simulate
 
-        r = simulate(job.ring(), steps=job.steps, warmup=job.warmup, seed=job.seed,
+        r = simulate(job_ring(job), steps=job.steps, warmup=job.warmup, seed=job.seed,
                      replicas=job.replicas)
         return MonteCarloResult(r.flux, r.flux_error, job.length, job.steps, job.replicas)
     from markov.chain import solve
     from markov.goe_census import recurrent_class_bound
 
-    sol = solve(job.ring(), state_bound=recurrent_class_bound)
+    sol = solve(job_ring(job), state_bound=recurrent_class_bound)
     return ExactResult(float(sol.flux), tuple(float(x) for x in sol.c_v), int(sol.n_states),
                        float(sol.residual))
 
@@ -233,9 +229,9 @@ def preflight(jobs) -> None:
 
     for job in jobs:
         if isinstance(job, ExactJob):
-            ensure_chain_arguments(job.ring())
+            ensure_chain_arguments(job_ring(job))
         else:
-            ensure_simulation_fits(job.ring(), None)
+            ensure_simulation_fits(job_ring(job), None)
 
 
 def ensure_mc_steps(mc_steps) -> int:

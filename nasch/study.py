@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -162,15 +161,6 @@ class StudyTable(RenderedTable):
                 "mc_replicas": self.mc_replicas, "notes": list(self.notes),
                 "seconds": self.seconds,
                 "rows": [r.to_dict() for r in self.rows]}
-
-    def to_json(self) -> str:
-        """The table as indented JSON.
-
-        Returns
-        -------
-        str
-        """
-        return json.dumps(self.to_dict(), indent=2) + "\n"
 
     def to_csv(self) -> str:
         """The table as CSV, one line per row, numbers in full precision.

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import textwrap
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -152,15 +151,6 @@ class FluxTable(RenderedTable):
         return {"vmax": self.vmax, "update": self.update, "methods": list(self.methods),
                 "mc_steps": self.mc_steps, "extrapolation_order": self.order,
                 "rows": [r.to_dict() for r in self.rows]}
-
-    def to_json(self) -> str:
-        """The table as indented JSON.
-
-        Returns
-        -------
-        str
-        """
-        return json.dumps(self.to_dict(), indent=2) + "\n"
 
     def to_csv(self) -> str:
         """The table as CSV, one line per row, numbers in full precision.
