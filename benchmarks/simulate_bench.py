@@ -9,7 +9,7 @@ from __future__ import annotations
 import time
 
 from markov.ring import Ring
-from markov.simulate import simulate
+from markov.montecarlo import simulate
 
 __all__ = ["benchmark_simulator", "CASES"]
 

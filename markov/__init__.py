@@ -37,7 +37,7 @@ _WHERE = {
     "load_solution": "chain",
     "stationary": "solvers", "StationaryResult": "solvers", "SOLVERS": "choices",
     "METHODS": "choices", "OPERATORS": "choices",
-    "simulate": "simulate", "SimulationResult": "simulate",
+    "simulate": "montecarlo", "SimulationResult": "montecarlo",
     **{name: "errors" for name in ("NaschError", "InvalidParameterError",
                                     "NoUniqueStationaryStateError",
                                     "StateSpaceTooLargeError", "ConvergenceError",

@@ -8,7 +8,7 @@ point, and fan them out through :func:`nasch.sweep.run_jobs`:
   (:func:`markov.solve`, with the Garden of Eden size bound), giving an
   :class:`ExactResult`;
 * :class:`MonteCarloJob`: a simulation of a large ring at one density
-  (:func:`markov.simulate.simulate`), giving a :class:`MonteCarloResult`.
+  (:func:`markov.montecarlo.simulate`), giving a :class:`MonteCarloResult`.
 
 The seed of a Monte Carlo job depends only on the base seed and the point
 (density, ``vmax``, ``p``, update order) through :func:`point_seed`, so the
@@ -159,7 +159,7 @@ def run_job(job: ExactJob | MonteCarloJob) -> ExactResult | MonteCarloResult:
     ExactResult or MonteCarloResult
     """
     if isinstance(job, MonteCarloJob):
-        from markov.simulate import simulate
+        from markov.montecarlo import simulate
 
         r = simulate(job_ring(job), steps=job.steps, warmup=job.warmup, seed=job.seed,
                      replicas=job.replicas)
@@ -224,7 +224,7 @@ def preflight(jobs) -> None:
     ----------
     jobs : iterable of ExactJob or MonteCarloJob
     """
-    from markov.simulate import ensure_simulation_fits
+    from markov.montecarlo import ensure_simulation_fits
     from markov.validate import ensure_chain_arguments
 
     for job in jobs:
@@ -248,9 +248,9 @@ def ensure_mc_steps(mc_steps) -> int:
     Raises
     ------
     InvalidParameterError
-        Between 1 and :data:`markov.simulate.DEFAULT_BATCHES` - 1.
+        Between 1 and :data:`markov.montecarlo.DEFAULT_BATCHES` - 1.
     """
-    from markov.simulate import DEFAULT_BATCHES
+    from markov.montecarlo import DEFAULT_BATCHES
 
     mc_steps = ensure_int("mc_steps", mc_steps, 0)
     if 0 < mc_steps < DEFAULT_BATCHES:

@@ -8,7 +8,7 @@ For each point ``(vmax, p, c)`` of a grid:
 * Monte Carlo: ``mc_replicas`` runs of ``mc_steps`` steps (after as many
   warm-up steps) on a ring of at least ``mc_length`` cells with density exactly
   ``c`` (:class:`nasch.jobs.MonteCarloJob`), flux and 1-sigma error of
-  :func:`markov.simulate.simulate`; this is the reference;
+  :func:`markov.montecarlo.simulate`; this is the reference;
 * the ``L -> infinity`` extrapolation of the exact fluxes of the rings among
   ``lengths`` with ``c L`` an integer and at most ``max_states`` rotation
   classes (counted exactly first, :func:`markov.goe_census.recurrent_class_count`),

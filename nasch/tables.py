@@ -311,7 +311,7 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
         density's denominator above it, so its density equals ``N / L`` exactly.
     mc_replicas : int
         Independent Monte Carlo runs per point; their spread enters the error
-        bar (see :func:`markov.simulate.simulate`).
+        bar (see :func:`markov.montecarlo.simulate`).
     seed : int
         Base seed; each Monte Carlo run derives its own from it and its point
         (:func:`nasch.jobs.point_seed`, as a figure or the study does).

@@ -93,7 +93,7 @@ def test_large_counts_are_written_with_an_exponent():
 
 
 def test_simulate_memory_guard_refuses_before_allocating(monkeypatch):
-    monkeypatch.setattr("markov.simulate.initial_configuration",
+    monkeypatch.setattr("markov.montecarlo.initial_configuration",
                         lambda *a, **k: pytest.fail("allocated before the memory guard"))
     res = run("simulate", "-L", "1000000000", "-c", "0.2", "--p", "0.5", "--steps", "100",
               "--max-memory", "1")
@@ -104,7 +104,7 @@ def test_simulate_memory_guard_refuses_before_allocating(monkeypatch):
 
 def test_simulation_bytes_matches_the_measured_peak():
     # measured in issue 12: L = 1e9, N = 2e8 peaked at 9.6 GB resident
-    from markov.simulate import simulation_bytes
+    from markov.montecarlo import simulation_bytes
     assert simulation_bytes(Ring(10**9, 2 * 10**8, 2, 0.5)) == pytest.approx(9.6e9, rel=0.01)
 
 

@@ -10,7 +10,7 @@ from click.testing import CliRunner
 
 from markov import InvalidParameterError, Ring, solve
 from nasch.cli import main
-from markov.simulate import blocking_error, evolve, initial_configuration, simulate
+from markov.montecarlo import blocking_error, evolve, initial_configuration, simulate
 
 
 def naive_parallel_step(cells, vmax, p_brakes):

@@ -40,7 +40,7 @@ def simulate(length, density, cars, vmax, p, steps, warmup, batches, seed, updat
       nasch simulate -L 1000 -c 0.5 --vmax 2 --p 0.5 --seed 7 --json
     """
     from markov.ring import Ring
-    from markov.simulate import simulate as run
+    from markov.montecarlo import simulate as run
     from markov.validate import ensure_int, ensure_max_memory, ensure_real
 
     if (density is None) == (cars is None):
