@@ -201,7 +201,8 @@ class RingChain:
         """Estimated peak bytes of the matrix-free operator and solving with ``method``."""
         if "transition_operator" in self.__dict__:
             op = self.transition_operator
-            return op.nbytes + 8 * self.n_states * memory.solver_vectors(method)
+            # the keys stay beside the operator (the observables need them)
+            return op.nbytes + self.keys.nbytes + 8 * self.n_states * memory.solver_vectors(method)
         return self.n_states * self._matrix_free_bytes_per_state(method)
 
     def _auto_method(self) -> str:
