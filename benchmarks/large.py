@@ -83,14 +83,8 @@ def _warm_up() -> None:
     solve(Ring(6, 3, 2, 0.5), operator="matrix-free", method="aggregation")
 
 
-def work_ours(L, N, vmax, p, lump=True, operator="auto", method="auto", tol=1e-10,
-              max_memory_gib=20.0) -> dict:
-    """This package: search, build (matrix or operator), solve."""
-    from markov import Ring, RingChain
-
-    _warm_up()
-    chain = RingChain(Ring(L, N, vmax, p), lump=lump, max_memory=max_memory_gib * 2**30,
-                      operator=operator)
+def _timed_solve(chain, method: str, tol: float):
+    """Search, build (matrix or operator) and solve one chain; the three timings."""
     start = time.perf_counter()
     chain.keys
     search = time.perf_counter() - start
@@ -100,12 +94,24 @@ def work_ours(L, N, vmax, p, lump=True, operator="auto", method="auto", tol=1e-1
         chain.transition_operator
     build = time.perf_counter() - start
     sol = chain.solution(method, tol=tol)
-    return {"states": sol.n_states, "level_words": sum(sol.level_sizes or ()) or None,
-            "nonzeros": sol.nonzeros, "operator": sol.operator, "method": sol.result.method,
-            "products": sol.result.iterations, "search_s": search, "build_s": build,
-            "solve_s": sol.result.seconds, "residual": sol.residual, "flux": sol.flux,
-            "c_v": sol.c_v.tolist(), "lumped": lump,
-            "note": "levels " + ",".join(map(str, sol.level_sizes)) if sol.level_sizes else None}
+    return sol, {"states": sol.n_states, "nonzeros": sol.nonzeros, "operator": sol.operator,
+                 "method": sol.result.method, "products": sol.result.iterations,
+                 "search_s": search, "build_s": build, "solve_s": sol.result.seconds,
+                 "residual": sol.residual, "flux": sol.flux, "c_v": sol.c_v.tolist()}
+
+
+def work_ours(L, N, vmax, p, lump=True, operator="auto", method="auto", tol=1e-10,
+              max_memory_gib=20.0) -> dict:
+    """This package: search, build (matrix or operator), solve."""
+    from markov import Ring, RingChain
+
+    _warm_up()
+    chain = RingChain(Ring(L, N, vmax, p), lump=lump, max_memory=max_memory_gib * 2**30,
+                      operator=operator)
+    sol, row = _timed_solve(chain, method, tol)
+    levels = sol.level_sizes
+    return {**row, "level_words": sum(levels) if levels else None, "lumped": lump,
+            "note": "levels " + ",".join(map(str, levels)) if levels else None}
 
 
 def work_previous(tree, L, N, vmax, p, tol=1e-10, max_memory_gib=20.0) -> dict:
@@ -113,23 +119,10 @@ def work_previous(tree, L, N, vmax, p, tol=1e-10, max_memory_gib=20.0) -> dict:
     from markov import Ring, RingChain, solve
 
     assert Path(sys.modules["markov"].__file__).resolve().is_relative_to(Path(tree).resolve())
-    for operator in ("matrix", "compact", "matrix-free"):
+    for operator in ("matrix", "compact", "matrix-free"):  # its kernels, outside the timing
         solve(Ring(6, 3, 2, 0.5), operator=operator)
     chain = RingChain(Ring(L, N, vmax, p), max_memory=max_memory_gib * 2**30)
-    start = time.perf_counter()
-    chain.keys
-    search = time.perf_counter() - start
-    if chain.operator_kind == "matrix":
-        chain.matrix
-    else:
-        chain.transition_operator
-    build = time.perf_counter() - start
-    sol = chain.solution("auto", tol=tol)
-    return {"states": sol.n_states, "nonzeros": sol.nonzeros, "operator": sol.operator,
-            "method": sol.result.method, "products": sol.result.iterations,
-            "search_s": search, "build_s": build, "solve_s": sol.result.seconds,
-            "residual": sol.residual, "flux": sol.flux, "c_v": sol.c_v.tolist(),
-            "lumped": True}
+    return {**_timed_solve(chain, "auto", tol)[1], "lumped": True}
 
 
 def work_budget(L, N, vmax, p) -> dict:

@@ -2,8 +2,8 @@
 
 For vmax = 2 and p = 0.5 (the paper's case) it prints, at half filling and at
 quarter filling, for the four largest rings whose exact solution fits a budget
-of 15 s each density (``nasch.budget``: at half filling L = 16..22, at
-quarter filling L = 16..28):
+of 15 s each density (``nasch.budget``: at half filling L = 14..20, at
+quarter filling L = 12..24):
 
 * the exact stationary flux of each finite ring (Markov chain, solved exactly),
 * the mean-field (MF), paradisical mean-field (pMF, pMF2) and 2-cluster fluxes

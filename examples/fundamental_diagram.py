@@ -2,15 +2,16 @@
 
 Each panel: pMF (solid), MF (dotted), 2-cluster (dash-dotted), Monte Carlo on
 a ring of ~3000 cells (dots), exact stationary fluxes of rings with L = 8, 12,
-16 at every N (open markers) and their L -> infinity extrapolation at
-c = 1/4, 1/3, 1/2, 2/3, 3/4 (diamonds with the error estimate).
+16 at every N (open markers) and the L -> infinity extrapolation at
+c = 1/4, 1/3, 1/2, 2/3, 3/4 (diamonds with the two-sigma error) of the four
+largest rings of each density that fit 15 s (``nasch.budget``).
 
-Run:  python examples/fundamental_diagram.py [OUTPUT_DIR]   (about 20-40 s on 2 cores)
+Run:  python examples/fundamental_diagram.py [OUTPUT_DIR]   (about 1-2 minutes on 2 cores)
 Writes OUTPUT_DIR/fig2_fundamental_vmax2.png and .pdf; OUTPUT_DIR defaults to
 the current directory (the figure in docs/ was made with
 ``python examples/fundamental_diagram.py docs/figures``).
 Same figure from the command line:
-      nasch plot fundamental --vmax 2 --p 0.5,0.1 --output fig2.png
+      nasch plot fundamental --vmax 2 --p 0.5,0.1 --budget 15s --seed 1 --output fig2.png
 """
 import os
 
@@ -31,7 +32,7 @@ def main(outdir: Path) -> None:
     start = time.perf_counter()
     for ext in (".png", ".pdf"):   # a bad directory is reported before the work
         check_output_path(outdir / f"fig2_fundamental_vmax2{ext}")
-    panels = fundamental_data(2, [0.5, 0.1], seed=1)
+    panels = fundamental_data(2, [0.5, 0.1], seed=1, budget=15.0)
     fig = fundamental_figure(panels)
     for ext in (".png", ".pdf"):
         path = save_figure(fig, outdir / f"fig2_fundamental_vmax2{ext}")

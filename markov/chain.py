@@ -220,7 +220,8 @@ class RingChain:
         """
         if "transition_operator" in self.__dict__:
             op = self.transition_operator
-            return op.nbytes + 8 * self.n_states * memory.solver_vectors(method)
+            # the keys stay beside the operator (the observables need them)
+            return op.nbytes + self.keys.nbytes + 8 * self.n_states * memory.solver_vectors(method)
         return self.n_states * self._matrix_free_bytes_per_state(method)
 
     def _auto_method(self) -> str:
