@@ -26,7 +26,7 @@ from .encoding import compact_jam_key
 from .transition import successor_counts, transition_matrix
 from .validate import ensure_chain_arguments, format_count
 
-__all__ = ["RingChain", "Solution", "solve", "load_solution"]
+__all__ = ["RingChain", "Solution", "solve", "load_solution", "representable"]
 
 # OPERATORS (markov.choices): how ``x -> x P`` is applied (see
 # RingChain.operator_kind for ``auto``): ``matrix`` the assembled CSR matrix
@@ -68,6 +68,38 @@ def _ensure_unique(ring: Ring) -> None:
             "p = 1 makes every car brake to v - 1 after accelerating, so a stopped car"
             " never moves again and every configuration of stopped cars is absorbing:"
             " there are many stationary states; use 0 < p < 1")
+
+
+def representable(ring: Ring) -> bool:
+    """Whether the exact solver can encode the ring at all.
+
+    A configuration must fit a signed 64-bit key, and under parallel update a
+    word of the factored operator (positions and car values) must fit 62 bits.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    bool
+
+    Examples
+    --------
+    >>> representable(Ring(24, 12, 2, 0.5)), representable(Ring(60, 30, 2, 0.5))
+    (True, False)
+    """
+    from ._factored import word_bits
+    from .encoding import max_length
+
+    if ring.length > max_length(ring.vmax):
+        return False
+    if ring.update == PARALLEL and 0 < ring.cars:
+        try:
+            word_bits(ring)
+        except InvalidParameterError:
+            return False
+    return True
 
 
 class RingChain:

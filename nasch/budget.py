@@ -139,16 +139,9 @@ def predicted_seconds(length: int, cars: int, vmax: int, p: float,
 
 def _solvable(length: int, cars: int, vmax: int, update: str) -> bool:
     """Whether the exact solver can represent the ring at all (64-bit keys and words)."""
-    from markov._factored import word_bits
-    from markov.encoding import max_length
+    from markov.chain import representable
 
-    if length > max_length(vmax):
-        return False
-    try:
-        word_bits(Ring(length, cars, vmax, 0.5, update))
-    except InvalidParameterError:
-        return update != PARALLEL
-    return True
+    return representable(Ring(length, cars, vmax, 0.5, update))
 
 
 def lengths_within_budget(vmax: int, p: float, density, budget: float, count: int = 4,
