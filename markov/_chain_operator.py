@@ -101,4 +101,6 @@ class ChainOperator(spla.LinearOperator):
         -------
         float
         """
-        return float(np.abs(self.apply(pi) - pi).sum())
+        diff = self.apply(pi)
+        diff -= pi
+        return float(np.abs(diff, out=diff).sum())  # in place: one vector, not three

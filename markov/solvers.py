@@ -112,6 +112,21 @@ def _normalise(x: np.ndarray) -> np.ndarray:
     return x / x.sum()
 
 
+def _normalise_in_place(x: np.ndarray) -> np.ndarray:
+    """:func:`_normalise` of a float64 vector the caller owns, without temporaries."""
+    x /= x.sum()
+    np.maximum(x, 0.0, out=x)
+    x /= x.sum()
+    return x
+
+
+def _l1_distance(a: np.ndarray, b: np.ndarray, work: np.ndarray) -> float:
+    """``||a - b||_1``, computed in ``work`` (no temporaries)."""
+    np.subtract(a, b, out=work)
+    np.abs(work, out=work)
+    return float(work.sum())
+
+
 def _direct(P, tol, maxiter):
     n = P.shape[0]
     # n - 1 balance equations of (I - P^T) pi = 0 and the normalisation sum(pi) = 1
@@ -136,12 +151,13 @@ def _eigs(P, tol, maxiter):
 def _power_steps(product, x, tol, maxiter, count):
     """Power iteration; returns (x, residual of x)."""
     res = np.inf
+    work = np.empty_like(x)
     while count[0] < maxiter:
         y = product(x)
-        res = float(np.abs(y - x).sum())  # the residual of x, measured on the way
+        res = _l1_distance(y, x, work)  # the residual of x, measured on the way
         if res <= tol:
             return x, res
-        x = _normalise(y)
+        x = _normalise_in_place(y)
     return x, res
 
 
@@ -244,17 +260,23 @@ def _aggregation_steps(product, x, tol, maxiter, count, agg: Aggregates):
     ``z = x xi_I / X_I`` (disaggregation); and ``z P = y xi_{source} /
     X_{source}`` because every product term stays in its source aggregate, so
     one product per cycle gives both the coarse matrix and the smoothing step.
-    The iterate is accepted on a genuine product ``z P``.
+    The iterate is accepted on a genuine product ``z P``.  ``x`` is
+    overwritten.
     """
     AT, rows, entry = _coarse_pattern(agg)
     m = agg.count
     xi = None
     res = np.inf
+    # Peak memory matters at L = 26 (1.4e8 states, 1.1 GB a vector): the iterate
+    # lives in the caller's vector x, updated in place, beside the operator's
+    # output y and one work vector.
+    work = np.empty_like(x)
     while count[0] < maxiter:
         y = product(x)
         C = np.bincount(entry, weights=y, minlength=rows.size)
         X = np.maximum(np.bincount(rows, weights=C, minlength=m), np.finfo(float).tiny)
         np.divide(C, X[rows], out=AT.data)
+        del C
         if m <= _COARSE_DIRECT_LIMIT:
             xi = _normalise(_direct(AT.T.tocsr(), tol, maxiter)[0])
         else:
@@ -262,16 +284,22 @@ def _aggregation_steps(product, x, tol, maxiter, count, agg: Aggregates):
             xi, _, _, _ = _iterate(lambda v: AT @ v, m, "iterative", coarse_tol, _COARSE_MAXITER,
                                   X if xi is None else xi)
         scale = xi / X
-        z = _normalise(x * scale[agg.group])
-        zP = y * scale[agg.source]
-        if float(np.abs(zP - z).sum()) <= tol and count[0] < maxiter:
+        z = x  # disaggregation: z = x xi_I / X_I, in place
+        z *= np.take(scale, agg.group, out=work)
+        _normalise_in_place(z)
+        zP = y  # z P = y xi_source / X_source, in place
+        zP *= np.take(scale, agg.source, out=work)
+        del y
+        res = _l1_distance(zP, z, work)
+        if res <= tol and count[0] < maxiter:
+            del zP
             zP = product(z)  # accept on a genuine product, not on the rescaled one
-            res = float(np.abs(zP - z).sum())
+            res = _l1_distance(zP, z, work)
             if res <= tol:
                 return z, res
-        else:
-            res = float(np.abs(zP - z).sum())
-        x = _normalise(zP)
+        x[:] = zP  # z (= x) is spent
+        del zP
+        _normalise_in_place(x)
     return x, res
 
 
