@@ -50,6 +50,7 @@ import scipy.sparse as sp_sparse
 from markov.encoding import EMPTY, from_text
 from markov.errors import ConvergenceError, InvalidParameterError
 from markov.rules import velocity_outcomes
+from markov.validate import ensure_open_unit
 
 from .meanfield import gap_horizons
 
@@ -333,9 +334,8 @@ def comf_state(vmax: int, p: float, c: float) -> ComfState:
     """
     if isinstance(vmax, bool) or not isinstance(vmax, (int, np.integer)) or vmax < 1:
         raise InvalidParameterError(f"vmax must be an integer >= 1, got {vmax!r}")
-    vmax, p, c = int(vmax), float(p), float(c)
-    if not (0 < p < 1 and 0 < c < 1):
-        raise InvalidParameterError(f"COMF needs 0 < p < 1 and 0 < c < 1, got p={p}, c={c}")
+    vmax = int(vmax)
+    p, c = ensure_open_unit("p", p), ensure_open_unit("density", c)
     # start: all moves equally likely (converged from several starts to the same point;
     # the MF solution would cost a sympy solve, 5 s for vmax 5)
     shape = np.full(vmax + 1, 1.0 / (vmax + 1))
