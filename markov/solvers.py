@@ -106,18 +106,17 @@ def check_irreducible(P: sp.csr_array) -> None:
             " stationary state on this set")
 
 
-def _normalise(x: np.ndarray) -> np.ndarray:
-    x = np.real(x)
-    x = np.clip(x / x.sum(), 0.0, None)  # round-off negatives are below the residual
-    return x / x.sum()
-
-
 def _normalise_in_place(x: np.ndarray) -> np.ndarray:
-    """:func:`_normalise` of a float64 vector the caller owns, without temporaries."""
+    """``x`` scaled to sum one, in place (a float64 vector the caller owns)."""
     x /= x.sum()
-    np.maximum(x, 0.0, out=x)
+    np.maximum(x, 0.0, out=x)  # round-off negatives are below the residual
     x /= x.sum()
     return x
+
+
+def _normalise(x: np.ndarray) -> np.ndarray:
+    """A normalised float64 copy of ``x`` (its real part: ARPACK returns complex)."""
+    return _normalise_in_place(np.array(np.real(x), dtype=np.float64))
 
 
 def _l1_distance(a: np.ndarray, b: np.ndarray, work: np.ndarray) -> float:
