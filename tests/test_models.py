@@ -220,7 +220,7 @@ def test_cruise_control_low_density_is_laminar(L, N, vmax):
 
 def test_backward_sequential_vmax1_tends_to_the_literature_flux():
     # finite rings (random first car) approach q c (1 - c)/(1 - q c) from above;
-    # a Richardson fit on L = 4, 6, 8 lands within 2e-3 (1.2e-3 measured;
+    # a Richardson fit on L = 4, 6, 8 lands within 2e-3 (9.6e-4 measured;
     # L = 6, 8, 10 give 3.3e-4)
     p, c = 0.5, 0.5
     flux = []
