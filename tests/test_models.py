@@ -412,6 +412,13 @@ def test_bad_models_are_refused_in_one_line(text, params, message):
     assert "\n" not in str(err.value)
 
 
+def test_a_short_table_refuses_gaps_it_cannot_answer():
+    t = tabulate(load_model("kkw", {"vmax": 3, "d": 1, "k": 1}), 3)   # horizon 5
+    assert t.support(1, 2, 1) == (0, 1, 2) and t.support(1, 3, 1) == (1, 2)
+    with pytest.raises(InvalidParameterError, match="gap 4 is beyond this table"):
+        t.support(1, 4, 1)
+
+
 def test_a_spec_needs_an_integer_vmax():
     with pytest.raises(InvalidParameterError, match="must declare an integer parameter vmax"):
         ModelSpec(name="x", function=nasch.rule, parameters={"p": 0.5})
