@@ -509,15 +509,23 @@ class RuleTable:
     weight_id: Any
     weights: tuple
 
+    def _row(self, gap: int) -> int:
+        g = int(gap)
+        if g > self.max_gap and self.max_gap < self.horizon:
+            raise InvalidParameterError(
+                f"gap {g} is beyond this table (max_gap = {self.max_gap} < horizon "
+                f"{self.horizon}): tabulate with a larger max_gap")
+        return min(g, self.horizon, self.max_gap)
+
     def support(self, v: int, gap: int, v_ahead: int) -> tuple[int, ...]:
         """New velocities of positive weight for ``(v, gap, v_ahead)`` (any ``gap >= 0``)."""
-        g = min(int(gap), self.horizon, self.max_gap)
+        g = self._row(gap)
         n = int(self.count[v, g, v_ahead])
         return tuple(int(u) for u in self.new_velocity[v, g, v_ahead, :n])
 
     def outcomes(self, v: int, gap: int, v_ahead: int) -> tuple[tuple[int, float], ...]:
         """``(new_velocity, weight)`` pairs for ``(v, gap, v_ahead)`` (any ``gap >= 0``)."""
-        g = min(int(gap), self.horizon, self.max_gap)
+        g = self._row(gap)
         n = int(self.count[v, g, v_ahead])
         return tuple((int(self.new_velocity[v, g, v_ahead, k]), float(self.weight[v, g, v_ahead, k]))
                      for k in range(n))

@@ -13,7 +13,10 @@ Convention, a discrete version with constant noise probabilities:
 3. noise: ``w - 1`` with probability ``b``, ``w + 1`` with probability ``a``,
    ``w`` with ``1 - a - b``; the result is clipped to
    ``0..min(v + 1, vmax, gap)`` (at most one cell of acceleration, never into
-   the car ahead), clipped outcomes merging with their neighbour.
+   the car ahead), clipped outcomes merging with their neighbour.  So the
+   acceleration noise acts where the deterministic step did not already
+   accelerate (inside the synchronisation distance, or braked by the gap):
+   three outcomes there, two in free flow.
 
 KKW (2002) and Kerner's book make ``b`` and ``a`` velocity dependent
 (``b = b0`` for ``v = 0``, ``a = a0`` below a threshold speed ...) and measure
