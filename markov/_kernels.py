@@ -31,9 +31,9 @@ from numba.extending import intrinsic
 
 from .rules import deterministic_velocity, randomize
 
-__all__ = ["digits_of", "cars_of", "gap", "term", "deterministic_move", "rotate", "shift_bits",
-           "canonical", "orbit_size", "rotate_mask", "smallest_rotation", "row_length",
-           "successor_row"]
+__all__ = ["digits_of", "cars_of", "gap", "term", "rotate", "shift_bits",
+           "canonical", "orbit_size", "rotate_mask", "smallest_rotation", "ahead_velocity",
+           "row_length", "successor_row"]
 
 
 # ------------------------------------------------------------------ decoding
@@ -75,27 +75,6 @@ def gap(pos, n, i, length):
 def term(x, w, length, pw):
     """Key term of a car that was at ``x`` and moved ``w`` cells (its velocity is ``w``)."""
     return (w + 1) * pw[(x + w) % length]
-
-
-@njit(cache=True)
-def deterministic_move(key, length, vmax, pw, pos, vel, deltas):
-    """R1 + R2 for every car of ``key``, then R4 without braking.
-
-    Returns ``(moved, k)``: the key after every car moved its ``u`` cells, and
-    the number ``k`` of cars with ``u > 0``; ``deltas[j]`` is the key change if
-    the ``j``-th of them brakes (R3).  ``pos``/``vel`` receive the cars.
-    """
-    n = cars_of(key, length, vmax + 2, pos, vel)
-    moved = 0
-    k = 0
-    for i in range(n):
-        u = deterministic_velocity(vel[i], gap(pos, n, i, length), vmax)
-        go = term(pos[i], u, length, pw)
-        moved += go
-        if u > 0:
-            deltas[k] = term(pos[i], randomize(u), length, pw) - go
-            k += 1
-    return moved, k
 
 
 # ------------------------------------------------------------------ rotations
@@ -228,76 +207,103 @@ def smallest_rotation(mask, length):
 
 
 # ------------------------------------------------------------------ the row generator
+#
+# The rule enters as the arrays of a markov.rule.RuleTable: ``count[v, g, a]``
+# outcomes for a car of velocity ``v``, gap ``min(gap, horizon)`` and car ahead
+# at ``a``; ``new_velocity[v, g, a, k]`` and ``weight[v, g, a, k]`` for each.
+
+
+@njit(cache=True, inline="always")
+def ahead_velocity(vel, n, i):
+    """Velocity of the car ahead of car ``i`` of ``n`` (a lone car is its own car ahead)."""
+    return vel[i + 1] if i + 1 < n else vel[0]
+
 
 @njit(cache=True)
-def row_length(key, length, vmax, parallel, pos, vel):
+def row_length(key, length, vmax, parallel, count, horizon, pos, vel):
     """Entries :func:`successor_row` writes for ``key``.
 
-    Parallel update: ``2**k`` (``k`` cars able to move); random-sequential:
-    one for the empty cells (if any), one per stopped car, two per movable car.
+    Parallel update: the product of the cars' outcome counts; random-sequential:
+    one for the empty cells (if any), then one per outcome of each car.
     """
     n = cars_of(key, length, vmax + 2, pos, vel)
-    k = 0
+    total = 1 if parallel else (1 if n < length else 0)
     for i in range(n):
-        if deterministic_velocity(vel[i], gap(pos, n, i, length), vmax) > 0:
-            k += 1
-    if parallel:
-        return 1 << k
-    return (1 if n < length else 0) + n + k
+        c = count[vel[i], min(gap(pos, n, i, length), horizon), ahead_velocity(vel, n, i)]
+        total = total * c if parallel else total + c
+    return total
 
 
 @njit(cache=True)
-def successor_row(key, length, vmax, pw, parallel, pos, vel, deltas,
-                  out_keys, out_go, out_brake, out_mult):
+def successor_row(key, length, vmax, pw, parallel, count, new_velocity, weight, weight_id,
+                  horizon, pos, vel, rows, digit, out_keys, out_weight, out_ids, out_mult):
     """Every successor of ``key`` in one step (parallel) or one sub-step (random-sequential).
 
-    Entry ``j`` has probability ``out_mult[j] q**out_go[j] p**out_brake[j]``
-    (divided by ``L`` for random-sequential update): ``go`` cars moved their
-    ``u > 0`` cells, ``brake`` cars braked to ``u - 1``.
+    Entry ``j`` has probability ``out_mult[j] * out_weight[j]`` (divided by ``L``
+    for random-sequential update).  ``out_ids[j, w]``, when ``out_ids`` has
+    rows, counts the cars whose outcome has weight ``w`` of the table (the
+    exact rational solver multiplies the symbolic weights); pass a ``(0, 0)``
+    array to skip it.
 
-    * parallel: ``2**k`` entries, one per set of braking cars (distinct keys;
-      ``go + brake = k``, multiplicity 1);
+    * parallel: every car draws its new velocity from its row of the table at
+      once; one entry per combination of outcomes (distinct keys: the move is
+      one-to-one), multiplicity 1;
     * random-sequential: a cell is drawn uniformly; the ``L - N`` empty cells
       leave the key as it is (one entry, multiplicity ``L - N``), a drawn car
-      updates alone (one entry if it cannot move, else go and brake).
+      updates alone, one entry per outcome.
 
-    Keys are not canonicalised here.  Returns the number of entries written
+    ``rows`` (``(L, 3)`` int64) and ``digit`` (``L`` int64) are scratch.  Keys
+    are not canonicalised here.  Returns the number of entries written
     (:func:`row_length`); the output arrays must hold that many.
     """
-    if parallel:
-        moved, k = deterministic_move(key, length, vmax, pw, pos, vel, deltas)
-        for mask in range(1 << k):
-            new = moved
-            braked = 0
-            for j in range(k):
-                if (mask >> j) & 1:
-                    new += deltas[j]
-                    braked += 1
-            out_keys[mask] = new
-            out_go[mask] = k - braked
-            out_brake[mask] = braked
-            out_mult[mask] = 1
-        return 1 << k
     n = cars_of(key, length, vmax + 2, pos, vel)
-    count = 0
+    ids = out_ids.shape[0] > 0
+    for i in range(n):
+        rows[i, 0] = vel[i]
+        rows[i, 1] = min(gap(pos, n, i, length), horizon)
+        rows[i, 2] = ahead_velocity(vel, n, i)
+    if parallel:
+        total = 1
+        for i in range(n):
+            digit[i] = 0
+            total *= count[rows[i, 0], rows[i, 1], rows[i, 2]]
+        for e in range(total):
+            new = np.int64(0)
+            w = 1.0
+            if ids:
+                out_ids[e, :] = 0
+            for i in range(n):
+                v, g, a, k = rows[i, 0], rows[i, 1], rows[i, 2], digit[i]
+                new += term(pos[i], new_velocity[v, g, a, k], length, pw)
+                w *= weight[v, g, a, k]
+                if ids:
+                    out_ids[e, weight_id[v, g, a, k]] += 1
+            out_keys[e] = new
+            out_weight[e] = w
+            out_mult[e] = 1
+            for i in range(n):   # the next combination (odometer, car 0 fastest)
+                digit[i] += 1
+                if digit[i] < count[rows[i, 0], rows[i, 1], rows[i, 2]]:
+                    break
+                digit[i] = 0
+        return total
+    e = 0
     if n < length:  # an empty cell was drawn: nothing changes
         out_keys[0] = key
-        out_go[0] = 0
-        out_brake[0] = 0
+        out_weight[0] = 1.0
         out_mult[0] = length - n
-        count = 1
+        if ids:
+            out_ids[0, :] = 0
+        e = 1
     for i in range(n):
-        u = deterministic_velocity(vel[i], gap(pos, n, i, length), vmax)
+        v, g, a = rows[i, 0], rows[i, 1], rows[i, 2]
         rest = key - (vel[i] + 1) * pw[pos[i]]  # the car removed from its cell
-        out_keys[count] = rest + term(pos[i], u, length, pw)
-        out_go[count] = 1 if u > 0 else 0
-        out_brake[count] = 0
-        out_mult[count] = 1
-        count += 1
-        if u > 0:
-            out_keys[count] = rest + term(pos[i], randomize(u), length, pw)
-            out_go[count] = 0
-            out_brake[count] = 1
-            out_mult[count] = 1
-            count += 1
-    return count
+        for k in range(count[v, g, a]):
+            out_keys[e] = rest + term(pos[i], new_velocity[v, g, a, k], length, pw)
+            out_weight[e] = weight[v, g, a, k]
+            out_mult[e] = 1
+            if ids:
+                out_ids[e, :] = 0
+                out_ids[e, weight_id[v, g, a, k]] = 1
+            e += 1
+    return e

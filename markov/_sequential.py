@@ -1,8 +1,8 @@
 """``x -> x P`` of the random-sequential sub-step chain, row by row, and key ranking.
 
 * :class:`KeyIndex`: rank a key among the sorted states through a hash table.
-* :class:`SequentialOperator`: a sub-step has at most ``2 N + 1`` successors
-  (an empty cell drawn, or one car updated, braking or not), so each product
+* :class:`SequentialOperator`: a sub-step has few successors (an empty cell
+  drawn, or one car updated: one per outcome of its rule), so each product
   regenerates every row with :func:`markov._kernels.successor_row`,
   canonicalises and ranks its successors and scatters ``x_i P_ij``; nothing of
   size "transitions" is stored.  Parallel update is applied by
@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit, prange
 
 from ._chain_operator import ChainOperator
-from ._kernels import canonical, row_length, shift_bits, successor_row
+from ._kernels import canonical, shift_bits, successor_row
 from .encoding import powers
 from .errors import InvalidParameterError
 from .ring import PARALLEL, Ring
@@ -123,71 +123,68 @@ def _rank_many(tkeys, tvals, hbits, query, out):
 
 
 @njit(cache=True)
-def _row_buffers(length):
+def _row_buffers(length, width):
     """Scratch of :func:`markov._kernels.successor_row` for one random-sequential row."""
-    cap = 2 * length + 1   # the empty cells, then one or two entries per car
-    return (np.empty(length, np.int64), np.empty(length, np.int64), np.empty(length, np.int64),
-            np.empty(cap, np.int64), np.empty(cap, np.int8), np.empty(cap, np.int8),
+    cap = width * length + 1   # the empty cells, then one entry per outcome of each car
+    return (np.empty(length, np.int64), np.empty(length, np.int64),
+            np.empty((length, 3), np.int64), np.empty(length, np.int64),
+            np.empty(cap, np.int64), np.empty(cap, np.float64), np.empty((0, 0), np.int8),
             np.empty(cap, np.int32))
 
 
 @njit(cache=True, parallel=True)
-def _apply_rows(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, lump, weight,
-                bad):
-    """``acc[thread] += x_i P[i, :]``; ``weight[go, brake]`` = ``q**go p**brake / L``."""
+def _apply_rows(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, lump, count,
+                new_velocity, weight, weight_id, horizon, bad):
+    """``acc[thread] += x_i P[i, :]``; the entries' weights are divided by ``L`` (the draw)."""
     n = keys.shape[0]
     nblocks = (n + _BLOCK - 1) // _BLOCK
+    inv = 1.0 / length
     for blk in prange(nblocks):
         t = numba.get_thread_id()
-        pos, vel, deltas, succ, go, brake, mult = _row_buffers(length)
+        pos, vel, rows, digit, succ, w, ids, mult = _row_buffers(length, new_velocity.shape[3])
         row = acc[t]
         for i in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
             xi = x[i]
             if xi == 0.0:
                 continue
-            count = successor_row(keys[i], length, vmax, pw, False, pos, vel, deltas, succ,
-                                  go, brake, mult)
-            for j in range(count):
+            m = successor_row(keys[i], length, vmax, pw, False, count, new_velocity, weight,
+                              weight_id, horizon, pos, vel, rows, digit, succ, w, ids, mult)
+            for j in range(m):
                 target = canonical(succ[j], length, pw, bits) if lump else succ[j]
                 col = _rank(tkeys, tvals, hbits, target)
                 if col < 0:
                     bad[t] += 1
                 else:
-                    row[col] += xi * mult[j] * weight[go[j], brake[j]]
+                    row[col] += xi * mult[j] * w[j] * inv
 
 
 @njit(cache=True, parallel=True)
-def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, out):
-    """Random-sequential successors of ``keys[i]`` into ``out[indptr[i]:indptr[i+1]]``."""
+def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, parallel, cap, count,
+                    new_velocity, weight, weight_id, horizon, out):
+    """Successors of ``keys[i]`` into ``out[indptr[i]:indptr[i+1]]`` (rows of at most ``cap``)."""
     n = keys.shape[0]
     nblocks = (n + _BLOCK - 1) // _BLOCK
     for blk in prange(nblocks):
-        pos, vel, deltas, _, go, brake, mult = _row_buffers(length)
+        pos, vel, rows, digit = (np.empty(length, np.int64), np.empty(length, np.int64),
+                                 np.empty((length, 3), np.int64), np.empty(length, np.int64))
+        w, ids, mult = np.empty(cap, np.float64), np.empty((0, 0), np.int8), np.empty(cap, np.int32)
         for i in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
             lo, hi = indptr[i], indptr[i + 1]
-            successor_row(keys[i], length, vmax, pw, False, pos, vel, deltas, out[lo:hi], go,
-                          brake, mult)
+            successor_row(keys[i], length, vmax, pw, parallel, count, new_velocity, weight,
+                          weight_id, horizon, pos, vel, rows, digit, out[lo:hi], w, ids, mult)
             if lump:
                 for j in range(lo, hi):
                     out[j] = canonical(out[j], length, pw, bits)
 
 
-@njit(cache=True)
-def _row_lengths(keys, length, vmax, out):
-    pos = np.empty(length, np.int64)
-    vel = np.empty(length, np.int64)
-    for i in range(keys.shape[0]):
-        out[i] = row_length(keys[i], length, vmax, False, pos, vel)
-
-
 def successor_keys(ring: Ring, keys: np.ndarray, lump: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Successor keys of every state of the random-sequential chain, threaded.
+    """Successor keys of every state, threaded, from the row generator.
 
     Parameters
     ----------
     ring : Ring
-        Random-sequential update (parallel update:
-        :func:`markov._factored.frontier_successors`).
+        Any model and update (NaSch's parallel search walks the factored levels
+        instead: :func:`markov._factored.frontier_successors`).
     keys : (n,) int64 array
     lump : bool
         Canonical rotations of the successors.
@@ -199,16 +196,16 @@ def successor_keys(ring: Ring, keys: np.ndarray, lump: bool) -> tuple[np.ndarray
         Successors of ``keys[i]`` at ``succ[indptr[i]:indptr[i+1]]``, the keys
         of :func:`markov.transition.successors` in the same order.
     """
-    if ring.update == PARALLEL:
-        raise InvalidParameterError("successor_keys is for random-sequential update")
+    from .transition import successor_counts
+
     keys = np.ascontiguousarray(keys, dtype=np.int64)
-    counts = np.empty(keys.shape[0], dtype=np.int64)
-    _row_lengths(keys, ring.length, ring.vmax, counts)
+    counts = successor_counts(ring, keys)
     indptr = np.zeros(keys.shape[0] + 1, dtype=np.int64)
     np.cumsum(counts, out=indptr[1:])
     out = np.empty(int(indptr[-1]), dtype=np.int64)
     _successor_keys(keys, indptr, ring.length, ring.vmax, powers(ring.length, ring.vmax),
-                    shift_bits(ring.vmax), bool(lump), out)
+                    shift_bits(ring.vmax), bool(lump), ring.update == PARALLEL,
+                    int(counts.max(initial=1)), *ring.kernel_rule(), out)
     return indptr, out
 
 
@@ -276,9 +273,7 @@ class SequentialOperator(ChainOperator):
         self.threads = numba.get_num_threads()
         self._pw = powers(ring.length, ring.vmax)
         self._bits = shift_bits(ring.vmax)
-        p, length = float(ring.p), ring.length
-        # weight[go, brake] of an entry: q or p for the drawn car, 1 / L for the draw
-        self._weight = np.array([[1.0, p], [1.0 - p, 0.0]]) / length
+        self._rule = ring.kernel_rule()
         self._acc = np.zeros((self.threads, self.n))
         self._bad = np.zeros(self.threads, dtype=np.int64)
 
@@ -308,7 +303,7 @@ class SequentialOperator(ChainOperator):
             self._acc = np.zeros((self.threads, self.n))
             self._bad = np.zeros(self.threads, dtype=np.int64)
         _apply_rows(idx.keys, idx.tkeys, idx.tvals, np.int64(idx.hbits), x, self._acc,
-                    r.length, r.vmax, self._pw, self._bits, self.lump, self._weight, self._bad)
+                    r.length, r.vmax, self._pw, self._bits, self.lump, *self._rule, self._bad)
         _sum_rows(self._acc, out)
         if self._bad.sum():
             raise RuntimeError(f"{int(self._bad.sum())} successors lie outside the state set:"

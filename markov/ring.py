@@ -1,9 +1,11 @@
-"""The model parameters, validated once.
+"""The system, validated once: a ring, its cars and the model that moves them.
 
-:class:`Ring` is the immutable description of one Nagel-Schreckenberg system:
-a ring of ``length`` cells, ``cars`` cars, maximal velocity ``vmax``, braking
-probability ``p`` and the update order.  Every public entry point takes a
-:class:`Ring`, so input is checked in exactly one place.
+:class:`Ring` is the immutable description of one system: a ring of
+``length`` cells, ``cars`` cars, the update order and the model (the rule and
+its parameter values, :class:`markov.rule.Model`).  ``vmax`` and ``p`` are the
+model's; ``Ring(L, N, vmax, p)`` is the Nagel-Schreckenberg model, as before.
+Every public entry point takes a :class:`Ring`, so input is checked in
+exactly one place.
 """
 from __future__ import annotations
 
@@ -11,15 +13,19 @@ import math
 import numbers
 from dataclasses import dataclass
 from fractions import Fraction
+from functools import lru_cache
 
 from .errors import InvalidParameterError
+from .rule import Model, RuleTable, load_model, tabulate
 from .validate import ensure_int as _ensure_int
 
-__all__ = ["Ring", "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL"]
+__all__ = ["Ring", "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL", "NASCH"]
 
 PARALLEL = "parallel"
 RANDOM_SEQUENTIAL = "random-sequential"
 UPDATES = (PARALLEL, RANDOM_SEQUENTIAL)
+#: The source name of the default model.
+NASCH = "nasch"
 
 
 def _ensure_probability(value) -> float | Fraction:
@@ -32,9 +38,9 @@ def _ensure_probability(value) -> float | Fraction:
     return value if isinstance(value, Fraction) else float(value)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, repr=False)
 class Ring:
-    """A NaSch system on a ring; validated on construction.
+    """A traffic cellular automaton on a ring; validated on construction.
 
     Parameters
     ----------
@@ -48,18 +54,27 @@ class Ring:
         Braking probability in ``[0, 1]`` (a ``Fraction`` keeps it exact).
     update : {"parallel", "random-sequential"}
         Update order.
+    model : Model, optional
+        The rule and its parameters (:func:`markov.rule.load_model`); default
+        the NaSch model with ``vmax`` and ``p``.  With a model, ``vmax`` and
+        ``p`` may be left out: they are read from it (``p`` is ``None`` for a
+        model without a parameter ``p``); given, they must agree with it.
 
     Examples
     --------
     >>> Ring(length=3, cars=1, vmax=1, p=0.5).density
     0.3333333333333333
+    >>> r = Ring(10, 4, model=load_model("vdr", {"vmax": 2, "p": 0.1, "p0": 0.5}))
+    >>> r.vmax, r.p, r.model.name
+    (2, 0.1, 'vdr')
     """
 
     length: int
     cars: int
-    vmax: int
-    p: float | Fraction
+    vmax: int | None = None
+    p: float | Fraction | None = None
     update: str = PARALLEL
+    model: Model | None = None
 
     def __post_init__(self) -> None:
         length = _ensure_int("length L", self.length, 1)
@@ -67,8 +82,23 @@ class Ring:
         if cars > length:
             raise InvalidParameterError(
                 f"number of cars N must satisfy 0 <= N <= L = {length}, got N = {cars}")
-        vmax = _ensure_int("vmax", self.vmax, 1)
-        p = _ensure_probability(self.p)
+        model = self.model
+        if model is None:
+            if self.vmax is None or self.p is None:
+                raise InvalidParameterError("a ring needs vmax and p, or a model")
+            vmax = _ensure_int("vmax", self.vmax, 1)
+            model = load_model(NASCH, {"vmax": vmax, "p": _ensure_probability(self.p)})
+        elif not isinstance(model, Model):
+            raise InvalidParameterError(
+                f"model must be a markov.rule.Model (see load_model), got {type(model).__name__}")
+        params = model.params
+        for name in ("vmax", "p"):
+            given = getattr(self, name)
+            if given is not None and (name not in params or given != params[name]):
+                raise InvalidParameterError(
+                    f"{name} = {given} disagrees with the model {model.name}"
+                    f" ({name} = {params.get(name, 'not a parameter')})")
+        vmax, p = model.vmax, params.get("p")
         if self.update not in UPDATES:
             raise InvalidParameterError(
                 f"update must be one of {', '.join(UPDATES)}, got {self.update!r}")
@@ -76,6 +106,42 @@ class Ring:
         object.__setattr__(self, "cars", cars)
         object.__setattr__(self, "vmax", vmax)
         object.__setattr__(self, "p", p)
+        object.__setattr__(self, "model", model)
+
+    def __repr__(self) -> str:
+        head = f"Ring(length={self.length}, cars={self.cars}, "
+        if self.is_nasch:
+            return head + f"vmax={self.vmax}, p={self.p!r}, update={self.update!r})"
+        return head + f"update={self.update!r}, model={self.model!r})"
+
+    @property
+    def is_nasch(self) -> bool:
+        """Whether the model is the shipped NaSch rule (its fast paths apply)."""
+        return self.model.source == NASCH
+
+    def table(self, symbolic: bool = False) -> RuleTable:
+        """The model's rule table up to its horizon, as the kernels read it (cached).
+
+        Parameters
+        ----------
+        symbolic : bool
+            Weights as sympy expressions (:func:`markov.rule.tabulate`).
+
+        Returns
+        -------
+        RuleTable
+        """
+        return _table(self.model, symbolic)
+
+    def kernel_rule(self) -> tuple:
+        """``(count, new_velocity, weight, weight_id, horizon)``: the arguments of the kernels.
+
+        Returns
+        -------
+        tuple
+        """
+        t = self.table()
+        return t.count, t.new_velocity, t.weight, t.weight_id, t.horizon
 
     @property
     def density(self) -> float:
@@ -88,7 +154,7 @@ class Ring:
         return self.cars == 0 or self.cars == self.length
 
     def with_p(self, p) -> "Ring":
-        """The same ring with another braking probability.
+        """The same ring with another braking probability (the model's ``p``).
 
         Parameters
         ----------
@@ -98,4 +164,24 @@ class Ring:
         -------
         Ring
         """
-        return Ring(self.length, self.cars, self.vmax, p, self.update)
+        return self.with_params(p=_ensure_probability(p))
+
+    def with_params(self, **changes) -> "Ring":
+        """The same ring with some model parameters changed (validated again).
+
+        Parameters
+        ----------
+        **changes
+            Parameter values, e.g. ``p=0.25, p0=0.5``.
+
+        Returns
+        -------
+        Ring
+        """
+        return Ring(self.length, self.cars, update=self.update,
+                    model=self.model.with_params(**changes))
+
+
+@lru_cache(maxsize=64)
+def _table(model: Model, symbolic: bool) -> RuleTable:
+    return tabulate(model, symbolic=symbolic)

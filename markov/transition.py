@@ -17,6 +17,9 @@ same rows into polynomials in ``p``.
 With ``lump=True`` every successor is replaced by its canonical rotation
 (:func:`markov._kernels.canonical`): the chain lumped by rotations of the ring,
 exact because the rules are translation invariant.
+
+The successor structure of a ring does not depend on the values of the
+probabilities as long as none is 0 or 1 (the table drops outcomes of weight 0).
 """
 from __future__ import annotations
 
@@ -45,10 +48,11 @@ class SuccessorRows(NamedTuple):
         Row ``i`` is ``indptr[i]:indptr[i + 1]``.
     keys : (m,) int64 array
         Successor keys (canonical rotations when lumped).
-    go : (m,) int8 array
-        Cars that moved their ``u > 0`` cells (probability ``q = 1 - p`` each).
-    brake : (m,) int8 array
-        Cars that braked to ``u - 1`` (probability ``p`` each).
+    weight : (m,) float64 array
+        Product of the outcome weights of the cars (1 for an empty cell drawn).
+    ids : (m, W) int8 array
+        ``ids[j, w]``: cars whose outcome had weight ``w`` of the table
+        (``(0, 0)`` unless asked for).
     multiplicity : (m,) int32 array
         Equal draws behind the entry (random-sequential: the empty cells).
     norm : int
@@ -58,48 +62,44 @@ class SuccessorRows(NamedTuple):
 
     indptr: np.ndarray
     keys: np.ndarray
-    go: np.ndarray
-    brake: np.ndarray
+    weight: np.ndarray
+    ids: np.ndarray
     multiplicity: np.ndarray
     norm: int
 
-    def probabilities(self, p: float) -> np.ndarray:
-        """``multiplicity q**go p**brake / norm`` of every entry, at braking probability ``p``.
-
-        Parameters
-        ----------
-        p : float
+    def probabilities(self) -> np.ndarray:
+        """``multiplicity * weight / norm`` of every entry.
 
         Returns
         -------
         (m,) float64 array
         """
-        p = float(p)
-        top = np.arange(max(int(self.go.max(initial=0)), int(self.brake.max(initial=0))) + 1)
-        weights = ((1.0 - p) ** top)[self.go] * (p ** top)[self.brake]  # table look-ups
-        weights *= self.multiplicity
+        weights = self.weight * self.multiplicity
         return weights / self.norm if self.norm != 1 else weights
 
 
 @njit(cache=True)
-def _row_lengths(keys, length, vmax, parallel, out):
+def _row_lengths(keys, length, vmax, parallel, count, horizon, out):
     pos = np.empty(length, np.int64)
     vel = np.empty(length, np.int64)
     for i in range(keys.shape[0]):
-        out[i] = row_length(keys[i], length, vmax, parallel, pos, vel)
+        out[i] = row_length(keys[i], length, vmax, parallel, count, horizon, pos, vel)
 
 
 @njit(cache=True)
-def _fill_rows(keys, indptr, length, vmax, pw, bits, lump, parallel,
-               out_keys, out_go, out_brake, out_mult):
+def _fill_rows(keys, indptr, length, vmax, pw, bits, lump, parallel, count, new_velocity,
+               weight, weight_id, horizon, out_keys, out_weight, out_ids, out_mult):
     """Row ``i`` of :func:`successors` at ``indptr[i]:indptr[i+1]``."""
     pos = np.empty(length, np.int64)
     vel = np.empty(length, np.int64)
-    deltas = np.empty(length, np.int64)
+    rows = np.empty((length, 3), np.int64)
+    digit = np.empty(length, np.int64)
+    ids = out_ids.shape[0] > 0
     for i in range(keys.shape[0]):
         lo, hi = indptr[i], indptr[i + 1]
-        successor_row(keys[i], length, vmax, pw, parallel, pos, vel, deltas, out_keys[lo:hi],
-                      out_go[lo:hi], out_brake[lo:hi], out_mult[lo:hi])
+        successor_row(keys[i], length, vmax, pw, parallel, count, new_velocity, weight,
+                      weight_id, horizon, pos, vel, rows, digit, out_keys[lo:hi],
+                      out_weight[lo:hi], out_ids[lo:hi] if ids else out_ids, out_mult[lo:hi])
         if lump:
             for j in range(lo, hi):
                 out_keys[j] = canonical(out_keys[j], length, pw, bits)
@@ -119,21 +119,26 @@ def successor_counts(ring: Ring, keys: np.ndarray) -> np.ndarray:
     """
     keys = np.ascontiguousarray(keys, dtype=np.int64)
     counts = np.empty(len(keys), dtype=np.int64)
-    _row_lengths(keys, ring.length, ring.vmax, ring.update == PARALLEL, counts)
+    count, _, _, _, horizon = ring.kernel_rule()
+    _row_lengths(keys, ring.length, ring.vmax, ring.update == PARALLEL, count, horizon, counts)
     return counts
 
 
-def successors(ring: Ring, keys: np.ndarray, lump: bool) -> SuccessorRows:
+def successors(ring: Ring, keys: np.ndarray, lump: bool, table=None) -> SuccessorRows:
     """All successors of the given states, with what each entry's probability is made of.
 
     Parameters
     ----------
     ring : Ring
-        The system (its ``p`` is not used: see :meth:`SuccessorRows.probabilities`).
+        The system.
     keys : (n,) int64 array
         State keys.
     lump : bool
         Replace successors by their canonical rotation.
+    table : RuleTable, optional
+        The rule table to read (default ``ring.table()``); with one, the
+        entries also count the cars per weight of the table
+        (:attr:`SuccessorRows.ids`), as the exact rational solver needs.
 
     Returns
     -------
@@ -146,18 +151,21 @@ def successors(ring: Ring, keys: np.ndarray, lump: bool) -> SuccessorRows:
 
     >>> from markov.encoding import encode
     >>> rows = successors(Ring(3, 1, 1, 0.5), [encode([1, -1, -1], 1)], lump=False)
-    >>> rows.go.tolist(), rows.brake.tolist(), rows.probabilities(0.25).tolist()
-    ([1, 0], [0, 1], [0.75, 0.25])
+    >>> rows.probabilities().tolist()
+    [0.5, 0.5]
     """
     keys = np.ascontiguousarray(keys, dtype=np.int64)
     parallel = ring.update == PARALLEL
     indptr = np.zeros(len(keys) + 1, dtype=np.int64)
     np.cumsum(successor_counts(ring, keys), out=indptr[1:])
     m = int(indptr[-1])
-    out = (np.empty(m, np.int64), np.empty(m, np.int8), np.empty(m, np.int8),
-           np.empty(m, np.int32))
+    t = ring.table() if table is None else table
+    nids = len(t.weights) if table is not None else 0
+    out = (np.empty(m, np.int64), np.empty(m, np.float64),
+           np.zeros((m if nids else 0, nids), np.int8), np.empty(m, np.int32))
     _fill_rows(keys, indptr, ring.length, ring.vmax, powers(ring.length, ring.vmax),
-               shift_bits(ring.vmax), bool(lump), parallel, *out)
+               shift_bits(ring.vmax), bool(lump), parallel, t.count, t.new_velocity, t.weight,
+               t.weight_id, t.horizon, *out)
     return SuccessorRows(indptr, *out, 1 if parallel else ring.length)
 
 
@@ -197,7 +205,7 @@ def transition_matrix(ring: Ring, keys: np.ndarray, lump: bool) -> sp.csr_array:
                 raise RuntimeError("a successor lies outside the state set: it is not closed")
             indptrs.append(rows.indptr[1:] + (indptrs[-1][-1] if indptrs else 0))
             cols.append(col)
-            vals.append(rows.probabilities(ring.p))
+            vals.append(rows.probabilities())
             bar.update(min(_CHUNK, n - start))
     indptr = np.concatenate([[0]] + indptrs).astype(np.int64)
     index_dtype = np.int32 if n < 2**31 else np.int64

@@ -2,10 +2,10 @@
 
 The matrix comes from the same enumeration as the floating-point solver:
 :func:`markov.statespace.recurrent_keys` for the states and the row generator
-of :func:`markov.transition.successors` for the transitions.  For parallel
-update a state with ``k`` cars able to move has ``2**k`` successor entries,
-one per set of braking cars, with probability ``q**a p**b``: the row generator
-reports ``a`` (cars that moved) and ``b`` (cars that braked) of every entry.
+of :func:`markov.transition.successors` for the transitions, read with the
+model's symbolic rule table: every entry reports how many cars took each
+weight of the table (NaSch: ``a`` cars moved, weight ``1 - p`` each, ``b``
+braked, weight ``p``), so its probability is a product of those weights.
 Duplicated successors (after lumping by rotation) are summed as polynomials.
 
 The stationary vector solves ``pi (P - I) = 0``, ``sum pi = 1`` over the field
@@ -38,7 +38,7 @@ MAX_SYMBOLIC_STATES = 150       # over QQ(p) the entries grow: ~2 s at 63 states
 
 
 def transition_polynomials(ring: Ring, keys: np.ndarray, lump: bool = True):
-    """Exact transitions as ``{(i, j): {(a, b): count}}``: ``P_ij = sum count q^a p^b``.
+    """Exact transitions as ``{(i, j): {e: count}}``: ``P_ij = sum count prod_w W_w^e_w``.
 
     Parameters
     ----------
@@ -52,23 +52,23 @@ def transition_polynomials(ring: Ring, keys: np.ndarray, lump: bool = True):
     Returns
     -------
     dict
-        ``{(i, j): {(a, b): count}}`` over the nonzero entries: ``a`` cars
-        moved and ``b`` braked on ``count`` of the ways from ``keys[i]`` to
-        ``keys[j]``.
+        ``{(i, j): {e: count}}`` over the nonzero entries: on ``count`` of the
+        ways from ``keys[i]`` to ``keys[j]``, ``e[w]`` cars took the weight
+        ``W_w = ring.table(symbolic=True).weights[w]``.
     """
     if ring.update != PARALLEL:
         raise InvalidParameterError("exact rational solutions are implemented for parallel"
                                     f" update only, got {ring.update!r}")
-    rows = successors(ring, keys, lump)
+    rows = successors(ring, keys, lump, table=ring.table(symbolic=True))
     cols = np.searchsorted(keys, rows.keys)
     cols[cols == len(keys)] = 0
     if not np.array_equal(keys[cols], rows.keys):
         raise RuntimeError("a successor lies outside the state set: it is not closed")
-    out: dict[tuple[int, int], dict[tuple[int, int], int]] = {}
+    out: dict[tuple[int, int], dict[tuple[int, ...], int]] = {}
     for i in range(len(keys)):
         for e in range(rows.indptr[i], rows.indptr[i + 1]):
             cell = out.setdefault((i, int(cols[e])), {})
-            ab = (int(rows.go[e]), int(rows.brake[e]))
+            ab = tuple(int(c) for c in rows.ids[e])
             cell[ab] = cell.get(ab, 0) + int(rows.multiplicity[e])
     return out
 
@@ -147,19 +147,25 @@ def exact_solution(length: int, cars: int, vmax: int, p=None) -> ExactSolution:
             f"{n} recurrent rotation classes; exact {'symbolic' if symbolic else 'rational'}"
             f" solutions are limited to {limit}")
     poly = transition_polynomials(ring, keys)
+    # the table's weights are expressions of the symbol p (markov.rule.tabulate)
+    weights = ring.table(symbolic=True).weights
     if symbolic:
         dom = sp.QQ.frac_field(P_SYMBOL)
-        pv, qv = dom.from_sympy(P_SYMBOL), dom.from_sympy(1 - P_SYMBOL)
+        wv = [dom.from_sympy(sp.sympify(w).subs(sp.Symbol("p"), P_SYMBOL)) for w in weights]
     else:
         dom = sp.QQ
-        pv, qv = dom.from_sympy(p_exact), dom.from_sympy(1 - p_exact)
+        wv = [dom.from_sympy(sp.sympify(w).subs(sp.Symbol("p"), p_exact)) for w in weights]
     zero, one = dom.zero, dom.one
     # A = (P - I)^T with the last equation replaced by sum(pi) = 1
     rows = [[zero] * n for _ in range(n)]
     for (i, j), terms in poly.items():
         val = zero
-        for (a, b), count in terms.items():
-            val += dom(count) * qv**a * pv**b
+        for e, count in terms.items():
+            term = dom(count)
+            for w, power in enumerate(e):
+                if power:
+                    term *= wv[w] ** power
+            val += term
         rows[j][i] += val
     for i in range(n):
         rows[i][i] -= one

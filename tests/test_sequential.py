@@ -39,8 +39,18 @@ def test_row_operator_refuses_parallel_update():
     keys = recurrent_keys(ring)
     with pytest.raises(InvalidParameterError, match="FactoredOperator"):
         SequentialOperator(ring, keys, lump=True)
-    with pytest.raises(InvalidParameterError, match="random-sequential"):
-        successor_keys(ring, keys, lump=True)
+
+
+
+def test_successor_keys_of_parallel_update_match_the_factored_search():
+    from markov._factored import frontier_successors
+    from markov.encoding import unique_keys
+
+    for lump in (True, False):
+        ring = Ring(7, 3, 2, 0.5)
+        keys = recurrent_keys(ring, lump=lump)
+        _, succ = successor_keys(ring, keys, lump=lump)
+        assert np.array_equal(unique_keys(succ), frontier_successors(ring, keys, lump))
 
 
 def test_linear_operator_and_rows():

@@ -48,9 +48,11 @@ def test_transition_rows_sum_to_one_as_polynomials():
     ring = Ring(7, 3, 2, Fraction(1, 2))
     keys = recurrent_keys(ring)
     poly = transition_polynomials(ring, keys)
+    weights = ring.table(symbolic=True).weights     # expressions of Symbol("p")
     rows = {}
     for (i, _), terms in poly.items():
-        rows[i] = rows.get(i, 0) + sum(n * (1 - p)**a * p**b for (a, b), n in terms.items())
+        rows[i] = rows.get(i, 0) + sum(n * sp.Mul(*(sp.sympify(w)**k for w, k in zip(weights, e)))
+                                       for e, n in terms.items())
     assert len(rows) == len(keys)
     assert all(sp.expand(r) == 1 for r in rows.values())
 
