@@ -26,7 +26,8 @@ from .encoding import compact_jam_key
 from .transition import successor_counts, transition_matrix
 from .validate import ensure_chain_arguments, format_count
 
-__all__ = ["RingChain", "Solution", "solve", "load_solution", "representable"]
+__all__ = ["RingChain", "Solution", "ClassSolution", "solve", "solve_classes", "load_solution",
+           "representable", "known_irreducible"]
 
 # OPERATORS (markov.choices): how ``x -> x P`` is applied (see
 # RingChain.operator_kind for ``auto``): ``matrix`` the assembled CSR matrix
@@ -55,19 +56,63 @@ _LIGHTEST = "power"
 #: braking probability and with BiCGSTAB above (:meth:`RingChain._auto_method`).
 AGGREGATION_MAX_P = 0.3
 
-def _ensure_unique(ring: Ring) -> None:
-    if ring.trivial:
-        return
-    if ring.p == 0:
-        raise NoUniqueStationaryStateError(
-            "p = 0 makes the update deterministic: each configuration runs into its own"
-            " periodic orbit, so the stationary state depends on the initial"
-            " configuration; use 0 < p < 1 (e.g. p = 1e-6 for the deterministic limit)")
-    if ring.p == 1:
-        raise NoUniqueStationaryStateError(
-            "p = 1 makes every car brake to v - 1 after accelerating, so a stopped car"
-            " never moves again and every configuration of stopped cars is absorbing:"
-            " there are many stationary states; use 0 < p < 1")
+def known_irreducible(ring: Ring) -> bool:
+    """Whether everything reachable from the compact jam is one closed class, proven.
+
+    NaSch with ``0 < p < 1``: every configuration reaches the compact jam.
+    Every other chain is split by :func:`markov.classes.closed_classes`.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    bool
+    """
+    return ring.trivial or (ring.is_nasch and 0 < ring.p < 1)
+
+
+def _start_key(ring: Ring, start, lump: bool) -> int | None:
+    """The key of a start configuration given as text (``"2..1.0"``), or ``None``."""
+    if start is None:
+        return None
+    from .encoding import canonical_keys, encode, from_text
+
+    if not isinstance(start, str):
+        raise InvalidParameterError(
+            f"a start configuration is text ('.' empty, digit = velocity), got {start!r}")
+    cells = from_text(start, ring.vmax)
+    cars = sum(c >= 0 for c in cells)
+    if len(cells) != ring.length or cars != ring.cars:
+        raise InvalidParameterError(
+            f"the start configuration {start!r} has {len(cells)} cells and {cars} cars;"
+            f" the ring has L = {ring.length}, N = {ring.cars}")
+    key = encode(cells, ring.vmax)
+    if lump:
+        key = int(canonical_keys(np.array([key], dtype=np.int64), ring.length, ring.vmax)[0])
+    return key
+
+
+def describe_classes(ring: Ring, classes: list[np.ndarray]) -> str:
+    """One line: how many closed classes, their sizes and a configuration of each.
+
+    Parameters
+    ----------
+    ring : Ring
+    classes : list of int64 arrays
+
+    Returns
+    -------
+    str
+    """
+    from .encoding import decode, to_text
+
+    shown = ", ".join(f"{len(c):,} state{'s' if len(c) > 1 else ''}"
+                      f" ({to_text(decode(int(c[0]), ring.length, ring.vmax))})"
+                      for c in classes[:5])
+    more = f" and {len(classes) - 5} more" if len(classes) > 5 else ""
+    return f"{len(classes)} closed classes: {shown}{more}"
 
 
 def representable(ring: Ring) -> bool:
@@ -139,9 +184,11 @@ class RingChain:
 
     def __init__(self, ring: Ring, lump: bool = True, max_memory: float | None = None,
                  operator: str = "auto",
-                 state_bound: Callable[[Ring, bool], int | None] | None = None):
+                 state_bound: Callable[[Ring, bool], int | None] | None = None,
+                 start: str | None = None):
         ensure_chain_arguments(ring, max_memory=max_memory)
         self.ring = ring
+        self.start = _start_key(ring, start, lump)
         self.lump = lump
         self.max_memory = max_memory
         self.limit = memory.memory_limit(max_memory)
@@ -165,7 +212,12 @@ class RingChain:
         """
         other = RingChain(self.ring.with_p(p), self.lump, self.max_memory, self.operator,
                           self.state_bound)
-        for name in ("keys", "transitions", "operator_kind", "aggregates"):
+        other.start = self.start
+        shared = ("keys", "transitions", "operator_kind", "aggregates", "reachable", "classes")
+        if known_irreducible(other.ring) != known_irreducible(self.ring) or \
+                not known_irreducible(other.ring):
+            shared = ()   # the support may change with p (an outcome of weight 0)
+        for name in shared:
             if name in self.__dict__:
                 other.__dict__[name] = self.__dict__[name]
         if "transition_operator" in self.__dict__:
@@ -201,8 +253,8 @@ class RingChain:
             " per state it", n * per_state, self.limit)
 
     @cached_property
-    def keys(self) -> np.ndarray:
-        """Sorted keys of the recurrent class (canonical rotations when lumped)."""
+    def reachable(self) -> np.ndarray:
+        """Sorted keys of everything reachable from the start (the compact jam by default)."""
         start = time.perf_counter()
         if self.ring.trivial:
             keys = np.array([compact_jam_key(self.ring.length, self.ring.cars, self.ring.vmax)],
@@ -210,9 +262,45 @@ class RingChain:
         else:
             self._precheck()
             keys = recurrent_keys(self.ring, self.lump, self.max_memory,
-                                  per_state=self._guard_bytes_per_state())
+                                  per_state=self._guard_bytes_per_state(), start=self.start)
         self.build_seconds += time.perf_counter() - start
         return keys
+
+    @cached_property
+    def classes(self) -> list[np.ndarray]:
+        """The closed classes reachable from the start (:func:`markov.classes.closed_classes`).
+
+        One class, all of :attr:`reachable`, where that is proven
+        (:func:`known_irreducible`); otherwise the support graph is split.
+        """
+        if known_irreducible(self.ring) and self.start is None:
+            return [self.reachable]
+        from .classes import closed_classes
+
+        start = time.perf_counter()
+        classes = closed_classes(self.ring, self.reachable, self.lump, self.max_memory)
+        self.build_seconds += time.perf_counter() - start
+        return classes
+
+    @cached_property
+    def keys(self) -> np.ndarray:
+        """Sorted keys of the recurrent class (canonical rotations when lumped).
+
+        Raises
+        ------
+        NoUniqueStationaryStateError
+            When several closed classes are reachable from the start (each has
+            its own stationary state: :func:`solve_classes`).
+        """
+        classes = self.classes
+        if len(classes) > 1:
+            r = self.ring
+            raise NoUniqueStationaryStateError(
+                f"the chain of {r.model.name} (L={r.length}, N={r.cars}) has no unique"
+                f" stationary state: from the {'start' if self.start is not None else 'compact jam'}"
+                f" it reaches {describe_classes(r, classes)}; solve each with"
+                " solve_classes (nasch solve --classes)")
+        return classes[0]
 
     @property
     def n_states(self) -> int:
@@ -292,6 +380,14 @@ class RingChain:
             When the requested path (or, for ``auto``, neither) would fit.
         """
         if self.ring.trivial:
+            return "matrix"
+        if self.ring.update == PARALLEL and not self.ring.is_nasch:
+            if self.operator == "matrix-free":
+                raise InvalidParameterError(
+                    f"the factored operator is NaSch's so far; {self.ring.model.name} under"
+                    " parallel update is solved with the matrix (operator='matrix' or 'auto')")
+            memory.check_fits(f"the transition matrix ({self.transitions:,} transitions on"
+                              f" {self.n_states:,} states)", self.matrix_bytes(), self.limit)
             return "matrix"
         hint = "; try operator='matrix-free'"
         if self.operator == "matrix":
@@ -373,7 +469,6 @@ class RingChain:
         StateSpaceTooLargeError
             When the method's work vectors do not fit beside the operator.
         """
-        _ensure_unique(self.ring)
         ensure_chain_arguments(self.ring, method=method, tol=tol)
         if method == "aggregation" and self.ring.update != PARALLEL:
             raise InvalidParameterError(
@@ -608,10 +703,90 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     >>> round(solve(Ring(3, 1, 1, 0.25)).flux, 12)
     0.25
     """
-    _ensure_unique(ring)
     ensure_chain_arguments(ring, method=method, tol=tol, max_memory=max_memory)
     return RingChain(ring, lump=lump, max_memory=max_memory, operator=operator,
                      state_bound=state_bound).solution(method=method, tol=tol)
+
+
+@dataclass(frozen=True)
+class ClassSolution:
+    """One closed class of a reducible chain and its stationary state.
+
+    Attributes
+    ----------
+    representative : str
+        The class's smallest configuration in text notation.
+    from_start : bool
+        Whether the class is reachable from the start configuration (the
+        compact jam by default).
+    solution : Solution
+        The stationary state restricted to the class.
+    """
+
+    representative: str
+    from_start: bool
+    solution: Solution
+
+    def to_dict(self) -> dict:
+        """JSON-ready: the solution's fields with the class's.
+
+        Returns
+        -------
+        dict
+        """
+        d = self.solution.to_dict()
+        d.update(representative=self.representative, from_start=self.from_start)
+        return d
+
+
+def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
+                  lump: bool = True, tol: float = DEFAULT_TOL,
+                  max_memory: float | None = None) -> list[ClassSolution]:
+    """The stationary state of each closed class: a reducible chain answered in full.
+
+    Parameters
+    ----------
+    ring : Ring
+    every : bool
+        Find every closed class of the ring, over all configurations (small
+        rings: :func:`markov.classes.all_configurations_classes`); else the
+        classes reachable from ``start``.
+    start : str, optional
+        Start configuration in text notation (default the compact jam).
+    lump : bool
+    tol : float
+    max_memory : float, optional
+        Bytes allowed.
+
+    Returns
+    -------
+    list of ClassSolution
+        Ordered by the classes' smallest keys.
+
+    Examples
+    --------
+    NaSch at ``p = 0``: each class carries ``J = min(vmax c, 1 - c)``.
+
+    >>> [round(c.solution.flux, 12) for c in solve_classes(Ring(7, 3, 2, 0.0), every=True)]
+    [0.571428571429]
+    """
+    from .classes import all_configurations_classes
+    from .encoding import decode, to_text
+
+    ensure_chain_arguments(ring, tol=tol, max_memory=max_memory)
+    chain = RingChain(ring, lump=lump, max_memory=max_memory, operator="matrix", start=start)
+    reachable = chain.classes
+    classes = all_configurations_classes(ring, lump, max_memory) if every else reachable
+    firsts = {int(c[0]) for c in reachable}
+    out = []
+    for keys in classes:
+        sub = RingChain(ring, lump=lump, max_memory=max_memory, operator="matrix")
+        sub.__dict__["reachable"] = keys
+        sub.__dict__["classes"] = [keys]
+        sol = sub.solution(tol=tol)
+        out.append(ClassSolution(to_text(decode(int(keys[0]), ring.length, ring.vmax)),
+                                 int(keys[0]) in firsts, sol))
+    return out
 
 
 def load_solution(path) -> Solution:

@@ -58,7 +58,7 @@ def _not_in(sorted_set: np.ndarray, candidates: np.ndarray) -> np.ndarray:
 
 def _successor_set(ring: Ring, frontier: np.ndarray, lump: bool) -> np.ndarray:
     """Sorted distinct successors of the frontier states (the support of ``x P``)."""
-    if ring.update == PARALLEL:
+    if ring.update == PARALLEL and ring.is_nasch:
         from ._factored import frontier_successors
 
         return frontier_successors(ring, frontier, lump)
@@ -68,8 +68,12 @@ def _successor_set(ring: Ring, frontier: np.ndarray, lump: bool) -> np.ndarray:
 
 
 def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = None,
-                   per_state: float | None = None) -> np.ndarray:
-    """Sorted keys of the recurrent class of the chain (``0 < p < 1`` support).
+                   per_state: float | None = None, start: int | None = None) -> np.ndarray:
+    """Sorted keys of everything reachable from the compact jam (or from ``start``).
+
+    For NaSch with ``0 < p < 1`` that is the recurrent class of the chain; for
+    other rules it is a closed set that may hold several closed classes and
+    transient states (:func:`markov.classes.closed_classes` splits it).
 
     Parameters
     ----------
@@ -82,6 +86,8 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
     per_state : float, optional
         Bytes per state the caller will need (:mod:`markov.memory`); default
         and at least the search's own :func:`markov.memory.search_bytes_per_state`.
+    start : int, optional
+        Key of the configuration to start from (default the compact jam).
 
     Returns
     -------
@@ -108,8 +114,11 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
     check_encodable(ring.length, ring.vmax)
     limit = memory_limit(max_memory)
     per_state = max(search_bytes_per_state(), per_state or 0.0)
-    start = compact_jam_key(ring.length, ring.cars, ring.vmax)
-    if ring.cars == 1:
+    if start is not None:
+        pass
+    elif not (ring.is_nasch and ring.cars == 1):
+        start = compact_jam_key(ring.length, ring.cars, ring.vmax)
+    else:
         # A lone car sees the gap L - 1 forever, so R1+R2 push its velocity up to
         # w = min(vmax, L - 1) and R3 takes it at most one below: only w - 1 and
         # w are recurrent; the stopped car (the "jam") is transient once w >= 2.
