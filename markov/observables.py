@@ -21,10 +21,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ._kernels import cars_of, digits_of, gap
+from ._kernels import ahead_velocity, cars_of, digits_of, gap
 from .errors import InvalidParameterError
 from .ring import Ring
-from .rules import deterministic_velocity
 
 __all__ = ["cluster_probabilities", "velocity_densities", "gap_distribution", "expected_move"]
 
@@ -128,16 +127,16 @@ def gap_distribution(ring: Ring, keys: np.ndarray, pi: np.ndarray) -> np.ndarray
 
 
 @njit(cache=True)
-def _expected_move(keys, weights, length, vmax, p):
+def _expected_move(keys, weights, length, vmax, count, new_velocity, weight, horizon):
     pos = np.empty(length, np.int64)
     vel = np.empty(length, np.int64)
     total = 0.0
     for i in range(keys.shape[0]):
         n = cars_of(keys[i], length, vmax + 2, pos, vel)
         for j in range(n):
-            u = deterministic_velocity(vel[j], gap(pos, n, j, length), vmax)
-            if u > 0:
-                total += weights[i] * (u - p)
+            v, g, a = vel[j], min(gap(pos, n, j, length), horizon), ahead_velocity(vel, n, j)
+            for k in range(count[v, g, a]):
+                total += weights[i] * new_velocity[v, g, a, k] * weight[v, g, a, k]
     return total
 
 
@@ -159,7 +158,8 @@ def expected_move(ring: Ring, keys: np.ndarray, pi: np.ndarray) -> float:
     -------
     float
     """
+    count, new_velocity, weight, _, horizon = ring.kernel_rule()
     total = _expected_move(np.ascontiguousarray(keys, np.int64),
                            np.ascontiguousarray(pi, np.float64), ring.length, ring.vmax,
-                           float(ring.p))
+                           count, new_velocity, weight, horizon)
     return total / ring.length

@@ -58,7 +58,8 @@ def _not_in(sorted_set: np.ndarray, candidates: np.ndarray) -> np.ndarray:
 
 def _successor_set(ring: Ring, frontier: np.ndarray, lump: bool) -> np.ndarray:
     """Sorted distinct successors of the frontier states (the support of ``x P``)."""
-    if ring.update == PARALLEL and ring.is_nasch:
+    # the factored levels carry NaSch's support for 0 < p < 1 (both coins possible)
+    if ring.update == PARALLEL and ring.is_nasch and 0 < ring.p < 1:
         from ._factored import frontier_successors
 
         return frontier_successors(ring, frontier, lump)

@@ -1,0 +1,160 @@
+"""Closed classes of a ring's chain: which stationary states there are.
+
+NaSch with ``0 < p < 1`` has one closed class (everything reachable from the
+compact jam), and :mod:`markov.statespace` finds it by a breadth-first
+search.  Other rules, and NaSch at ``p = 0`` or ``p = 1``, can have several:
+Fukui-Ishibashi at density ``>= 1/vmax``, cruise control at low density,
+``p = 0`` (deterministic: every periodic orbit is a class).  A closed class is
+a strongly connected component of the support graph that no edge leaves; each
+carries its own stationary state.
+
+* :func:`closed_classes` splits a closed set of states (e.g. all that is
+  reachable from a start configuration) into its closed classes and its
+  transient rest;
+* :func:`all_configurations_classes` does it for every configuration of the
+  ring (small rings: the support graph of all ``C(L, N) (vmax+1)**N``
+  configurations must fit in memory).
+
+The support graph comes from the row generator
+(:func:`markov._sequential.successor_keys`), so it is the support of the
+model's rule table: an outcome of weight 0 is no edge.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import StateSpaceTooLargeError
+from .memory import gib, memory_limit
+from .ring import Ring
+
+__all__ = ["closed_classes", "all_configurations_classes", "support_graph_bytes"]
+
+#: Bytes per edge of the support graph (int64 successor key, int32 column,
+#: int64 row index of the COO build) and per state.
+_EDGE_BYTES = 24
+_STATE_BYTES = 48
+
+
+def support_graph_bytes(ring: Ring, n_states: int) -> float:
+    """Estimated peak bytes of :func:`closed_classes` on ``n_states`` states.
+
+    Parameters
+    ----------
+    ring : Ring
+    n_states : int
+
+    Returns
+    -------
+    float
+    """
+    from .memory import expected_row_length
+
+    return n_states * (_STATE_BYTES + _EDGE_BYTES * expected_row_length(ring))
+
+
+def closed_classes(ring: Ring, keys: np.ndarray, lump: bool,
+                   max_memory: float | None = None) -> list[np.ndarray]:
+    """The closed classes inside a closed set of states.
+
+    Parameters
+    ----------
+    ring : Ring
+    keys : (n,) int64 array, sorted
+        A set that no transition leaves (canonical keys if ``lump``).
+    lump : bool
+    max_memory : float, optional
+        Bytes allowed (default 75 % of physical memory).
+
+    Returns
+    -------
+    list of (m,) int64 arrays
+        The keys of each closed class, sorted; the classes ordered by their
+        smallest key.  States in none of them are transient.
+
+    Raises
+    ------
+    StateSpaceTooLargeError
+        When the support graph would not fit in ``max_memory``.
+
+    Examples
+    --------
+    NaSch at ``p = 0``, one car on four cells: the car speeds up to ``vmax``
+    and stays there; the states with velocity ``< vmax`` are transient.
+
+    >>> from markov.statespace import all_keys
+    >>> keys = all_keys(Ring(4, 1, 2, 0.0), lump=True)
+    >>> [len(c) for c in closed_classes(Ring(4, 1, 2, 0.0), keys, lump=True)]
+    [1]
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    from ._sequential import successor_keys
+
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    n = len(keys)
+    need = support_graph_bytes(ring, n)
+    limit = memory_limit(max_memory)
+    if need > limit:
+        raise StateSpaceTooLargeError(
+            f"finding the closed classes of {n:,} states needs about {gib(need)} for the"
+            f" support graph, over the limit of {gib(limit)}")
+    if n == 1:
+        return [keys]
+    indptr, succ = successor_keys(ring, keys, lump)
+    col = np.searchsorted(keys, succ)
+    col[col == n] = 0
+    if not np.array_equal(keys[col], succ):
+        raise RuntimeError("a successor lies outside the state set: it is not closed")
+    graph = sp.csr_array((np.ones(len(col), np.int8), col.astype(np.int32), indptr),
+                         shape=(n, n))
+    _, label = connected_components(graph, directed=True, connection="strong")
+    # a component is closed when no edge leaves it
+    row = np.repeat(np.arange(n), np.diff(indptr))
+    leaves = np.zeros(label.max() + 1, dtype=bool)
+    leaves[label[row[label[row] != label[col]]]] = True
+    closed = np.flatnonzero(~leaves)
+    classes = [keys[label == c] for c in closed]
+    classes.sort(key=lambda c: int(c[0]))
+    return classes
+
+
+def all_configurations_classes(ring: Ring, lump: bool = True,
+                               max_memory: float | None = None) -> list[np.ndarray]:
+    """Every closed class of the ring's chain, over all configurations.
+
+    Parameters
+    ----------
+    ring : Ring
+    lump : bool
+    max_memory : float, optional
+
+    Returns
+    -------
+    list of (m,) int64 arrays
+        As :func:`closed_classes`.
+
+    Raises
+    ------
+    StateSpaceTooLargeError
+        When the configurations or their support graph do not fit.
+
+    Examples
+    --------
+    NaSch at ``p = 0``, vmax = 1, two cars on four cells: every configuration
+    ends in the free flow ``1.1.`` (one rotation class), flux
+    ``min(vmax c, 1 - c) = 1/2``:
+
+    >>> [len(c) for c in all_configurations_classes(Ring(4, 2, 1, 0.0))]
+    [1]
+    """
+    from .statespace import all_keys, count_all
+
+    limit = memory_limit(max_memory)
+    need = support_graph_bytes(ring, count_all(ring))
+    if need > limit:
+        raise StateSpaceTooLargeError(
+            f"{count_all(ring):,} configurations (L={ring.length}, N={ring.cars},"
+            f" vmax={ring.vmax}) and their support graph need about {gib(need)}, over the"
+            f" limit of {gib(limit)}")
+    return closed_classes(ring, all_keys(ring, lump, max_memory), lump, max_memory)
