@@ -33,7 +33,8 @@ from .rules import deterministic_velocity, randomize
 
 __all__ = ["digits_of", "cars_of", "gap", "term", "rotate", "shift_bits",
            "canonical", "orbit_size", "rotate_mask", "smallest_rotation", "ahead_velocity",
-           "row_length", "successor_row"]
+           "row_length", "successor_row", "PARALLEL_CODE", "RANDOM_SEQUENTIAL_CODE",
+           "ORDERED_SEQUENTIAL_CODE"]
 
 
 # ------------------------------------------------------------------ decoding
@@ -219,14 +220,87 @@ def ahead_velocity(vel, n, i):
     return vel[i + 1] if i + 1 < n else vel[0]
 
 
+#: Update codes of the kernels (``markov.ring.UPDATE_CODES`` maps the names).
+PARALLEL_CODE, RANDOM_SEQUENTIAL_CODE, ORDERED_SEQUENTIAL_CODE = 0, 1, 2
+
+
 @njit(cache=True)
-def row_length(key, length, vmax, parallel, count, horizon, pos, vel):
-    """Entries :func:`successor_row` writes for ``key``.
+def _ordered_rows(key, length, pw, count, new_velocity, weight, weight_id, horizon, n, pos,
+                  vel, rows, digit, newpos, newvel, write, out_keys, out_weight, out_ids,
+                  out_mult):
+    """Backward ordered-sequential step from every start car; returns the entries (written if ``write``).
+
+    Start car ``s`` updates first and sees the car ahead at its old position and
+    velocity; then the car behind it, and so on upstream, each seeing the car
+    ahead already moved (its new position, its new velocity).  Each start car
+    has weight ``1 / N`` (the norm of the rows).  A lone car sees itself.
+    """
+    ids = write and out_ids.shape[0] > 0
+    e = 0
+    for s in range(n):
+        d = 0
+        digit[0] = 0
+        while d >= 0:
+            i = (s - d) % n          # the car updated at depth d
+            j = (i + 1) % n          # its car ahead
+            if d == 0 or n == 1:
+                ahead_x, ahead_v = pos[j], vel[j]
+            else:
+                ahead_x, ahead_v = newpos[j], newvel[j]
+            g = (ahead_x - pos[i] - 1) % length if n > 1 else length - 1
+            v, gg = vel[i], min(g, horizon)
+            if digit[d] >= count[v, gg, ahead_v]:
+                d -= 1               # every outcome of this car tried: back up
+                if d >= 0:
+                    digit[d] += 1
+                continue
+            rows[d, 0], rows[d, 1], rows[d, 2] = v, gg, ahead_v
+            u = new_velocity[v, gg, ahead_v, digit[d]]
+            newpos[i] = (pos[i] + u) % length
+            newvel[i] = u
+            if d < n - 1:
+                d += 1
+                digit[d] = 0
+                continue
+            if write:                # a leaf: every car moved
+                new = np.int64(0)
+                w = 1.0
+                if ids:
+                    out_ids[e, :] = 0
+                for t in range(n):
+                    c = (s - t) % n
+                    new += term(pos[c], newvel[c], length, pw)
+                    w *= weight[rows[t, 0], rows[t, 1], rows[t, 2], digit[t]]
+                    if ids:
+                        out_ids[e, weight_id[rows[t, 0], rows[t, 1], rows[t, 2], digit[t]]] += 1
+                out_keys[e] = new
+                out_weight[e] = w
+                out_mult[e] = 1
+            e += 1
+            digit[d] += 1
+    return e
+
+
+@njit(cache=True)
+def row_length(key, length, vmax, update, count, new_velocity, horizon, pos, vel):
+    """Entries :func:`successor_row` writes for ``key`` (``update``: a code above).
 
     Parallel update: the product of the cars' outcome counts; random-sequential:
-    one for the empty cells (if any), then one per outcome of each car.
+    one for the empty cells (if any), then one per outcome of each car;
+    ordered-sequential: one per start car and sequence of outcomes (counted by
+    walking them: a car's row depends on where the car ahead went).
     """
     n = cars_of(key, length, vmax + 2, pos, vel)
+    if update == ORDERED_SEQUENTIAL_CODE:
+        if n == 0:
+            return 1
+        return _ordered_rows(key, length, np.empty(0, np.int64), count, new_velocity,
+                             np.empty((0, 0, 0, 0)), np.empty((0, 0, 0, 0), np.int64), horizon,
+                             n, pos, vel, np.empty((length, 3), np.int64),
+                             np.empty(length, np.int64), np.empty(length, np.int64),
+                             np.empty(length, np.int64), False, np.empty(0, np.int64),
+                             np.empty(0), np.empty((0, 0), np.int8), np.empty(0, np.int32))
+    parallel = update == PARALLEL_CODE
     total = 1 if parallel else (1 if n < length else 0)
     for i in range(n):
         c = count[vel[i], min(gap(pos, n, i, length), horizon), ahead_velocity(vel, n, i)]
@@ -235,12 +309,14 @@ def row_length(key, length, vmax, parallel, count, horizon, pos, vel):
 
 
 @njit(cache=True)
-def successor_row(key, length, vmax, pw, parallel, count, new_velocity, weight, weight_id,
+def successor_row(key, length, vmax, pw, update, count, new_velocity, weight, weight_id,
                   horizon, pos, vel, rows, digit, out_keys, out_weight, out_ids, out_mult):
-    """Every successor of ``key`` in one step (parallel) or one sub-step (random-sequential).
+    """Every successor of ``key`` in one step (parallel, ordered) or one sub-step (random-sequential).
 
-    Entry ``j`` has probability ``out_mult[j] * out_weight[j]`` (divided by ``L``
-    for random-sequential update).  ``out_ids[j, w]``, when ``out_ids`` has
+    ``update`` is one of the codes above.  Entry ``j`` has probability
+    ``out_mult[j] * out_weight[j]``, divided by ``L`` for random-sequential
+    update (the draw of a cell) and by ``N`` for ordered-sequential update (the
+    draw of the start car).  ``out_ids[j, w]``, when ``out_ids`` has
     rows, counts the cars whose outcome has weight ``w`` of the table (the
     exact rational solver multiplies the symbolic weights); pass a ``(0, 0)``
     array to skip it.
@@ -250,7 +326,10 @@ def successor_row(key, length, vmax, pw, parallel, count, new_velocity, weight, 
       one-to-one), multiplicity 1;
     * random-sequential: a cell is drawn uniformly; the ``L - N`` empty cells
       leave the key as it is (one entry, multiplicity ``L - N``), a drawn car
-      updates alone, one entry per outcome.
+      updates alone, one entry per outcome;
+    * ordered-sequential (backward): a start car is drawn uniformly, then the
+      cars update one by one upstream, each seeing the car ahead where it has
+      just moved (:func:`_ordered_rows`); entries need not be distinct.
 
     ``rows`` (``(L, 3)`` int64) and ``digit`` (``L`` int64) are scratch.  Keys
     are not canonicalised here.  Returns the number of entries written
@@ -258,11 +337,23 @@ def successor_row(key, length, vmax, pw, parallel, count, new_velocity, weight, 
     """
     n = cars_of(key, length, vmax + 2, pos, vel)
     ids = out_ids.shape[0] > 0
+    if update == ORDERED_SEQUENTIAL_CODE:
+        if n == 0:
+            out_keys[0] = key
+            out_weight[0] = 1.0
+            out_mult[0] = 1
+            if ids:
+                out_ids[0, :] = 0
+            return 1
+        return _ordered_rows(key, length, pw, count, new_velocity, weight, weight_id, horizon, n,
+                             pos, vel, rows, digit, np.empty(length, np.int64),
+                             np.empty(length, np.int64), True, out_keys, out_weight, out_ids,
+                             out_mult)
     for i in range(n):
         rows[i, 0] = vel[i]
         rows[i, 1] = min(gap(pos, n, i, length), horizon)
         rows[i, 2] = ahead_velocity(vel, n, i)
-    if parallel:
+    if update == PARALLEL_CODE:
         total = 1
         for i in range(n):
             digit[i] = 0

@@ -27,7 +27,7 @@ from ._chain_operator import ChainOperator
 from ._kernels import canonical, shift_bits, successor_row
 from .encoding import powers
 from .errors import InvalidParameterError
-from .ring import PARALLEL, Ring
+from .ring import PARALLEL, RANDOM_SEQUENTIAL, Ring
 
 __all__ = ["KeyIndex", "SequentialOperator", "successor_keys"]
 
@@ -147,7 +147,7 @@ def _apply_rows(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, lump,
             xi = x[i]
             if xi == 0.0:
                 continue
-            m = successor_row(keys[i], length, vmax, pw, False, count, new_velocity, weight,
+            m = successor_row(keys[i], length, vmax, pw, 1, count, new_velocity, weight,
                               weight_id, horizon, pos, vel, rows, digit, succ, w, ids, mult)
             for j in range(m):
                 target = canonical(succ[j], length, pw, bits) if lump else succ[j]
@@ -159,7 +159,7 @@ def _apply_rows(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, lump,
 
 
 @njit(cache=True, parallel=True)
-def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, parallel, cap, count,
+def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, update, cap, count,
                     new_velocity, weight, weight_id, horizon, out):
     """Successors of ``keys[i]`` into ``out[indptr[i]:indptr[i+1]]`` (rows of at most ``cap``)."""
     n = keys.shape[0]
@@ -170,7 +170,7 @@ def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, parallel, cap, c
         w, ids, mult = np.empty(cap, np.float64), np.empty((0, 0), np.int8), np.empty(cap, np.int32)
         for i in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
             lo, hi = indptr[i], indptr[i + 1]
-            successor_row(keys[i], length, vmax, pw, parallel, count, new_velocity, weight,
+            successor_row(keys[i], length, vmax, pw, update, count, new_velocity, weight,
                           weight_id, horizon, pos, vel, rows, digit, out[lo:hi], w, ids, mult)
             if lump:
                 for j in range(lo, hi):
@@ -204,7 +204,7 @@ def successor_keys(ring: Ring, keys: np.ndarray, lump: bool) -> tuple[np.ndarray
     np.cumsum(counts, out=indptr[1:])
     out = np.empty(int(indptr[-1]), dtype=np.int64)
     _successor_keys(keys, indptr, ring.length, ring.vmax, powers(ring.length, ring.vmax),
-                    shift_bits(ring.vmax), bool(lump), ring.update == PARALLEL,
+                    shift_bits(ring.vmax), bool(lump), ring.update_code,
                     int(counts.max(initial=1)), *ring.kernel_rule(), out)
     return indptr, out
 
@@ -264,7 +264,7 @@ class SequentialOperator(ChainOperator):
     """
 
     def __init__(self, ring: Ring, keys: np.ndarray, lump: bool):
-        if ring.update == PARALLEL:
+        if ring.update != RANDOM_SEQUENTIAL:
             raise InvalidParameterError(
                 "the row operator is for random-sequential update; parallel update is"
                 " applied by the factored operator (markov._factored.FactoredOperator)")

@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from . import memory, observables
 from .choices import OPERATORS, PRODUCT_METHODS
 from .errors import InvalidParameterError, NoUniqueStationaryStateError
-from .ring import PARALLEL, Ring
+from .ring import ORDERED_SEQUENTIAL, PARALLEL, Ring
 from .statespace import count_all, recurrent_keys
 from .solvers import DEFAULT_TOL, StationaryResult, stationary
 from .encoding import compact_jam_key
@@ -381,11 +381,13 @@ class RingChain:
         """
         if self.ring.trivial:
             return "matrix"
-        if self.ring.update == PARALLEL and not self.ring.is_nasch:
+        if self.ring.update == ORDERED_SEQUENTIAL or (self.ring.update == PARALLEL
+                                                       and not self.ring.is_nasch):
             if self.operator == "matrix-free":
                 raise InvalidParameterError(
-                    f"the factored operator is NaSch's so far; {self.ring.model.name} under"
-                    " parallel update is solved with the matrix (operator='matrix' or 'auto')")
+                    f"no matrix-free operator for {self.ring.model.name} under"
+                    f" {self.ring.update} update yet: it is solved with the matrix"
+                    " (operator='matrix' or 'auto')")
             memory.check_fits(f"the transition matrix ({self.transitions:,} transitions on"
                               f" {self.n_states:,} states)", self.matrix_bytes(), self.limit)
             return "matrix"
@@ -554,10 +556,11 @@ class Solution:
     def flux(self) -> float:
         """Flux per cell and time step.
 
-        Parallel update: ``sum_v v c_v``.  Random-sequential update: mean
-        advance per time step of ``L`` sub-steps, divided by ``L``.
+        Parallel and ordered-sequential update (every car moves once a step,
+        its velocity is what it moved): ``sum_v v c_v``.  Random-sequential
+        update: mean advance per time step of ``L`` sub-steps, divided by ``L``.
         """
-        if self.ring.update == PARALLEL:
+        if self.ring.update in (PARALLEL, ORDERED_SEQUENTIAL):
             return float(np.dot(np.arange(self.ring.vmax + 1), self.c_v))
         return observables.expected_move(self.ring, self.keys, self.pi)
 

@@ -172,10 +172,13 @@ def expected_row_length(ring) -> float:
     """Successors per state, estimated before the states are known.
 
     Parallel update: ``2**k`` for ``k`` movable cars, about half of them
-    (capped at 4096); random-sequential: ``2 N + 1``.
+    (capped at 4096); ordered-sequential: ``N`` times that (one per start
+    car); random-sequential: ``2 N + 1``.
     """
     if ring.update == "parallel":
         return min(2.0 ** (ring.cars / 2), 4096.0)
+    if ring.update == "ordered-sequential":
+        return min(ring.cars * 2.0 ** (ring.cars / 2), 4096.0)
     return 2.0 * ring.cars + 1
 
 

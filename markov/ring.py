@@ -19,11 +19,16 @@ from .errors import InvalidParameterError
 from .rule import Model, RuleTable, load_model, tabulate
 from .validate import ensure_int as _ensure_int
 
-__all__ = ["Ring", "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL", "NASCH"]
+__all__ = ["Ring", "UPDATES", "UPDATE_CODES", "PARALLEL", "RANDOM_SEQUENTIAL",
+           "ORDERED_SEQUENTIAL", "NASCH"]
 
 PARALLEL = "parallel"
 RANDOM_SEQUENTIAL = "random-sequential"
-UPDATES = (PARALLEL, RANDOM_SEQUENTIAL)
+#: Backward ordered-sequential update with a random start car (docs/models.md).
+ORDERED_SEQUENTIAL = "ordered-sequential"
+UPDATES = (PARALLEL, RANDOM_SEQUENTIAL, ORDERED_SEQUENTIAL)
+#: The kernels' codes of the updates (markov._kernels).
+UPDATE_CODES = {PARALLEL: 0, RANDOM_SEQUENTIAL: 1, ORDERED_SEQUENTIAL: 2}
 #: The source name of the default model.
 NASCH = "nasch"
 
@@ -52,8 +57,9 @@ class Ring:
         Maximal velocity ``>= 1``.
     p : float or fractions.Fraction
         Braking probability in ``[0, 1]`` (a ``Fraction`` keeps it exact).
-    update : {"parallel", "random-sequential"}
-        Update order.
+    update : {"parallel", "random-sequential", "ordered-sequential"}
+        Update order (ordered-sequential: backward, from a start car drawn
+        uniformly each step; docs/models.md).
     model : Model, optional
         The rule and its parameters (:func:`markov.rule.load_model`); default
         the NaSch model with ``vmax`` and ``p``.  With a model, ``vmax`` and
@@ -132,6 +138,11 @@ class Ring:
         RuleTable
         """
         return _table(self.model, symbolic)
+
+    @property
+    def update_code(self) -> int:
+        """The update as the kernels' code (:data:`UPDATE_CODES`)."""
+        return UPDATE_CODES[self.update]
 
     def kernel_rule(self) -> tuple:
         """``(count, new_velocity, weight, weight_id, horizon)``: the arguments of the kernels.

@@ -32,7 +32,7 @@ from numba import njit
 from ._kernels import canonical, row_length, shift_bits, successor_row
 from .encoding import powers
 from .progress import progress_bar
-from .ring import PARALLEL, Ring
+from .ring import PARALLEL, RANDOM_SEQUENTIAL, Ring
 
 __all__ = ["SuccessorRows", "successor_counts", "successors", "transition_matrix"]
 
@@ -57,7 +57,7 @@ class SuccessorRows(NamedTuple):
         Equal draws behind the entry (random-sequential: the empty cells).
     norm : int
         1 for parallel update, ``L`` for a random-sequential sub-step (the draw
-        of the cell).
+        of the cell), ``N`` for ordered-sequential update (the start car).
     """
 
     indptr: np.ndarray
@@ -79,15 +79,15 @@ class SuccessorRows(NamedTuple):
 
 
 @njit(cache=True)
-def _row_lengths(keys, length, vmax, parallel, count, horizon, out):
+def _row_lengths(keys, length, vmax, update, count, new_velocity, horizon, out):
     pos = np.empty(length, np.int64)
     vel = np.empty(length, np.int64)
     for i in range(keys.shape[0]):
-        out[i] = row_length(keys[i], length, vmax, parallel, count, horizon, pos, vel)
+        out[i] = row_length(keys[i], length, vmax, update, count, new_velocity, horizon, pos, vel)
 
 
 @njit(cache=True)
-def _fill_rows(keys, indptr, length, vmax, pw, bits, lump, parallel, count, new_velocity,
+def _fill_rows(keys, indptr, length, vmax, pw, bits, lump, update, count, new_velocity,
                weight, weight_id, horizon, out_keys, out_weight, out_ids, out_mult):
     """Row ``i`` of :func:`successors` at ``indptr[i]:indptr[i+1]``."""
     pos = np.empty(length, np.int64)
@@ -97,7 +97,7 @@ def _fill_rows(keys, indptr, length, vmax, pw, bits, lump, parallel, count, new_
     ids = out_ids.shape[0] > 0
     for i in range(keys.shape[0]):
         lo, hi = indptr[i], indptr[i + 1]
-        successor_row(keys[i], length, vmax, pw, parallel, count, new_velocity, weight,
+        successor_row(keys[i], length, vmax, pw, update, count, new_velocity, weight,
                       weight_id, horizon, pos, vel, rows, digit, out_keys[lo:hi],
                       out_weight[lo:hi], out_ids[lo:hi] if ids else out_ids, out_mult[lo:hi])
         if lump:
@@ -119,8 +119,9 @@ def successor_counts(ring: Ring, keys: np.ndarray) -> np.ndarray:
     """
     keys = np.ascontiguousarray(keys, dtype=np.int64)
     counts = np.empty(len(keys), dtype=np.int64)
-    count, _, _, _, horizon = ring.kernel_rule()
-    _row_lengths(keys, ring.length, ring.vmax, ring.update == PARALLEL, count, horizon, counts)
+    count, new_velocity, _, _, horizon = ring.kernel_rule()
+    _row_lengths(keys, ring.length, ring.vmax, ring.update_code, count, new_velocity, horizon,
+                 counts)
     return counts
 
 
@@ -155,7 +156,6 @@ def successors(ring: Ring, keys: np.ndarray, lump: bool, table=None) -> Successo
     [0.5, 0.5]
     """
     keys = np.ascontiguousarray(keys, dtype=np.int64)
-    parallel = ring.update == PARALLEL
     indptr = np.zeros(len(keys) + 1, dtype=np.int64)
     np.cumsum(successor_counts(ring, keys), out=indptr[1:])
     m = int(indptr[-1])
@@ -164,9 +164,10 @@ def successors(ring: Ring, keys: np.ndarray, lump: bool, table=None) -> Successo
     out = (np.empty(m, np.int64), np.empty(m, np.float64),
            np.zeros((m if nids else 0, nids), np.int8), np.empty(m, np.int32))
     _fill_rows(keys, indptr, ring.length, ring.vmax, powers(ring.length, ring.vmax),
-               shift_bits(ring.vmax), bool(lump), parallel, t.count, t.new_velocity, t.weight,
-               t.weight_id, t.horizon, *out)
-    return SuccessorRows(indptr, *out, 1 if parallel else ring.length)
+               shift_bits(ring.vmax), bool(lump), ring.update_code, t.count, t.new_velocity,
+               t.weight, t.weight_id, t.horizon, *out)
+    norm = {PARALLEL: 1, RANDOM_SEQUENTIAL: ring.length}.get(ring.update, max(ring.cars, 1))
+    return SuccessorRows(indptr, *out, norm)
 
 
 def transition_matrix(ring: Ring, keys: np.ndarray, lump: bool) -> sp.csr_array:
