@@ -516,10 +516,11 @@ class Solution:
     # -- the vector itself (markov.storage)
 
     def save(self, path) -> Path:
-        """Write keys, probabilities and metadata to ``path`` (``.npz``), atomically.
+        """Write keys, probabilities, metadata and their SHA-256 sums to ``path``
+        (``.npz``), atomically.
 
         See :mod:`markov.storage` for the layout and the key encoding; read it
-        back with :func:`markov.load_solution`.
+        back, checked, with :func:`markov.load_solution`.
 
         Parameters
         ----------

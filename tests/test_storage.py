@@ -153,7 +153,7 @@ def _as_version_1(arrays, meta):
 
 @pytest.fixture
 def saved(tmp_path):
-    """A lumped solution (L = 10, N = 5, vmax = 2: flux 0.2030 at p = 0.5), its file."""
+    """A lumped solution (L = 10, N = 5, vmax = 2, p = 0.5: flux 0.2028) and its file."""
     sol = solve(Ring(10, 5, 2, 0.5))
     return sol, sol.save(tmp_path / "pi.npz")
 
@@ -195,7 +195,7 @@ def test_every_kind_of_solution_round_trips_bit_for_bit(tmp_path, args, lump):
 
 
 def test_the_corruptions_of_the_issue_are_refused(saved, tmp_path):
-    """Doubled probabilities (flux 0.4059), the ring length edited (0.1804), NaN,
+    """The issue's list: doubled probabilities, the ring length edited, NaN,
     truncated, byte-flipped, random bytes: each once with the stored sums (the sums
     refuse it) and once with sums fitted to the edit or in the old layout (the
     checks of the contents refuse it)."""
@@ -213,7 +213,7 @@ def test_the_corruptions_of_the_issue_are_refused(saved, tmp_path):
         _refused(_write(tmp_path / f"{name}-raw.npz", a, m, resum=False), "SHA-256")
         _refused(_write(tmp_path / f"{name}-resum.npz", a, m), words)
         _refused(_write(tmp_path / f"{name}-v1.npz", *_as_version_1(a, m)), words)
-    # the version-1 edits of the issue, without sums, no longer load (as they did)
+    # truncated, byte-flipped (the bytes the CRC-32 and the sums cover), random bytes
     data = path.read_bytes()
     for cut in (0, 1, 30, len(data) // 3, len(data) // 2, len(data) - 22, len(data) - 1):
         bad = tmp_path / f"cut{cut}.npz"
@@ -231,6 +231,13 @@ def test_the_corruptions_of_the_issue_are_refused(saved, tmp_path):
             assert str(exc).startswith(f"cannot load {bad}: ") and "\n" not in str(exc)
         else:  # a byte nobody reads (a time stamp, padding): the same solution
             assert back.pi.tobytes() == sol.pi.tobytes() and back.ring == sol.ring
+    for name in ("keys", "probabilities", "rotations"):   # a flip in any stored number
+        at = data.index(arrays[name].tobytes()) + 5
+        flipped = bytearray(data)
+        flipped[at] ^= 0x01
+        bad = tmp_path / f"flip-{name}.npz"
+        bad.write_bytes(bytes(flipped))
+        _refused(bad, f"for file '{name}.npy'")   # zipfile's CRC-32 sees it first
     noise = tmp_path / "noise.npz"
     noise.write_bytes(rng.bytes(5000))
     assert "pickle" not in _refused(noise, "not a zip archive")
