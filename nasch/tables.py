@@ -18,6 +18,7 @@ from __future__ import annotations
 import csv
 import io
 import textwrap
+import warnings
 from dataclasses import dataclass, field
 from fractions import Fraction
 from functools import lru_cache
@@ -292,14 +293,16 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
     p : float or sequence of float
         Braking probabilities, each in ``(0, 1)``.
     lengths : sequence of int, optional
-        Ring lengths (or give ``budget``).
+        Ring lengths; default: chosen per density by ``budget``
+        (:func:`nasch.budget.choose_lengths`, the choice of the study and the figure).
     cars, densities : sequences, optional
         Numbers of cars, or densities (``N = round(c L)``); default half filling.
     budget : float, optional
-        Seconds of exact solving per density and ``p``, instead of ``lengths``:
-        the ``order + 2`` largest rings of each density that fit
-        (:func:`nasch.budget.lengths_within_budget`); needs ``densities``
-        (or the default half filling), not ``cars``.
+        Seconds of exact solving per density and ``p``, instead of ``lengths``
+        (default :data:`nasch.budget.DEFAULT_BUDGET`): the ``order + 2`` largest
+        rings of each density that fit time and memory
+        (:func:`nasch.budget.choose_lengths`, which names them on stderr);
+        needs ``densities`` (or the default half filling), not ``cars``.
     update : {"parallel", "random-sequential"}
     mc_steps : int
         Monte Carlo time steps per replica and (density, p); 0: no Monte Carlo.
@@ -319,7 +322,8 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
         Approximation columns among :data:`APPROXIMATIONS` (undefined ones for
         this ``vmax`` are dropped).
     extrapolation : bool
-        Add an ``L = inf`` row per density with at least ``order + 1`` sizes.
+        Add an ``L = inf`` row per density with at least ``order + 1`` sizes
+        (a density with fewer gets a :class:`RuntimeWarning` instead).
     order : int
         Order of the ``1/L`` series (see :func:`nasch.extrapolate.extrapolate`).
     serial, scheduler, client, n_workers
@@ -350,15 +354,16 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
     order = ensure_int("order", order, 1)
     n_workers = None if n_workers is None else ensure_int("n_workers", n_workers, 1)
     Ring(mc_length, 1, vmax, ps[0], update)  # validates vmax
-    if (lengths is None) == (budget is None):
+    if lengths is not None and budget is not None:
         raise InvalidParameterError("give either the ring lengths or a budget")
-    if budget is not None:
+    if lengths is None:
         if cars is not None:
-            raise InvalidParameterError("a budget chooses rings per density: give densities")
-        from .budget import lengths_within_budget
+            raise InvalidParameterError(
+                "a budget chooses rings per density: give densities (or ring lengths)")
+        from .budget import choose_lengths
 
         rings_of = {p_: sorted({pt for c in (densities or [0.5]) for pt in table_points(
-            lengths_within_budget(vmax, p_, c, budget, count=order + 2, update=update),
+            choose_lengths(vmax, p_, c, budget, order=order, update=update),
             densities=[c])}) for p_ in ps}
     else:
         rings = table_points(lengths, cars, densities)
@@ -396,4 +401,8 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
                                                          for L, N in group], order=order)
                 rows.append(FluxRow("extrapolated", p_, None, None, float(c), ex.f_inf,
                                     ex.error, None, None, approx, **mc_cells))
+            elif extrapolation:   # said, not dropped in silence
+                warnings.warn(f"no L = inf row for p = {p_:g}, c = {c}: {len(group)} ring(s),"
+                              f" an order-{order} fit needs {order + 1}", RuntimeWarning,
+                              stacklevel=2)
     return FluxTable(int(vmax), update, tuple(rows), methods, mc_steps, int(order))
