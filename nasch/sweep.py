@@ -94,7 +94,12 @@ def _single_threaded(func, job):
 
 
 def default_workers() -> int:
-    """Worker processes of the default local cluster: the usable cores (at least 1)."""
+    """Worker processes of the default local cluster: the usable cores (at least 1).
+
+    Returns
+    -------
+    int
+    """
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not Linux
