@@ -174,7 +174,7 @@ def report(data: dict) -> str:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seeds", type=int, default=10, help="seeds per point and run length")
+    ap.add_argument("--seeds", type=int, default=6, help="seeds per point and run length")
     ap.add_argument("--from-json", action="store_true",
                     help="re-render benchmarks/results/mc_coverage.json without running")
     ap.add_argument("--out", type=Path, default=RESULTS)

@@ -4,7 +4,8 @@ One row per ring ``(p, L, N)``: the exact stationary flux and ``c_v`` of the
 finite chain, the mean-field (MF), paradisical mean-field (pMF, pMF2) and
 2-cluster fluxes at the same density ``c = N / L`` (from :mod:`symbolic`), and a
 Monte Carlo flux with its error bar on a large ring of exactly the same
-density (marked ``*`` where the run was too short for an honest bar).  For every density with enough ring sizes an extra row holds the
+density (marked ``*`` where the run was too short for an honest bar).  For
+every density with enough ring sizes an extra row holds the
 ``L -> infinity`` extrapolation of the exact fluxes (:mod:`nasch.extrapolate`).
 
 The work (exact chains, Monte Carlo runs: :mod:`nasch.jobs`) fans out over
