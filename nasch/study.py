@@ -427,6 +427,9 @@ def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequen
         for x in ps:
             for c in fracs:
                 m = mc[v, x, c]
+                if not m.reliable:   # the reference itself has no honest bar: say so
+                    notes.append(f"Monte Carlo, vmax = {v}, p = {x:g}, c = {float(c):.4f}:"
+                                 f" no honest error bar ({m.warning}); use more --mc-steps")
                 ring = sorted(exact.get((v, x, c), []))
                 ext = (extrapolate([L for L, _ in ring], [f for _, f in ring], order=order)
                        if len(ring) >= order + 1 else None)

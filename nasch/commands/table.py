@@ -33,7 +33,7 @@ __all__ = ["table"]
 @click.option("--output", "-o", type=click.Path(dir_okay=False), default=None,
               help="Write here (atomically) instead of stdout.")
 @click.option("--mc-steps", type=int, default=2000, show_default=True,
-              help="Monte Carlo time steps per (density, p); 0 for none.")
+              help="Monte Carlo time steps per replica and (density, p); 0 for none.")
 @click.option("--mc-length", type=int, default=10000, show_default=True,
               help="Monte Carlo ring length (rounded up to match the density exactly).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Monte Carlo base seed.")
@@ -96,6 +96,10 @@ def table(vmax, p_text, lengths_text, budget_text, cars_text, density_text, upda
             scheduler=scheduler, n_workers=workers)
     for w in caught:
         click.echo(f"warning: {w.message}", err=True)
+    flagged = {(r.p, r.density): r.mc_warning for r in t.rows if r.mc_reliable is False}
+    if flagged:
+        click.echo(f"warning: {len(flagged)} Monte Carlo value(s) marked * have no honest error"
+                   f" bar ({next(iter(flagged.values()))}); use more --mc-steps", err=True)
     text = t.render(fmt)
     if output:
         write_atomic(output, text)
