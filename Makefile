@@ -8,7 +8,7 @@ BENCH_STAMP := $(VENV)/.installed-bench
 # pytest-xdist runs one worker per core; BLAS threads on top would oversubscribe them
 SINGLE_THREADED := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 
-.PHONY: demo test bench bench-large bench-coverage clean
+.PHONY: demo test bench bench-large bench-coverage bench-mc-coverage clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV) || python3 -m venv $(VENV)
@@ -36,6 +36,9 @@ bench-large: $(BENCH_STAMP)
 
 bench-coverage: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/error_coverage.py
+
+bench-mc-coverage: $(BENCH_STAMP)
+	$(SINGLE_THREADED) $(BIN)/python benchmarks/mc_coverage.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info

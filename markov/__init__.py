@@ -26,7 +26,7 @@ __all__ = [
     "Ring", "RingChain", "Solution", "solve", "load_solution", "stationary",
     "StationaryResult", "simulate", "SimulationResult", "SOLVERS", "METHODS", "OPERATORS",
     "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL",
-    "NaschError", "InvalidParameterError", "NoUniqueStationaryStateError",
+    "NaschError", "InvalidParameterError", "CorruptFileError", "NoUniqueStationaryStateError",
     "StateSpaceTooLargeError", "ConvergenceError", "OutputError",
 ]
 
@@ -38,7 +38,7 @@ _WHERE = {
     "stationary": "solvers", "StationaryResult": "solvers", "SOLVERS": "choices",
     "METHODS": "choices", "OPERATORS": "choices",
     "simulate": "montecarlo", "SimulationResult": "montecarlo",
-    **{name: "errors" for name in ("NaschError", "InvalidParameterError",
+    **{name: "errors" for name in ("NaschError", "InvalidParameterError", "CorruptFileError",
                                     "NoUniqueStationaryStateError",
                                     "StateSpaceTooLargeError", "ConvergenceError",
                                     "OutputError")},

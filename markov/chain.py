@@ -614,10 +614,11 @@ class Solution:
     # -- the vector itself (markov.storage)
 
     def save(self, path) -> Path:
-        """Write keys, probabilities and metadata to ``path`` (``.npz``), atomically.
+        """Write keys, probabilities, metadata and their SHA-256 sums to ``path``
+        (``.npz``), atomically.
 
         See :mod:`markov.storage` for the layout and the key encoding; read it
-        back with :func:`markov.load_solution`.
+        back, checked, with :func:`markov.load_solution`.
 
         Parameters
         ----------
@@ -795,9 +796,13 @@ def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
 def load_solution(path) -> Solution:
     """Read a file written by :meth:`Solution.save` (``nasch solve --save``).
 
-    The observables are recomputed from the stored keys and probabilities;
-    ``nonzeros`` and timings are not stored (``None``, 0).  Layout:
-    :mod:`markov.storage`, ``docs/storage.md``.
+    The file is checked before anything is built from it: its SHA-256 sums,
+    the metadata against the ring, every key (``N`` cars, a canonical rotation
+    when lumped, ...) and the probabilities (finite, ``>= 0``, summing to 1
+    within :data:`markov.storage.SUM_TOLERANCE`); ``docs/storage.md`` lists
+    the checks.  The observables are recomputed from the stored keys and
+    probabilities; ``nonzeros`` and timings are not stored (``None``, 0).
+    Layout: :mod:`markov.storage`, ``docs/storage.md``.
 
     Parameters
     ----------
@@ -810,7 +815,10 @@ def load_solution(path) -> Solution:
     Raises
     ------
     InvalidParameterError
-        When the file is missing, not an archive of this format, or inconsistent.
+        When the file is missing or cannot be opened.
+    CorruptFileError
+        When it is not a stationary-state file, is damaged or edited, or fails
+        a check: one line naming the file and what is wrong.
     """
     from .storage import read_solution
 

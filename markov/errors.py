@@ -9,6 +9,7 @@ that says what kind of failure it is, as scipy's errors do:
 error                           builtin        when
 =============================== ============== ===========================================
 InvalidParameterError           ValueError     an argument outside its allowed range
+CorruptFileError                ValueError     a saved file that is damaged or inconsistent
 NoUniqueStationaryStateError    ValueError     ``p = 0`` or ``1``, a reducible chain
 StateSpaceTooLargeError         MemoryError    refused before allocating what does not fit
 ConvergenceError                RuntimeError   an iterative solver stopped short
@@ -20,6 +21,7 @@ from __future__ import annotations
 __all__ = [
     "NaschError",
     "InvalidParameterError",
+    "CorruptFileError",
     "NoUniqueStationaryStateError",
     "StateSpaceTooLargeError",
     "ConvergenceError",
@@ -33,6 +35,13 @@ class NaschError(Exception):
 
 class InvalidParameterError(NaschError, ValueError):
     """A model or solver parameter is outside its allowed range."""
+
+
+class CorruptFileError(InvalidParameterError):
+    """A file given to read is damaged, edited or inconsistent (``markov.load_solution``).
+
+    A subclass of :class:`InvalidParameterError`: the file is bad input.
+    """
 
 
 class NoUniqueStationaryStateError(NaschError, ValueError):

@@ -44,13 +44,15 @@ def check_output_path(path, suffixes: Sequence[str] | None = None) -> Path:
     Examples
     --------
     >>> import tempfile, pathlib
-    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> tmp = tempfile.TemporaryDirectory()
+    >>> d = pathlib.Path(tmp.name)
     >>> check_output_path(d / "t.csv").name
     't.csv'
     >>> check_output_path(d / "missing" / "t.csv")  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
     markov.errors.InvalidParameterError: cannot write .../missing/t.csv: directory .../missing does not exist
+    >>> tmp.cleanup()
     """
     text = os.fspath(path)
     if not text:
@@ -80,7 +82,7 @@ def check_output_path(path, suffixes: Sequence[str] | None = None) -> Path:
     return p
 
 
-def write_bytes_atomic(path, data: bytes) -> Path:
+def write_bytes_atomic(path, data: bytes | memoryview) -> Path:
     """Write ``data`` to ``path`` atomically: all of it or (on failure) nothing.
 
     The bytes go to a temporary file in the same directory (so the final
@@ -92,7 +94,7 @@ def write_bytes_atomic(path, data: bytes) -> Path:
     Parameters
     ----------
     path : str or os.PathLike
-    data : bytes
+    data : bytes or memoryview
 
     Returns
     -------
@@ -107,8 +109,8 @@ def write_bytes_atomic(path, data: bytes) -> Path:
     Examples
     --------
     >>> import tempfile, pathlib
-    >>> d = pathlib.Path(tempfile.mkdtemp())
-    >>> write_bytes_atomic(d / "x.bin", b"abc").read_bytes()
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     write_bytes_atomic(pathlib.Path(tmp) / "x.bin", b"abc").read_bytes()
     b'abc'
     """
     path = Path(path)
@@ -155,8 +157,8 @@ def write_atomic(path, text: str, encoding: str = "utf-8") -> Path:
     Examples
     --------
     >>> import tempfile, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "t.csv"
-    >>> write_atomic(p, "a,b\\n1,2\\n").read_text()
+    >>> with tempfile.TemporaryDirectory() as tmp:
+    ...     write_atomic(pathlib.Path(tmp) / "t.csv", "a,b\\n1,2\\n").read_text()
     'a,b\\n1,2\\n'
     """
     return write_bytes_atomic(path, text.encode(encoding))

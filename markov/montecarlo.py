@@ -8,21 +8,38 @@ xoshiro256** generator seeded through splitmix64, so a seed gives the same
 trajectory on every machine and numba version (numba's own ``np.random``
 stream is an implementation detail we do not want results to hang on).
 
-Measurement: after ``warmup`` time steps, ``steps`` time steps are split into
-``batches`` consecutive batches; the flux of each batch is the distance all
-cars moved divided by ``L`` and the number of steps.  The estimate is the time
-average and its error bar the standard error of the batch means, taken as the
-largest over blocking levels (batches merged in pairs, repeatedly, while at
-least 8 blocks remain; Flyvbjerg & Petersen 1989).  Batch means are nearly
-independent only when batches are longer than the correlation time; near the
-maximum of the fundamental diagram jams live long, and the plain
-``batches``-level error was measured to be 2-3x too small there (L = 10^4,
-c = 1/4, vmax = 2, p = 1/2, 3000 steps), which the blocking maximum catches.
+Measurement (issue 17: error bars that cover the truth).  Each replica
+records the flux of every block of its run (up to 1024 blocks, at most one
+per step).  With the default automatic warm-up the run is recorded from its
+start and :func:`mser_truncation` cuts the transient from the data; the error
+of the mean of the kept blocks is ``sqrt(tau var / n)`` with ``tau`` the
+integrated autocorrelation time (Sokal's window, never below what blocking
+with >= 32 blocks shows), plus in quadrature the difference of the two
+halves' means, which catches the slow, power-law relaxation (jams coarsening)
+that lies under the noise of every block.  :func:`analyse_series` flags a
+run whose kept part holds fewer than 100 autocorrelation times, whose MSER
+optimum sits at the end of its search, or whose first and last parts differ
+(drift test); replicas whose means disagree beyond their bars (chi-square)
+flag the result too.  A flagged result carries ``reliable = False`` and the
+reason; the CLI prints it on stderr.  ``benchmarks/mc_coverage.py`` measures
+how often the bars cover exact and long-run values (``docs/validation.md``).
+
+Start configuration: random cells, all cars at rest.  Measured against the
+alternative, cars evenly spaced at velocity ``min(gap, vmax)`` (the p = 0
+state): on L = 1000 the uniform start was still biased high after 2000 steps
+at nearly every point (by up to 1.3e-3, several error bars), the random
+start much less.  The random start has the long-wavelength density
+fluctuations of a disordered state from the first step, the uniform one
+lacks them and builds them up only slowly (``docs/validation.md``).
 
 References
 ----------
 K. Nagel and M. Schreckenberg, J. Phys. I France 2, 2221 (1992).
 H. Flyvbjerg and H. G. Petersen, J. Chem. Phys. 91, 461 (1989) (blocking).
+K. P. White, Simulation 69, 323 (1997) (MSER).
+A. D. Sokal, in *Functional Integration*, Plenum (1997) (integrated
+autocorrelation time, automatic window).
+J. Geweke, in *Bayesian Statistics 4*, Oxford (1992) (first vs last part).
 D. Blackman and S. Vigna, "Scrambled linear pseudorandom number generators",
 ACM Trans. Math. Softw. 47, 36 (2021) (xoshiro256**).
 """
@@ -31,6 +48,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import asdict, dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -41,10 +59,27 @@ from .progress import progress_bar
 from .rules import deterministic_velocity, randomize
 
 __all__ = ["SimulationResult", "simulate", "evolve", "initial_configuration", "blocking_error",
-           "simulation_bytes", "ensure_simulation_fits", "DEFAULT_BATCHES"]
+           "mser_truncation", "integrated_autocorrelation_time", "analyse_series",
+           "simulation_bytes", "ensure_simulation_fits", "DEFAULT_BATCHES", "MIN_STEPS",
+           "STARTS", "DEFAULT_START"]
 
-#: Batches of the batch-means error bar; a run needs at least one step per batch.
-DEFAULT_BATCHES = 32
+#: Blocks of the recorded flux series of a run (fewer when a run has fewer steps).
+DEFAULT_BATCHES = 1024
+#: Fewest steps a table, figure or study accepts (shorter runs are always flagged).
+MIN_STEPS = 32
+#: Start configurations (:func:`initial_configuration`) and the default.
+STARTS = ("random", "uniform")
+DEFAULT_START = "random"
+#: Replicas whose means scatter beyond their bars at this chi-square level flag a run.
+DISAGREEMENT_LEVEL = 0.01
+#: A kept series shorter than this many autocorrelation times is flagged.
+MIN_TAU_MULTIPLE = 100
+#: Blocking levels used for the error keep at least this many blocks.
+BLOCKING_MIN_BLOCKS = 32
+#: |z| of the drift test (first 20 % against last 50 % of the kept series) that flags.
+DRIFT_Z = 3.0
+#: Largest memory of the per-block velocity histograms (bytes).
+_SNAPSHOT_BYTES = 64 * 2**20
 
 _U53 = 1.0 / 9007199254740992.0  # 2**-53: uint64 >> 11 -> uniform double in [0, 1)
 # Car updates per kernel call: numba code does not see Ctrl-C, so long runs
@@ -158,6 +193,106 @@ def _random_sequential_steps(pos, vel, length, vmax, p, steps, rng, counts, move
 # --- public API -------------------------------------------------------------------
 
 
+
+def mser_truncation(series) -> int:
+    """MSER truncation point: the number of leading points to drop as warm-up.
+
+    Chooses ``d`` in ``[0, n // 2]`` minimising the marginal standard error
+    ``sum_{i >= d} (y_i - mean_d)^2 / (n - d)^2`` (White 1997; applied to
+    block means it is MSER-m with ``m`` the block length).  A transient
+    inflates the sum until it is cut off; on stationary data the statistic
+    grows with ``d``, so the minimum sits near 0.  The search stops at half
+    the series, where the estimator is known to be unstable; an optimum *at*
+    ``n // 2`` means the transient may last longer than half the run.
+
+    Parameters
+    ----------
+    series : sequence of float
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    A series that starts 1.0 too low for 20 points, then fluctuates:
+
+    >>> y = np.r_[np.zeros(20), 1 + 0.1 * np.sin(np.arange(200))]
+    >>> mser_truncation(y)
+    20
+    """
+    y = np.asarray(series, dtype=float)
+    n = len(y)
+    if n < 3:
+        return 0
+    # suffix sums give every candidate's mean and squared deviation at once
+    s1 = np.cumsum(y[::-1])[::-1]
+    s2 = np.cumsum((y * y)[::-1])[::-1]
+    d = np.arange(n // 2 + 1)
+    m = n - d
+    ss = s2[d] - s1[d] ** 2 / m
+    stat = np.maximum(ss, 0.0) / (m.astype(float) ** 2)
+    return int(np.argmin(stat))
+
+
+def integrated_autocorrelation_time(series, window_factor: float = 5.0) -> tuple[float, int, bool]:
+    """Integrated autocorrelation time with Sokal's automatic window.
+
+    ``tau = 1 + 2 sum_{t=1}^{M} rho(t)`` with ``M`` the smallest lag with
+    ``M >= window_factor * tau(M)`` (A. Sokal, *Monte Carlo methods in
+    statistical mechanics*, 1996, section 3); the variance of the mean of
+    ``n`` points is ``tau var / n``.  ``tau`` is clamped to at least 1: an
+    anticorrelated estimate is not trusted to shrink the error bar.
+
+    Parameters
+    ----------
+    series : sequence of float
+    window_factor : float
+        Sokal's ``c`` (4-10 are usual; 5 as in emcee).
+
+    Returns
+    -------
+    tau : float
+        In units of the series' spacing.
+    window : int
+        The lag ``M`` at which the sum stopped.
+    converged : bool
+        False when no lag up to ``n - 1`` met the window condition (the series
+        is too short for its correlations).
+
+    Examples
+    --------
+    AR(1) with coefficient 0.5: the exact value is (1 + 0.5) / (1 - 0.5) = 3.
+
+    >>> rng = np.random.default_rng(0)
+    >>> x = np.zeros(200_000)
+    >>> e = rng.normal(size=x.size)
+    >>> for i in range(1, x.size):
+    ...     x[i] = 0.5 * x[i - 1] + e[i]
+    >>> tau, window, ok = integrated_autocorrelation_time(x)
+    >>> ok and abs(tau - 3) < 0.1
+    True
+    """
+    y = np.asarray(series, dtype=float)
+    n = len(y)
+    if n < 2:
+        return 1.0, 0, False
+    y = y - y.mean()
+    c0 = float(np.dot(y, y)) / n
+    if c0 <= 0.0:   # a constant series: no fluctuation to correlate
+        return 1.0, 0, True
+    size = 1 << (2 * n - 1).bit_length()
+    f = np.fft.rfft(y, size)
+    acf = np.fft.irfft(f * np.conj(f), size)[:n] / (n * c0)
+    taus = 1.0 + 2.0 * np.cumsum(acf[1:])
+    lags = np.arange(1, n)
+    ok = lags >= window_factor * taus
+    if not ok.any():
+        return max(1.0, float(taus[-1])), n - 1, False
+    m = int(np.argmax(ok))
+    return max(1.0, float(taus[m])), int(lags[m]), True
+
+
 def blocking_error(batch_means, min_blocks: int = 8) -> float:
     """Standard error of the mean of correlated batch means, by blocking.
 
@@ -166,6 +301,7 @@ def blocking_error(batch_means, min_blocks: int = 8) -> float:
     ``std(blocks) / sqrt(n_blocks)`` is computed, and the largest is returned
     (it grows with the block length until blocks are independent).  With fewer
     than ``min_blocks`` batches the naive error of the batches is returned.
+    :func:`analyse_series` uses it as a floor under the autocorrelation error.
 
     Parameters
     ----------
@@ -193,30 +329,50 @@ def blocking_error(batch_means, min_blocks: int = 8) -> float:
     return best
 
 
-def initial_configuration(ring: Ring, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """Random start: ``N`` distinct cells drawn uniformly, all cars at rest.
+def initial_configuration(ring: Ring, seed: int, start: str = DEFAULT_START
+                          ) -> tuple[np.ndarray, np.ndarray]:
+    """A start configuration of the ring, cars in driving order.
 
-    Returns ``(positions, velocities)``, int64 arrays in driving order.
+    ``"random"``: ``N`` distinct cells drawn uniformly, all cars at rest.
+    ``"uniform"``: cars as evenly spaced as ``N`` and ``L`` allow (gaps
+    differ by at most one; the offset is drawn from ``seed``), each at
+    velocity ``min(gap, vmax)``, i.e. the p = 0 stationary state.  See
+    :func:`simulate` for which relaxes faster.
 
     Parameters
     ----------
     ring : Ring
     seed : int
+    start : {"random", "uniform"}
 
     Returns
     -------
     positions, velocities : int64 arrays
-        Cars in driving order, all at velocity 0.
+        Cars in driving order.
 
     Examples
     --------
-    >>> pos, vel = initial_configuration(Ring(10, 3, 2, 0.5), seed=1)
+    >>> pos, vel = initial_configuration(Ring(10, 3, 2, 0.5), seed=1, start="random")
     >>> len(pos), bool(np.all(np.diff(pos) > 0)), int(vel.sum())
     (3, True, 0)
+    >>> pos, vel = initial_configuration(Ring(10, 4, 2, 0.5), seed=0, start="uniform")
+    >>> sorted(((np.roll(pos, -1) - pos - 1) % 10).tolist()), sorted(vel.tolist())
+    ([1, 1, 2, 2], [1, 1, 2, 2])
     """
+    if start not in STARTS:
+        raise InvalidParameterError(f"start must be one of {', '.join(STARTS)}, got {start!r}")
     rng = np.random.Generator(np.random.PCG64(seed))
-    pos = np.sort(rng.choice(ring.length, size=ring.cars, replace=False)).astype(np.int64)
-    return pos, np.zeros(ring.cars, dtype=np.int64)
+    n, length = int(ring.cars), int(ring.length)
+    if start == "random":
+        pos = np.sort(rng.choice(length, size=n, replace=False)).astype(np.int64)
+        return pos, np.zeros(n, dtype=np.int64)
+    # car i at floor(i L / N): gaps floor or ceil of L / N - 1, exact integers
+    i = np.arange(n, dtype=np.int64)
+    # floor(i L / N) without overflowing int64 for L near 2**62
+    pos = i * (length // max(n, 1)) + (i * (length % max(n, 1))) // max(n, 1)
+    pos = np.sort((pos + int(rng.integers(length))) % length) if n else pos
+    gap = (np.roll(pos, -1) - pos - 1) % length if n > 1 else np.full(n, length - 1)
+    return pos, np.minimum(gap, ring.vmax).astype(np.int64)
 
 
 def _ensure_configuration(ring: Ring, positions, velocities) -> tuple[np.ndarray, np.ndarray]:
@@ -354,6 +510,92 @@ def evolve(ring: Ring, positions, velocities, steps: int, seed: int = 0):
     return pos[order], vel[order]
 
 
+class SeriesAnalysis(NamedTuple):
+    """What :func:`analyse_series` finds in one run's block series."""
+
+    cut: int            # leading blocks dropped (MSER)
+    mean: float         # weighted mean of the kept blocks
+    error: float        # 1-sigma error of that mean, sqrt(tau var / n)
+    tau: float          # integrated autocorrelation time, in blocks
+    reasons: tuple      # why the error bar is not to be trusted; () when it is
+
+
+def analyse_series(series, weights=None, truncate: bool = True) -> SeriesAnalysis:
+    """Warm-up cut, mean, error bar and honesty checks of one run's block series.
+
+    1. ``truncate``: drop the first :func:`mser_truncation` blocks.
+    2. Mean of the rest (weighted by ``weights``, the block lengths) and its
+       error ``sqrt(tau var / n)``, ``tau`` from
+       :func:`integrated_autocorrelation_time` (at least what
+       :func:`blocking_error` with 32 or more blocks implies), with the
+       difference of the two halves' means added in quadrature.
+    3. The bar is flagged (``reasons`` non-empty) when the kept series holds
+       fewer than :data:`MIN_TAU_MULTIPLE` autocorrelation times or the
+       window did not converge (then ``tau`` itself is too uncertain), when
+       MSER's optimum is at the end of its search (the transient may last
+       beyond half the run), or when the means of the first 20 % and the last
+       50 % of the kept series differ by more than :data:`DRIFT_Z` of their
+       combined error (a trend that the cut did not remove; Geweke 1992).
+
+    Parameters
+    ----------
+    series : sequence of float
+    weights : sequence of float, optional
+    truncate : bool
+        False: keep every block (an explicit warm-up was run before).
+
+    Returns
+    -------
+    SeriesAnalysis
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(1)
+    >>> a = analyse_series(np.r_[np.zeros(30), 1 + 0.1 * rng.normal(size=1000)])
+    >>> a.cut, a.reasons, abs(a.mean - 1) < 3 * a.error
+    (30, (), True)
+    >>> analyse_series(np.linspace(0, 1, 1000)).reasons[0]
+    'the transient may last beyond half the run (MSER cut at the limit)'
+    """
+    y = np.asarray(series, dtype=float)
+    w = np.ones_like(y) if weights is None else np.asarray(weights, dtype=float)
+    n = len(y)
+    reasons = []
+    cut = mser_truncation(y) if truncate else 0
+    if truncate and n >= 4 and cut == n // 2:
+        reasons.append("the transient may last beyond half the run (MSER cut at the limit)")
+    z, wz = y[cut:], w[cut:]
+    mean = float(np.dot(z, wz) / wz.sum())
+    tau, _, converged = integrated_autocorrelation_time(z)
+    k = len(z)
+    var = float(np.var(z, ddof=1)) if k > 1 else 0.0
+    if var > 0:
+        # Sokal's window misses a small, slow tail of the correlations (jams
+        # that live long); blocking sees it as an error still growing with the
+        # block length, so the larger of the two is kept.
+        tau = max(tau, k * blocking_error(z, BLOCKING_MIN_BLOCKS) ** 2 / var)
+    error = math.sqrt(tau * var / k)
+    if k >= 4:
+        # A slow relaxation (jams coarsening after the start) leaves a trend
+        # far below the noise of one block that MSER cannot see, yet it biases
+        # the mean.  For a bias decaying like t^-1/2 the mean's remaining bias
+        # is 1.2x the difference between the halves' means, so that
+        # difference enters in quadrature.  On stationary data it is a
+        # N(0, 2 sigma) number: the bar grows about 2x there, the price of
+        # covering the relaxing runs (benchmarks/mc_coverage.py).
+        trend = abs(float(z[:k // 2].mean() - z[k // 2:].mean()))
+        error = math.hypot(error, trend)
+    if not converged or k < MIN_TAU_MULTIPLE * tau:
+        reasons.append(f"too short: {k} kept blocks are {k / tau:.0f} autocorrelation times"
+                       f" (tau = {tau:.1f} blocks; at least {MIN_TAU_MULTIPLE} needed)")
+    head, tail = z[:max(1, k // 5)], z[k - max(1, k // 2):]
+    spread = math.sqrt(tau * var * (1 / len(head) + 1 / len(tail)))
+    if spread > 0 and abs(head.mean() - tail.mean()) > DRIFT_Z * spread:
+        reasons.append(f"drift: the first 20 % and the last 50 % of the kept series differ by"
+                       f" {abs(head.mean() - tail.mean()) / spread:.1f} sigma")
+    return SeriesAnalysis(cut, mean, error, tau, tuple(reasons))
+
+
 @dataclass(frozen=True)
 class SimulationResult:
     """Monte Carlo estimate of the stationary flux and velocity densities.
@@ -361,17 +603,41 @@ class SimulationResult:
     Attributes
     ----------
     length, cars, vmax, p, update : the simulated system
-    steps, warmup, batches, seed : the run
+    steps : int
+        Recorded time steps per replica (the MSER cut is taken from them).
+    warmup : int
+        Time steps run before recording (0 with the automatic warm-up).
+    batches : int
+        Blocks the recorded steps of each replica were split into.
+    seed : int
     flux : float
-        Mean of the batch fluxes (cars passing a bond per time step).
+        Time average over the kept blocks of all replicas.
     flux_error : float
-        Standard error of that mean from batch means (1 sigma).
+        Its 1-sigma error (integrated autocorrelation time; replica spread).
     c_v : (vmax + 1,) float array
-        Fraction of cells holding a car of velocity ``v``, averaged over the run.
+        Fraction of cells holding a car of velocity ``v``, over the kept steps.
     batch_fluxes : (replicas * batches,) float array
+        Every recorded block's flux, cut ones included, replica after replica.
     seconds : float
         Wall time of warm-up plus measurement.
     replicas : int
+    reliable : bool
+        False when any check of :func:`analyse_series` failed for a replica,
+        replicas disagree beyond their bars, or the dynamics is deterministic:
+        then ``flux_error`` is not an honest 1-sigma bar.
+    warning : str or None
+        Why not (the first reasons), None when reliable.
+    warmup_used : int
+        Largest number of steps discarded in a replica (``warmup`` plus the
+        MSER cut).
+    measured_steps : int
+        Kept steps, all replicas together.
+    tau_int : float
+        Largest integrated autocorrelation time over the replicas, in time
+        steps (block time times block length: an upper bound when it is
+        below a block).
+    start : str
+        The start configuration.
     """
 
     length: int
@@ -390,6 +656,12 @@ class SimulationResult:
     batch_fluxes: np.ndarray = field(repr=False, compare=False)
     seconds: float = field(compare=False)
     replicas: int = 1
+    reliable: bool = True
+    warning: str | None = None
+    warmup_used: int = 0
+    measured_steps: int = 0
+    tau_int: float = 1.0
+    start: str = DEFAULT_START
 
     @property
     def density(self) -> float:
@@ -417,9 +689,16 @@ class SimulationResult:
         return d
 
 
+def _replica_seed(seed: int, r: int) -> int:
+    # Replica 0 uses the seed itself (replicas=1 is the plain run); the others
+    # derive theirs from (seed, r), independent of everything else.
+    return int(seed) if r == 0 else int(
+        np.random.SeedSequence([int(seed), r]).generate_state(1, np.uint64)[0])
+
+
 def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
              batches: int = DEFAULT_BATCHES, initial=None, replicas: int = 1,
-             max_memory: float | None = None) -> SimulationResult:
+             max_memory: float | None = None, start: str = DEFAULT_START) -> SimulationResult:
     """Monte Carlo estimate of the stationary flux of a (large) ring.
 
     Parameters
@@ -427,94 +706,150 @@ def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
     ring : Ring
         The system; any size (cost ``O(N)`` per time step).
     steps : int
-        Measured time steps, at least ``batches``.
+        Recorded time steps per replica.
     warmup : int, optional
-        Time steps discarded first; default ``steps // 10``.
+        None (default): automatic, the run is recorded from its start and the
+        warm-up is cut from the data (:func:`mser_truncation`).  An integer:
+        that many steps are run first and every recorded step is kept.
     seed : int
         Seed (``0 <= seed < 2**64``); the same seed gives identical results.
     batches : int
-        Number of batches for the batch-means error bar (>= 2); blocking
-        merges them down to 8 (see :func:`blocking_error`).
+        Blocks of the recorded series (>= 2; at most one per step, and fewer
+        when ``vmax`` is so large that their velocity histograms would need
+        more than 64 MiB).
     initial : (positions, velocities), optional
-        Start configuration; default :func:`initial_configuration` (random
-        cells, cars at rest, drawn from ``seed``).
+        Start configuration; default :func:`initial_configuration` of kind
+        ``start``, drawn from the replica's seed.
     replicas : int
-        Independent runs (own random start and stream each, ``warmup + steps``
-        steps each); the error bar is the larger of the combined within-run
-        error and the between-run standard error.  Use several near the flux
-        maximum, where correlations outlive a run.
+        Independent runs (own start and stream each); the error bar is the
+        larger of the combined within-run error and the between-run standard
+        error, and replicas that disagree beyond their bars (chi-square,
+        0.1 % level) flag the result.
     max_memory : float, optional
         Bytes allowed (default 75 % of physical memory); a larger ring is
         refused before anything is allocated (:func:`simulation_bytes`).
+    start : {"random", "uniform"}
+        Start configuration (:func:`initial_configuration`); random (the
+        default) relaxes faster, see the module notes.
 
     Returns
     -------
     SimulationResult
+        Check ``reliable`` (and ``warning``) before trusting ``flux_error``.
 
     Notes
     -----
+    Each replica records the flux of every block (``distance moved / (L *
+    block length)``).  :func:`analyse_series` cuts the warm-up (MSER), takes
+    the error from the integrated autocorrelation time of the kept block
+    means (plus, in quadrature, the difference of the two halves' means: a
+    trend too slow for the other checks), and flags runs too short
+    for it (fewer than :data:`MIN_TAU_MULTIPLE` autocorrelation times), with
+    a transient that outlasts half the run, or with a drift between the first
+    and last part.  The flux is the average of the kept
+    blocks of all replicas, weighted by their lengths:
+
     .. math:: f = \\frac{1}{L T} \\sum_{t} \\sum_j v_j(t), \\qquad
-              \\sigma_f = \\operatorname{std}(f_b) / \\sqrt{B}
+              \\sigma_f^2 = \\tau_{int} \\operatorname{var}(f_b) / n_b
+
+    The coverage of this bar (how often the long-run value lies inside it) is
+    measured by ``benchmarks/mc_coverage.py`` (``docs/validation.md``).
 
     For ``p = 0`` or ``p = 1`` the dynamics is deterministic and the result
-    depends on the initial configuration (there is no unique stationary state).
+    depends on the initial configuration (there is no unique stationary
+    state); it is flagged.
 
     Examples
     --------
-    >>> r = simulate(Ring(1000, 200, 2, 0.5), steps=2000, seed=3)
-    >>> abs(r.flux - 0.238) < 0.005 and r.flux_error < 0.002
+    >>> r = simulate(Ring(1000, 200, 2, 0.5), steps=4000, seed=3)
+    >>> r.reliable and abs(r.flux - 0.238) < 4 * r.flux_error < 0.01
     True
     """
     steps = _ensure_steps("steps", steps, 1)
     batches = _ensure_steps("batches", batches, 2)
     replicas = _ensure_steps("replicas", replicas, 1)
-    if steps < batches:
-        raise InvalidParameterError(
-            f"steps must be at least the number of batches ({batches}), got {steps}")
+    if start not in STARTS:
+        raise InvalidParameterError(f"start must be one of {', '.join(STARTS)}, got {start!r}")
     if initial is not None and replicas > 1:
         raise InvalidParameterError("an initial configuration allows only replicas = 1")
-    warmup = steps // 10 if warmup is None else _ensure_steps("warmup", warmup, 0)
+    auto = warmup is None
+    warmup = 0 if auto else _ensure_steps("warmup", warmup, 0)
     _rng_state(seed)   # validates the seed before any work
     ensure_simulation_fits(ring, max_memory)
-    start = time.perf_counter()
-    fluxes, errors, all_batches = [], [], []
-    counts = np.zeros(ring.vmax + 1, dtype=np.int64)
-    # One tick per warm-up and per batch; drawn only on a terminal (stderr).
-    bar = progress_bar(replicas * (batches + 1), "simulate", "batch")
+    # velocities never exceed the largest gap, L - N: histograms need no more
+    width = min(int(ring.vmax), max(0, int(ring.length) - int(ring.cars))) + 1
+    blocks = max(1, min(batches, steps, _SNAPSHOT_BYTES // (8 * width) - 1))
+    # Block b covers steps [edges[b], edges[b+1]); sizes differ by at most one.
+    edges = np.linspace(0, steps, blocks + 1).astype(np.int64)
+    sizes = np.diff(edges)
+    start_time = time.perf_counter()
+    results, all_blocks = [], []
+    kept_counts = np.zeros(ring.vmax + 1, dtype=np.int64)
+    # One tick per warm-up and per block; drawn only on a terminal (stderr).
+    bar = progress_bar(replicas * (blocks + 1), "simulate", "block")
     for r in range(replicas):
-        # Replica 0 uses the seed itself (replicas=1 is the plain run); the
-        # others derive theirs from (seed, r), independent of everything else.
-        rs = int(seed) if r == 0 else int(
-            np.random.SeedSequence([int(seed), r]).generate_state(1, np.uint64)[0])
+        rs = _replica_seed(seed, r)
         rng = _rng_state(rs)
         if initial is None:
-            pos, vel = initial_configuration(ring, rs)
+            pos, vel = initial_configuration(ring, rs, start)
         else:
             pos, vel = _ensure_configuration(ring, *initial)
-        _advance(ring, pos, vel, warmup, rng, np.zeros(ring.vmax + 1, dtype=np.int64))
+        counts = np.zeros(ring.vmax + 1, dtype=np.int64)
+        _advance(ring, pos, vel, warmup, rng, counts)
         bar.update(1)
-        # Batch b covers steps [edges[b], edges[b+1]); sizes differ by at most one.
-        edges = np.linspace(0, steps, batches + 1).astype(np.int64)
-        bf = np.empty(batches)
-        for b in range(batches):
-            n = int(edges[b + 1] - edges[b])
-            bf[b] = _advance(ring, pos, vel, n, rng, counts) / (ring.length * n)
+        # cumulative velocity histogram after each block, to count the kept part only
+        snaps = np.zeros((blocks + 1, width), dtype=np.int64)
+        counts[:] = 0
+        bf = np.empty(blocks)
+        for b in range(blocks):
+            bf[b] = _advance(ring, pos, vel, int(sizes[b]), rng, counts) / (
+                ring.length * int(sizes[b]))
+            snaps[b + 1] = counts[:width]
             bar.update(1)
-        # Weighted by batch length so the estimate is the plain time average.
-        fluxes.append(float(np.dot(bf, np.diff(edges)) / steps))
-        errors.append(blocking_error(bf))
-        all_batches.append(bf)
+        a = analyse_series(bf, sizes, truncate=auto)
+        kept_counts[:width] += snaps[-1] - snaps[a.cut]
+        results.append((a, int(steps - edges[a.cut])))
+        all_blocks.append(bf)
     bar.close()
-    seconds = time.perf_counter() - start
-    flux = float(np.mean(fluxes))
-    # Within-run errors combined; with replicas, also the spread between them,
-    # which sees correlations longer than one run (the larger one is kept).
-    error = math.sqrt(sum(e * e for e in errors)) / replicas
+    seconds = time.perf_counter() - start_time
+    kept = np.array([k for _, k in results], dtype=float)
+    means = np.array([a.mean for a, _ in results])
+    errs = np.array([a.error for a, _ in results])
+    flux = float(np.dot(kept, means) / kept.sum())
+    error = float(math.sqrt(np.dot(kept ** 2, errs ** 2)) / kept.sum())
+    reasons = [f"replica {r}: {why}" if replicas > 1 else why
+               for r, (a, _) in enumerate(results) for why in a.reasons]
     if replicas > 1:
-        error = max(error, float(np.std(fluxes, ddof=1) / math.sqrt(replicas)))
-    fluxes = np.concatenate(all_batches)
-    # counts holds N entries per measured time step for both update orders.
-    c_v = counts / (replicas * steps * ring.length)
+        # the spread between runs sees correlations longer than one run
+        error = max(error, float(np.std(means, ddof=1) / math.sqrt(replicas)))
+        reasons += _replica_disagreement(means, errs)
+    if ring.cars in (0, ring.length):
+        reasons = []     # nothing moves (or nobody can): the flux is exactly 0
+        flux, error = 0.0, 0.0
+    elif float(ring.p) in (0.0, 1.0):
+        reasons.insert(0, f"p = {float(ring.p):g} is deterministic: the result depends on the"
+                          " start configuration")
+    c_v = kept_counts / (kept.sum() * ring.length)
+    tau_steps = max(a.tau * float(np.mean(sizes[a.cut:])) for a, _ in results)
+    warmup_used = warmup + max(int(edges[a.cut]) for a, _ in results)
     return SimulationResult(ring.length, ring.cars, ring.vmax, float(ring.p), ring.update,
-                            steps, warmup, batches, int(seed), flux, error, c_v, fluxes,
-                            seconds, replicas)
+                            steps, warmup, blocks, int(seed), flux, error, c_v,
+                            np.concatenate(all_blocks), seconds, replicas,
+                            reliable=not reasons, warning="; ".join(reasons[:3]) or None,
+                            warmup_used=warmup_used, measured_steps=int(kept.sum()),
+                            tau_int=float(tau_steps), start=start)
+
+
+def _replica_disagreement(means: np.ndarray, errors: np.ndarray) -> list[str]:
+    """A reason when replica means scatter more than their bars allow (chi-square test)."""
+    if np.any(errors <= 0):
+        return [] if np.ptp(means) == 0 else ["replicas differ although each has no spread"]
+    from scipy.stats import chi2
+
+    w = 1 / errors ** 2
+    centre = float(np.dot(w, means) / w.sum())
+    stat = float(np.dot(w, (means - centre) ** 2))
+    k = len(means) - 1
+    if stat > chi2.ppf(1 - DISAGREEMENT_LEVEL, k):
+        return [f"replicas disagree: chi-square {stat:.1f} for {k} degrees of freedom"]
+    return []

@@ -28,8 +28,15 @@ from markov.ring import PARALLEL, Ring
 
 from .rings import density_fraction
 
-__all__ = ["parse_budget", "predicted_classes", "predicted_seconds", "lengths_within_budget",
-           "MAX_BUDGET_LENGTH"]
+__all__ = ["parse_budget", "predicted_classes", "predicted_seconds", "predicted_bytes",
+           "lengths_within_budget", "choose_lengths", "MAX_BUDGET_LENGTH", "DEFAULT_BUDGET"]
+
+#: Seconds of exact solving per density and ``p`` when neither ring lengths nor
+#: a budget are given: the one default ring choice of ``table``, ``study`` and
+#: ``plot`` (:func:`choose_lengths`).  At vmax 2, p 0.5 it picks L = 12..24 at
+#: c = 1/4 (4.8 s predicted), whose extrapolation 0.2414 +- 0.0073 covers Monte
+#: Carlo's 0.2472; the rings L <= 16 gave 0.2337 +- 0.0094, which does not.
+DEFAULT_BUDGET = 10.0
 
 #: Longest ring :func:`lengths_within_budget` considers (vmax = 1 reaches
 #: L = 24 at half filling in under a minute; beyond 40 no density fits).
@@ -137,6 +144,33 @@ def predicted_seconds(length: int, cars: int, vmax: int, p: float,
     return seconds * (_SEQUENTIAL_FACTOR if update != PARALLEL else 1.0)
 
 
+def predicted_bytes(length: int, cars: int, vmax: int, p: float,
+                    update: str = PARALLEL) -> float:
+    """Predicted peak bytes of one exact solve (the solver ``auto`` picks, matrix-free).
+
+    The chain's own memory model (:mod:`markov.memory`) per predicted rotation class.
+
+    Parameters
+    ----------
+    length, cars, vmax : int
+    p : float
+    update : str
+
+    Returns
+    -------
+    float
+    """
+    from markov import memory
+    from markov.chain import AGGREGATION_MAX_P
+
+    if cars in (0, length):
+        return 0.0
+    method = "aggregation" if update == PARALLEL and p <= AGGREGATION_MAX_P else "bicgstab"
+    per_state = (memory.factored_bytes_per_state(method) if update == PARALLEL
+                 else memory.rows_bytes_per_state(method))
+    return predicted_classes(length, cars, vmax, update) * per_state
+
+
 def _solvable(length: int, cars: int, vmax: int, update: str) -> bool:
     """Whether the exact solver can represent the ring at all (64-bit keys and words)."""
     from markov.chain import representable
@@ -146,8 +180,12 @@ def _solvable(length: int, cars: int, vmax: int, update: str) -> bool:
 
 def lengths_within_budget(vmax: int, p: float, density, budget: float, count: int = 4,
                           update: str = PARALLEL, shortest: int = 4,
-                          longest: int = MAX_BUDGET_LENGTH) -> list[int]:
+                          longest: int = MAX_BUDGET_LENGTH,
+                          max_memory: float | None = None) -> list[int]:
     """The ``count`` largest ring lengths of a density that together fit the budget.
+
+    Each ring must also fit the memory limit on its own (:func:`predicted_bytes`),
+    so a huge budget stops at the largest ring this machine can hold.
 
     Parameters
     ----------
@@ -162,6 +200,9 @@ def lengths_within_budget(vmax: int, p: float, density, budget: float, count: in
         How many rings (consecutive commensurate lengths, the largest that fit).
     shortest, longest : int
         Range of lengths considered.
+    max_memory : float, optional
+        Bytes one ring may use; default 75 % of physical memory
+        (:func:`markov.memory.memory_limit`).
 
     Returns
     -------
@@ -180,9 +221,17 @@ def lengths_within_budget(vmax: int, p: float, density, budget: float, count: in
     >>> len(Ls), all(L % 2 == 0 for L in Ls), Ls == sorted(Ls)
     (4, True, True)
     """
+    from markov.memory import memory_limit
+
     c = density_fraction(density)
-    candidates = [L for L in range(max(shortest, c.denominator), longest + 1)
-                  if (c * L).denominator == 1 and _solvable(L, int(c * L), vmax, update)]
+    limit = memory_limit(max_memory)
+    candidates = []
+    for L in range(max(shortest, c.denominator), longest + 1):
+        if (c * L).denominator != 1 or not _solvable(L, int(c * L), vmax, update):
+            continue
+        if predicted_bytes(L, int(c * L), vmax, p, update) > limit:
+            break  # the memory only grows with L
+        candidates.append(L)
     if len(candidates) <= count:
         return candidates
     cost = [predicted_seconds(L, int(c * L), vmax, p, update) for L in candidates]
@@ -198,3 +247,41 @@ def lengths_within_budget(vmax: int, p: float, density, budget: float, count: in
             f" a budget of {budget:g} s (predicted {sum(cost[:count]):.3g} s)")
     return candidates[best - count:best]
 
+
+
+def choose_lengths(vmax: int, p: float, density, budget: float | None = None, *,
+                   order: int = 2, update: str = PARALLEL, announce: bool = True) -> list[int]:
+    """The rings of one density for the ``L -> inf`` extrapolation, by budget.
+
+    The one ring choice of ``nasch table``, ``nasch study`` and ``nasch plot``
+    when no ring lengths are given: the ``order + 2`` largest rings that fit
+    ``budget`` (default :data:`DEFAULT_BUDGET`) and the memory limit
+    (:func:`lengths_within_budget`).  With ``announce`` one line on stderr
+    says which, before anything is solved.
+
+    Parameters
+    ----------
+    vmax : int
+    p : float
+    density : float or Fraction
+    budget : float, optional
+        Seconds for the rings of this density and ``p``.
+    order : int
+        Order of the 1/L series the rings are for.
+    update : str
+    announce : bool
+
+    Returns
+    -------
+    list of int
+    """
+    import sys
+
+    budget = DEFAULT_BUDGET if budget is None else budget
+    lengths = lengths_within_budget(vmax, p, density, budget, count=order + 2, update=update)
+    if announce:
+        c = density_fraction(density)
+        seconds = sum(predicted_seconds(L, int(c * L), vmax, p, update) for L in lengths)
+        print(f"rings for c = {c}, p = {p:g}: L = {', '.join(map(str, lengths))}"
+              f" (predicted {seconds:.3g} s of a {budget:g} s budget)", file=sys.stderr)
+    return lengths

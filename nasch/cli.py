@@ -30,7 +30,7 @@ _LAZY = {
             "Elementary Garden of Eden patterns (exhaustive) or a ring's GoE census."),
     "plot": ("nasch.commands.plot", "plot", "Figures (PNG or PDF, by the file extension)."),
     "simulate": ("nasch.commands.simulate", "simulate",
-                 "Monte Carlo flux of a large ring, with a batch-means error bar."),
+                 "Monte Carlo flux of a large ring, with an autocorrelation error bar."),
     "solve": ("nasch.commands.solve", "solve",
               "Exact stationary state of one ring: flux, c_v, gap distribution."),
     "study": ("nasch.commands.study", "study",

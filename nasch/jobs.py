@@ -48,7 +48,10 @@ class ExactJob(NamedTuple):
 
 
 class MonteCarloJob(NamedTuple):
-    """A simulation of one large ring: ``replicas`` runs of ``steps`` after ``warmup``."""
+    """A simulation of one large ring: ``replicas`` runs of ``steps`` after ``warmup``.
+
+    ``warmup`` None: automatic (cut from the recorded steps by MSER).
+    """
 
     length: int
     cars: int
@@ -56,7 +59,7 @@ class MonteCarloJob(NamedTuple):
     p: float
     update: str
     steps: int
-    warmup: int
+    warmup: int | None
     seed: int
     replicas: int = 1
 
@@ -72,13 +75,19 @@ class ExactResult(NamedTuple):
 
 
 class MonteCarloResult(NamedTuple):
-    """What a :class:`MonteCarloJob` gives: the flux and its 1-sigma error."""
+    """What a :class:`MonteCarloJob` gives: the flux, its 1-sigma error, whether it is honest.
+
+    ``reliable`` False: the run was too short for its bar; ``warning`` says why
+    (:attr:`markov.montecarlo.SimulationResult.warning`).
+    """
 
     flux: float
     error: float
     length: int
     steps: int
     replicas: int
+    reliable: bool = True
+    warning: str | None = None
 
 
 def job_ring(job: ExactJob | MonteCarloJob) -> Ring:
@@ -122,7 +131,7 @@ def point_seed(seed: int, density: Fraction, vmax: int, p: float,
 
 
 def monte_carlo_job(density: Fraction, vmax: int, p: float, *, update: str = PARALLEL,
-                    mc_length: int, steps: int, warmup: int, replicas: int = 1,
+                    mc_length: int, steps: int, warmup: int | None, replicas: int = 1,
                     seed: int = 0) -> MonteCarloJob:
     """The Monte Carlo job of a point: its ring (:func:`mc_ring`) and seed (:func:`point_seed`).
 
@@ -135,6 +144,7 @@ def monte_carlo_job(density: Fraction, vmax: int, p: float, *, update: str = PAR
     mc_length : int
         Smallest ring length.
     steps, warmup, replicas : int
+        ``warmup`` None: automatic.
     seed : int
         Base seed.
 
@@ -143,7 +153,8 @@ def monte_carlo_job(density: Fraction, vmax: int, p: float, *, update: str = PAR
     MonteCarloJob
     """
     length, cars = mc_ring(density, mc_length)
-    return MonteCarloJob(length, cars, int(vmax), float(p), update, int(steps), int(warmup),
+    return MonteCarloJob(length, cars, int(vmax), float(p), update, int(steps),
+                         None if warmup is None else int(warmup),
                          point_seed(seed, density, vmax, p, update), int(replicas))
 
 
@@ -163,7 +174,8 @@ def run_job(job: ExactJob | MonteCarloJob) -> ExactResult | MonteCarloResult:
 
         r = simulate(job_ring(job), steps=job.steps, warmup=job.warmup, seed=job.seed,
                      replicas=job.replicas)
-        return MonteCarloResult(r.flux, r.flux_error, job.length, job.steps, job.replicas)
+        return MonteCarloResult(r.flux, r.flux_error, job.length, job.steps, job.replicas,
+                                r.reliable, r.warning)
     from markov.chain import solve
     from markov.goe_census import recurrent_class_bound
 
@@ -210,7 +222,7 @@ def job_cost(job: ExactJob | MonteCarloJob) -> float:
 
         return predicted_seconds(*job)
     rate = _PARALLEL_RATE if job.update == PARALLEL else _SEQUENTIAL_RATE
-    return job.cars * (job.steps + job.warmup) * job.replicas / rate
+    return job.cars * (job.steps + (job.warmup or 0)) * job.replicas / rate
 
 
 def preflight(jobs) -> None:
@@ -235,7 +247,7 @@ def preflight(jobs) -> None:
 
 
 def ensure_mc_steps(mc_steps) -> int:
-    """Monte Carlo steps of a table or figure: 0 (none) or at least one per batch.
+    """Monte Carlo steps of a table or figure: 0 (none) or at least ``MIN_STEPS``.
 
     Parameters
     ----------
@@ -248,13 +260,13 @@ def ensure_mc_steps(mc_steps) -> int:
     Raises
     ------
     InvalidParameterError
-        Between 1 and :data:`markov.montecarlo.DEFAULT_BATCHES` - 1.
+        Between 1 and :data:`markov.montecarlo.MIN_STEPS` - 1.
     """
-    from markov.montecarlo import DEFAULT_BATCHES
+    from markov.montecarlo import MIN_STEPS
 
     mc_steps = ensure_int("mc_steps", mc_steps, 0)
-    if 0 < mc_steps < DEFAULT_BATCHES:
+    if 0 < mc_steps < MIN_STEPS:
         raise InvalidParameterError(
-            f"mc_steps must be 0 (no Monte Carlo) or at least {DEFAULT_BATCHES} (one step per"
-            f" batch of the error bar), got {mc_steps}")
+            f"mc_steps must be 0 (no Monte Carlo) or at least {MIN_STEPS} (shorter runs never"
+            f" give an honest error bar), got {mc_steps}")
     return mc_steps

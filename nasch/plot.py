@@ -59,7 +59,7 @@ _MARKERS = ("o", "s", "^", "v", "<", ">", "p", "h")
 
 
 def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
-                     extrapolation_lengths: Sequence[int] = tuple(range(8, 17)),
+                     extrapolation_lengths: Sequence[int] | None = None,
                      extrapolation_densities: Sequence[Fraction] = EXTRAPOLATION_DENSITIES,
                      order: int = 2, methods: Sequence[str] = ("pmf", "mf", "cluster2"),
                      curve_points: int = 120, mc_length: int = 3000, mc_steps: int = 2000,
@@ -76,9 +76,10 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
         (all computed in one fan-out, so one cluster start-up).
     lengths : sequence of int
         Rings whose exact flux is shown for every ``0 < N < L``.
-    extrapolation_lengths : sequence of int
+    extrapolation_lengths : sequence of int, optional
         Candidate rings for the extrapolation (those commensurate with each
-        density are used); ignored with ``budget``.
+        density are used).  Default: the rings ``nasch table`` and ``nasch
+        study`` choose, by ``budget`` (:func:`nasch.budget.choose_lengths`).
     extrapolation_densities : sequence of Fraction
         Densities to extrapolate (those with at least ``order + 1`` rings).
     order : int
@@ -96,10 +97,17 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     serial, scheduler, client
         See :func:`nasch.sweep.run_jobs`.
     budget : float, optional
-        Seconds of exact solving per extrapolated density and panel: the
-        ``order + 2`` largest rings of each density that fit
-        (:func:`nasch.budget.lengths_within_budget`), instead of
+        Seconds of exact solving per extrapolated density and panel (default
+        :data:`nasch.budget.DEFAULT_BUDGET`): the ``order + 2`` largest rings of
+        each density that fit (:func:`nasch.budget.choose_lengths`), instead of
         ``extrapolation_lengths``.
+
+    Raises
+    ------
+    InvalidParameterError
+        Before any work: both ``extrapolation_lengths`` and ``budget``, or a
+        method that ``vmax`` does not support at its size (e.g. the 2-cluster
+        beyond vmax 5).
 
     Returns
     -------
@@ -127,7 +135,16 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     mc_length = ensure_int("mc_length", mc_length, 2)
     mc_points = ensure_int("mc_points", mc_points, 1)
     lengths = [ensure_int("ring length", L, 2) for L in lengths]
-    extrapolation_lengths = [ensure_int("ring length", L, 2) for L in extrapolation_lengths]
+    if extrapolation_lengths is not None and budget is not None:
+        raise InvalidParameterError("give either the extrapolation lengths or a budget")
+    # each curve once at one density: a method too large for vmax is refused
+    # here, not after the exact rings and Monte Carlo
+    for m in methods:
+        if supported(m, vmax):
+            approximate(m, vmax, ps[0], 0.5)
+    by_budget = extrapolation_lengths is None
+    extrapolation_lengths = [ensure_int("ring length", L, 2)
+                             for L in (extrapolation_lengths or ())]
     # Rings beyond the exact solver's 64-bit key are dropped with a notice, at once.
     longest = max_length(vmax)
     too_long = sorted({L for L in [*lengths, *extrapolation_lengths] if L > longest})
@@ -142,10 +159,10 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     for x in ps:
         groups[x] = {}
         for c in map(Fraction, extrapolation_densities):
-            if budget is not None:
-                from .budget import lengths_within_budget
+            if by_budget:
+                from .budget import choose_lengths
 
-                Ls = lengths_within_budget(vmax, x, c, budget, count=order + 2)
+                Ls = choose_lengths(vmax, x, c, budget, order=order)
             else:
                 Ls = commensurate_lengths(c, extrapolation_lengths)
             if len(Ls) >= order + 1:

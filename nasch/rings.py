@@ -8,6 +8,7 @@ Carlo ring of the density (:func:`mc_ring`) has it too.
 from __future__ import annotations
 
 import math
+import warnings
 from fractions import Fraction
 from typing import Sequence
 
@@ -91,7 +92,8 @@ def table_points(lengths: Sequence[int], cars: Sequence[int] | None = None,
                  densities: Sequence[float] | None = None) -> list[tuple[int, int]]:
     """The ``(L, N)`` rings of a table.
 
-    ``cars`` gives ``N`` directly (pairs with ``0 < N < L`` are kept);
+    ``cars`` gives ``N >= 1`` directly (pairs with ``N >= L`` are left out with a
+    :class:`RuntimeWarning`);
     ``densities`` keeps, for each density ``c``, the lengths with ``c L`` an
     integer (read ``c`` as the nearest fraction with denominator <= 1000), so
     that every ring of a density group has exactly that density and the group
@@ -122,7 +124,14 @@ def table_points(lengths: Sequence[int], cars: Sequence[int] | None = None,
             raise InvalidParameterError(f"ring lengths must be >= 2, got {L}")
     pts = set()
     if cars is not None:
-        pts = {(L, int(N)) for L in lengths for N in cars if 0 < int(N) < L}
+        cars = [int(N) for N in cars]
+        if min(cars, default=1) < 1:
+            raise InvalidParameterError(f"numbers of cars must be >= 1, got {min(cars)}")
+        pts = {(L, N) for L in lengths for N in cars if N < L}
+        full = sorted((L, N) for L in lengths for N in cars if N >= L)
+        if full and pts:   # said, not dropped in silence (none left: refused below)
+            warnings.warn(f"rings with N >= L left out: {', '.join(map(str, full))}",
+                          RuntimeWarning, stacklevel=2)
     else:
         for c in (densities if densities is not None else [0.5]):
             frac = density_fraction(c)

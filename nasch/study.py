@@ -10,9 +10,11 @@ For each point ``(vmax, p, c)`` of a grid:
   ``c`` (:class:`nasch.jobs.MonteCarloJob`), flux and 1-sigma error of
   :func:`markov.montecarlo.simulate`; this is the reference;
 * the ``L -> infinity`` extrapolation of the exact fluxes of the rings among
-  ``lengths`` with ``c L`` an integer and at most ``max_states`` rotation
-  classes (counted exactly first, :func:`markov.goe_census.recurrent_class_count`),
-  when three or more fit (:func:`nasch.extrapolate.extrapolate`, order 2).
+  rings ``nasch table`` chooses (:func:`nasch.budget.choose_lengths`: the largest
+  that fit a time budget per point), or of those among ``lengths`` with ``c L``
+  an integer and at most ``max_states`` rotation classes (counted exactly first,
+  :func:`markov.goe_census.recurrent_class_count`), when three or more fit
+  (:func:`nasch.extrapolate.extrapolate`, order 2).
 
 The deviation of a method is ``(f - f_MC) / f_MC``; ``best`` is the method
 with the smallest ``|deviation|``.  Rendered in the formats of ``nasch table``
@@ -295,11 +297,22 @@ class StudyTable(RenderedTable):
                          + [f"% {x}" for x in self.summary()]) + "\n"
 
 
-def _exact_rings(vmax: int, c: Fraction, lengths, max_states: int) -> list[tuple[int, int]]:
-    """Rings ``(L, c L)`` among ``lengths`` with at most ``max_states`` rotation classes."""
+def _exact_rings(vmax: int, p: float, c: Fraction, lengths, max_states: int, budget,
+                 order: int, notes: list) -> list[tuple[int, int]]:
+    """Rings ``(L, c L)``: among ``lengths`` with at most ``max_states`` rotation
+    classes, or (``lengths`` None) the choice of the table and the figure
+    (:func:`nasch.budget.choose_lengths`); a density without rings that fit gets a note."""
     from markov.goe_census import recurrent_class_count
 
+    from .budget import choose_lengths
 
+    if lengths is None:
+        try:
+            Ls = choose_lengths(vmax, p, c, budget, order=order)
+        except InvalidParameterError as exc:
+            notes.append(f"exact rings, vmax = {vmax}, p = {p:g}, c = {c}: {exc}")
+            return []
+        return [(L, int(c * L)) for L in Ls]
     out = []
     for L in commensurate_lengths(c, lengths):
         N = int(c * L)
@@ -311,9 +324,9 @@ def _exact_rings(vmax: int, c: Fraction, lengths, max_states: int) -> list[tuple
 def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequence[float],
                       methods: Sequence[str] = DEFAULT_METHODS, *, mc_length: int = 10000,
                       mc_steps: int = 5000, mc_replicas: int = 2,
-                      lengths: Sequence[int] = tuple(range(8, 17)), max_states: int = 300_000,
-                      order: int = 2, seed: int = 0, serial: bool | None = None,
-                      scheduler: str | None = None) -> StudyTable:
+                      lengths: Sequence[int] | None = None, budget: float | None = None,
+                      max_states: int = 300_000, order: int = 2, seed: int = 0,
+                      serial: bool | None = None, scheduler: str | None = None) -> StudyTable:
     """Fluxes of the approximations beside Monte Carlo and exact extrapolations.
 
     Parameters
@@ -326,10 +339,15 @@ def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequen
     mc_length, mc_steps, mc_replicas : int
         Monte Carlo ring (rounded up to match each density), steps per replica
         (plus ``mc_steps`` warm-up), independent replicas.
-    lengths : sequence of int
-        Candidate exact rings; ``()`` for none.
+    lengths : sequence of int, optional
+        Candidate exact rings; ``()`` for none.  Default: the rings ``nasch
+        table`` and ``nasch plot`` choose, by ``budget``
+        (:func:`nasch.budget.choose_lengths`).
+    budget : float, optional
+        Seconds of exact solving per point when ``lengths`` is None (default
+        :data:`nasch.budget.DEFAULT_BUDGET`).
     max_states : int
-        Largest exact ring, in rotation classes.
+        Largest exact ring among ``lengths``, in rotation classes.
     order : int
         Order of the ``1/L`` series of the extrapolation.
     seed : int
@@ -365,10 +383,13 @@ def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequen
     if int(mc_replicas) < 1 or int(mc_length) < 2:
         raise InvalidParameterError("mc_replicas must be >= 1 and mc_length >= 2")
 
-    jobs, points = [], []    # points[i]: (vmax, p, c) of jobs[i]
+    if lengths is not None and budget is not None:
+        raise InvalidParameterError("give either the ring lengths or a budget")
+    jobs, points, notes = [], [], []    # points[i]: (vmax, p, c) of jobs[i]
     for v in vmaxes:
-        rings = {c: _exact_rings(v, c, lengths, max_states) for c in fracs}
         for x in ps:
+            rings = {c: _exact_rings(v, x, c, lengths, max_states, budget, order, notes)
+                     for c in fracs}
             for c in fracs:
                 jobs.append(monte_carlo_job(c, v, x, mc_length=int(mc_length),
                                             steps=int(mc_steps), warmup=int(mc_steps),
@@ -386,7 +407,7 @@ def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequen
         elif math.isfinite(r.flux):   # a ring the solver refused is left out
             exact.setdefault(point, []).append((job.length, r.flux))
 
-    notes, approx = [], {}
+    approx = {}
     for v in vmaxes:
         for name in names:
             if not supported(name, v):
@@ -406,6 +427,9 @@ def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequen
         for x in ps:
             for c in fracs:
                 m = mc[v, x, c]
+                if not m.reliable:   # the reference itself has no honest bar: say so
+                    notes.append(f"Monte Carlo, vmax = {v}, p = {x:g}, c = {float(c):.4f}:"
+                                 f" no honest error bar ({m.warning}); use more --mc-steps")
                 ring = sorted(exact.get((v, x, c), []))
                 ext = (extrapolate([L for L, _ in ring], [f for _, f in ring], order=order)
                        if len(ring) >= order + 1 else None)

@@ -3,8 +3,9 @@
 One row per ring ``(p, L, N)``: the exact stationary flux and ``c_v`` of the
 finite chain, the mean-field (MF), paradisical mean-field (pMF, pMF2) and
 2-cluster fluxes at the same density ``c = N / L`` (from :mod:`symbolic`), and a
-Monte Carlo flux with its batch-means error bar on a large ring of exactly the
-same density.  For every density with enough ring sizes an extra row holds the
+Monte Carlo flux with its error bar on a large ring of exactly the same
+density (marked ``*`` where the run was too short for an honest bar).  For
+every density with enough ring sizes an extra row holds the
 ``L -> infinity`` extrapolation of the exact fluxes (:mod:`nasch.extrapolate`).
 
 The work (exact chains, Monte Carlo runs: :mod:`nasch.jobs`) fans out over
@@ -18,6 +19,7 @@ from __future__ import annotations
 import csv
 import io
 import textwrap
+import warnings
 from dataclasses import dataclass, field
 from fractions import Fraction
 from functools import lru_cache
@@ -77,6 +79,9 @@ class FluxRow:
         Monte Carlo flux of the density and its 1-sigma error.
     mc_length : int or None
         The simulated ring.
+    mc_reliable : bool or None
+        False: the run was too short for an honest bar (``mc_warning`` says why).
+    mc_warning : str or None
     """
 
     kind: str
@@ -92,6 +97,8 @@ class FluxRow:
     mc_flux: float | None = None
     mc_error: float | None = None
     mc_length: int | None = None
+    mc_reliable: bool | None = None
+    mc_warning: str | None = None
 
     def to_dict(self) -> dict:
         """The row as in ``nasch table --format json``: one key per approximation.
@@ -104,7 +111,8 @@ class FluxRow:
                 "density": self.density, "flux": self.flux, "flux_error": self.flux_error,
                 "c_v": None if self.c_v is None else list(self.c_v), "states": self.states,
                 **self.approximations, "mc_flux": self.mc_flux, "mc_error": self.mc_error,
-                "mc_length": self.mc_length}
+                "mc_length": self.mc_length, "mc_reliable": self.mc_reliable,
+                "mc_warning": self.mc_warning}
 
 
 # --- the table ---------------------------------------------------------------------
@@ -162,7 +170,7 @@ class FluxTable(RenderedTable):
         buf = io.StringIO()
         cols = (["kind", "p", "L", "N", "density", "flux_exact", "flux_exact_error"]
                 + [f"c_{v}" for v in range(self.vmax + 1)] + ["states"] + list(self.methods)
-                + ["mc_length", "mc_flux", "mc_error"])
+                + ["mc_length", "mc_flux", "mc_error", "mc_reliable"])
         w = csv.writer(buf, lineterminator="\n")
         w.writerow(cols)
         for r in self.rows:
@@ -173,7 +181,8 @@ class FluxTable(RenderedTable):
                        + ["" if r.states is None else r.states]
                        + [csv_number(r.approximations[m]) for m in self.methods]
                        + ["" if r.mc_length is None else r.mc_length, csv_number(r.mc_flux),
-                          csv_number(r.mc_error)])
+                          csv_number(r.mc_error),
+                          "" if r.mc_reliable is None else str(r.mc_reliable).lower()])
         return buf.getvalue()
 
     # -- human-readable
@@ -204,7 +213,9 @@ class FluxTable(RenderedTable):
                     row.append("")
                 else:
                     shown.add(group)
-                    row.append(plus_minus(r.mc_flux, r.mc_error, latex))
+                    # a bar the run could not back up is marked, never bare
+                    row.append(plus_minus(r.mc_flux, r.mc_error, latex)
+                               + ("" if r.mc_reliable is not False else "*"))
             body.append(row)
         return head, body, align
 
@@ -270,8 +281,11 @@ class FluxTable(RenderedTable):
         if self.mc_steps:
             parts.append(f"Monte Carlo: {self.mc_steps} steps per replica on a ring of the same"
                          " density (length in the JSON/CSV), shown once per density,"
-                         " 1-sigma error (batch means with"
-                         " blocking, and the spread of independent replicas)")
+                         " 1-sigma error (integrated autocorrelation time after an MSER"
+                         " warm-up cut, and the spread of independent replicas)")
+            if any(r.mc_reliable is False for r in self.rows):
+                parts.append("*: Monte Carlo run too short for an honest error bar (reason in"
+                             " the JSON, mc_warning); use more --mc-steps")
         return "; ".join(parts)
 
 
@@ -292,20 +306,22 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
     p : float or sequence of float
         Braking probabilities, each in ``(0, 1)``.
     lengths : sequence of int, optional
-        Ring lengths (or give ``budget``).
+        Ring lengths; default: chosen per density by ``budget``
+        (:func:`nasch.budget.choose_lengths`, the choice of the study and the figure).
     cars, densities : sequences, optional
         Numbers of cars, or densities (``N = round(c L)``); default half filling.
     budget : float, optional
-        Seconds of exact solving per density and ``p``, instead of ``lengths``:
-        the ``order + 2`` largest rings of each density that fit
-        (:func:`nasch.budget.lengths_within_budget`); needs ``densities``
-        (or the default half filling), not ``cars``.
+        Seconds of exact solving per density and ``p``, instead of ``lengths``
+        (default :data:`nasch.budget.DEFAULT_BUDGET`): the ``order + 2`` largest
+        rings of each density that fit time and memory
+        (:func:`nasch.budget.choose_lengths`, which names them on stderr);
+        needs ``densities`` (or the default half filling), not ``cars``.
     update : {"parallel", "random-sequential"}
     mc_steps : int
         Monte Carlo time steps per replica and (density, p); 0: no Monte Carlo.
     mc_warmup : int, optional
-        Discarded steps; default ``mc_steps // 2`` (a random start on a large
-        ring needs a while to form its jams).
+        Steps run before recording; default automatic (the warm-up is cut from
+        the recorded steps, :func:`markov.montecarlo.simulate`).
     mc_length : int
         Minimal Monte Carlo ring; the ring used is the smallest multiple of the
         density's denominator above it, so its density equals ``N / L`` exactly.
@@ -319,7 +335,8 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
         Approximation columns among :data:`APPROXIMATIONS` (undefined ones for
         this ``vmax`` are dropped).
     extrapolation : bool
-        Add an ``L = inf`` row per density with at least ``order + 1`` sizes.
+        Add an ``L = inf`` row per density with at least ``order + 1`` sizes
+        (a density with fewer gets a :class:`RuntimeWarning` instead).
     order : int
         Order of the ``1/L`` series (see :func:`nasch.extrapolate.extrapolate`).
     serial, scheduler, client, n_workers
@@ -343,22 +360,23 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
             raise InvalidParameterError(
                 f"unknown approximation {m!r}; allowed: {', '.join(APPROXIMATIONS)}")
     mc_steps = ensure_mc_steps(mc_steps)
-    mc_warmup = mc_steps // 2 if mc_warmup is None else ensure_int("mc_warmup", mc_warmup, 0)
+    mc_warmup = None if mc_warmup is None else ensure_int("mc_warmup", mc_warmup, 0)
     mc_length = ensure_int("mc_length", mc_length, 2)
     mc_replicas = ensure_int("mc_replicas", mc_replicas, 1)
     seed = ensure_int("seed", seed, 0)
     order = ensure_int("order", order, 1)
     n_workers = None if n_workers is None else ensure_int("n_workers", n_workers, 1)
     Ring(mc_length, 1, vmax, ps[0], update)  # validates vmax
-    if (lengths is None) == (budget is None):
+    if lengths is not None and budget is not None:
         raise InvalidParameterError("give either the ring lengths or a budget")
-    if budget is not None:
+    if lengths is None:
         if cars is not None:
-            raise InvalidParameterError("a budget chooses rings per density: give densities")
-        from .budget import lengths_within_budget
+            raise InvalidParameterError(
+                "a budget chooses rings per density: give densities (or ring lengths)")
+        from .budget import choose_lengths
 
         rings_of = {p_: sorted({pt for c in (densities or [0.5]) for pt in table_points(
-            lengths_within_budget(vmax, p_, c, budget, count=order + 2, update=update),
+            choose_lengths(vmax, p_, c, budget, order=order, update=update),
             densities=[c])}) for p_ in ps}
     else:
         rings = table_points(lengths, cars, densities)
@@ -386,7 +404,8 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
             group = [(L, N) for L, N in rings_of[p_] if Fraction(N, L) == c]
             approx = {m: _approximation(m, int(vmax), p_, float(c)) for m in methods}
             m = mc.get((c, p_))
-            mc_cells = dict(mc_flux=m.flux, mc_error=m.error, mc_length=m.length) if m else {}
+            mc_cells = dict(mc_flux=m.flux, mc_error=m.error, mc_length=m.length,
+                            mc_reliable=m.reliable, mc_warning=m.warning) if m else {}
             for L, N in group:
                 e = exact[(L, N, p_)]
                 rows.append(FluxRow("exact", p_, L, N, N / L, e.flux, 0.0, e.c_v, e.states,
@@ -396,4 +415,8 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
                                                          for L, N in group], order=order)
                 rows.append(FluxRow("extrapolated", p_, None, None, float(c), ex.f_inf,
                                     ex.error, None, None, approx, **mc_cells))
+            elif extrapolation:   # said, not dropped in silence
+                warnings.warn(f"no L = inf row for p = {p_:g}, c = {c}: {len(group)} ring(s),"
+                              f" an order-{order} fit needs {order + 1}", RuntimeWarning,
+                              stacklevel=2)
     return FluxTable(int(vmax), update, tuple(rows), methods, mc_steps, int(order))

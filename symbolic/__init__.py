@@ -2,13 +2,14 @@
 
 Methods (see ``docs/symbolic.md``):
 
-* ``"mf"``       site-oriented mean field, any ``vmax``;
+* ``"mf"``       site-oriented mean field, vmax <= 100 (a dense linear system);
 * ``"pmf"``      paradisical MF: Garden of Eden patterns of order 1 removed (vmax 1..6);
 * ``"pmf2"``     pMF also without the patterns of order 2 (vmax 2: ``(0,•,•,2)``);
 * ``"clusterN"`` N-cluster approximation, any ``N >= 1`` (``"cluster"`` with
   ``order=N``); the size is limited by the windows it needs (vmax 2: N <= 11,
   vmax 3: 9, vmax 4: 7, vmax 5: 6);
-* ``"comf"``     car-oriented mean field (independent (velocity, gap) of cars), any vmax.
+* ``"comf"``     car-oriented mean field (independent (velocity, gap) of cars), vmax <= 10
+  and densities c >= 0.005 (a banded system that grows like vmax^4 and 1 / c).
 
 Quick start
 -----------
@@ -39,6 +40,9 @@ APPROXIMATIONS = ("mf", "pmf", "pmf2", "cluster2", "cluster3", "cluster4", "clus
 # Sympy builds a cluster's equations with one product per transfer row: beyond
 # this many rows they take megabytes and minutes.
 _MAX_EQUATION_TERMS = 20_000
+# The MF equations are collected over all vmax + 1 unknowns: sympy takes 3 s at
+# vmax 20, 11 s at vmax 30 (measured), so they are printed up to 20.
+_MAX_MF_EQUATION_VMAX = 20
 
 #: Largest vmax for pMF: that of the automaton search for the GoE patterns
 #: (0.3-0.8 s up to vmax 5, 8 s for vmax 6, docs/goe.md).
@@ -178,6 +182,19 @@ class Approximation:
                 "c_v": np.asarray(self.c_v).tolist(), "flux": flux}
 
 
+def _ensure_size(base: str, vmax: int) -> None:
+    """Refuse, before any work, a vmax whose MF or COMF solve would not end in seconds."""
+    if base == "mf":
+        from .solve import MAX_MF_VMAX
+        if vmax > MAX_MF_VMAX:
+            raise InvalidParameterError(
+                f"MF is solved for vmax <= {MAX_MF_VMAX} (a dense (vmax + 1)^2 system per"
+                f" density), got vmax = {vmax}")
+    elif base == "comf":
+        from .comf import ensure_comf_size
+        ensure_comf_size(vmax)
+
+
 def _ensure_method(method, vmax, order) -> tuple[str, int | None, int]:
     base, order = _split(method, order)
     if isinstance(vmax, bool) or not isinstance(vmax, (int, np.integer)) or vmax < 1:
@@ -186,6 +203,7 @@ def _ensure_method(method, vmax, order) -> tuple[str, int | None, int]:
         raise InvalidParameterError(
             f"method {base!r} needs the GoE patterns, found for vmax <= {MAX_PMF_VMAX};"
             f" got vmax = {vmax}")
+    _ensure_size(base, int(vmax))
     return base, order, int(vmax)
 
 
@@ -212,8 +230,9 @@ def approximate(method: str, vmax: int, p: float, density, order: int | None = N
     Raises
     ------
     InvalidParameterError
-        Unknown method, unsupported ``vmax``, a cluster too large to enumerate,
-        ``p`` or ``density`` outside ``(0, 1)``.
+        Unknown method, unsupported ``vmax`` (MF: above 100, COMF: above 10),
+        a cluster too large to enumerate, ``p`` or ``density`` outside
+        ``(0, 1)``, COMF below ``c = 0.005``; all before any work.
 
     Examples
     --------
@@ -272,8 +291,8 @@ def equations(method: str, vmax: int, order: int | None = None) -> list:
     Raises
     ------
     InvalidParameterError
-        For a method not offered for ``vmax``, or a cluster whose equations
-        have more than 20,000 terms.
+        For a method not offered for ``vmax``, MF above vmax 20, or a cluster
+        or COMF whose equations have more than 20,000 terms.
 
     Examples
     --------
@@ -283,16 +302,26 @@ def equations(method: str, vmax: int, order: int | None = None) -> list:
     name = method_name(method, order)
     if not supported(name, vmax):
         raise InvalidParameterError(
-            f"method {name!r} is not available for vmax = {vmax!r} (mf, cluster, comf: any"
-            f" vmax >= 1; pmf, pmf2: 1..6)")
+            f"method {name!r} is not available for vmax = {vmax!r} (mf: 1..100, comf: 1..10,"
+            f" cluster: any vmax >= 1 up to its window limit; pmf, pmf2: 1..6)")
+    _ensure_size(name, int(vmax))
     if name == "mf":
+        if vmax > _MAX_MF_EQUATION_VMAX:
+            raise InvalidParameterError(
+                f"the MF equations are printed for vmax <= {_MAX_MF_EQUATION_VMAX} (sympy"
+                f" takes 11 s at vmax 30), got vmax = {vmax}")
         from .meanfield import mf_equations
         return mf_equations(vmax)
     if name in ("pmf", "pmf2"):
         from .paradisical import pmf_equations
         return pmf_equations(vmax, second_order=(name == "pmf2"))
     if name == "comf":
-        from .comf import comf_equations
+        from .comf import comf_equation_terms, comf_equations
+        terms = comf_equation_terms(vmax)
+        if terms > _MAX_EQUATION_TERMS:
+            raise InvalidParameterError(
+                f"the COMF equations for vmax = {vmax} have about {terms:,} terms; at most"
+                f" {_MAX_EQUATION_TERMS:,} are built (use a smaller vmax)")
         return comf_equations(vmax)
     from .cluster import cluster_equations, transfer
     n = int(name[len("cluster"):])

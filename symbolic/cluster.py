@@ -89,6 +89,10 @@ def _ensure_sizes(vmax, n) -> tuple[int, int]:
     for name, value, low in (("vmax", vmax, 1), ("cluster size", n, 1)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
             raise InvalidParameterError(f"{name} must be an integer >= {low}, got {value!r}")
+    if vmax + 2 > PAD:   # a cell is one byte (PAD ends a window): refused before enumerating
+        raise InvalidParameterError(
+            f"the {n}-cluster approximation is enumerated for vmax <= {PAD - 2} (one byte per"
+            f" cell; in practice the window limit stops it earlier), got vmax = {vmax}")
     return int(vmax), int(n)
 
 

@@ -55,7 +55,8 @@ from markov.validate import ensure_open_unit
 from .meanfield import gap_horizons
 
 __all__ = ["ComfState", "comf_state", "solve_comf", "comf_word_probability",
-           "comf_equations"]
+           "comf_equations", "comf_equation_terms", "ensure_comf_size", "MIN_COMF_DENSITY",
+           "MAX_COMF_VMAX"]
 
 _TAIL = 1e-15          # probability allowed beyond the gap cut
 # Largest residual of the outer equations accepted where rounding stops the descent:
@@ -63,6 +64,16 @@ _TAIL = 1e-15          # probability allowed beyond the gap cut
 _FLOOR = 1e-10
 _MAX_STEPS = 200       # self-consistency steps (4-20 needed where tried)
 _MAX_GAP = 2_000_000   # largest gap cut tried (c >= ~1e-5)
+
+#: Smallest density COMF is solved at: the gap cut grows like ``40 / c`` and the
+#: self-consistency slows with it (vmax 2, p 0.5: c = 0.005 in 3 s, 0.002 in
+#: 40 s, 0.001 over 2 minutes); c >= 0.005 is also the validated range.
+MIN_COMF_DENSITY = 0.005
+#: Largest vmax COMF is solved for: the banded matrix has about
+#: ``2 vmax (vmax + 1)`` diagonals on ``16 vmax (vmax + 1)`` states, so memory
+#: grows like ``256 vmax^4`` bytes and time like ``vmax^6`` (vmax 5: 0.2 s,
+#: vmax 10: 21 s at c = 0.25; vmax 100 would need 25 GB).
+MAX_COMF_VMAX = 10
 
 
 @lru_cache(maxsize=None)
@@ -336,6 +347,7 @@ def comf_state(vmax: int, p: float, c: float) -> ComfState:
         raise InvalidParameterError(f"vmax must be an integer >= 1, got {vmax!r}")
     vmax = int(vmax)
     p, c = ensure_open_unit("p", p), ensure_open_unit("density", c)
+    ensure_comf_size(vmax, c)
     # start: all moves equally likely (converged from several starts to the same point;
     # the MF solution would cost a sympy solve, 5 s for vmax 5)
     shape = np.full(vmax + 1, 1.0 / (vmax + 1))
@@ -353,6 +365,29 @@ def comf_state(vmax: int, p: float, c: float) -> ComfState:
     probs = x.reshape(cut + 1, vmax + 1)
     _, moved, _ = _operators(vmax, p, cut)
     return ComfState(vmax, p, c, cut, probs, moved @ x, residual)
+
+
+def ensure_comf_size(vmax: int, density=None) -> None:
+    """Refuse, at once, a COMF solve beyond :data:`MAX_COMF_VMAX` or below :data:`MIN_COMF_DENSITY`.
+
+    Parameters
+    ----------
+    vmax : int
+    density : float or array_like, optional
+
+    Raises
+    ------
+    InvalidParameterError
+        With the supported range.
+    """
+    if vmax > MAX_COMF_VMAX:
+        raise InvalidParameterError(
+            f"COMF is solved for vmax <= {MAX_COMF_VMAX} (its banded system grows like"
+            f" vmax^4 in memory and vmax^6 in time), got vmax = {vmax}")
+    if density is not None and np.size(density) and np.min(density) < MIN_COMF_DENSITY:
+        raise InvalidParameterError(
+            f"COMF is solved for densities c >= {MIN_COMF_DENSITY:g} (its gap cut grows like"
+            f" 40 / c: c = 0.002 takes 40 s), got c = {float(np.min(density)):g}")
 
 
 def solve_comf(vmax: int, p_val, c_val) -> np.ndarray:
@@ -374,6 +409,7 @@ def solve_comf(vmax: int, p_val, c_val) -> np.ndarray:
     (3, 2)
     """
     p_b, c_b = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
+    ensure_comf_size(int(vmax), c_b)    # every point before the first solve
     out = np.array([comf_state(vmax, pv, cv).c_v for pv, cv in zip(p_b.ravel(), c_b.ravel())])
     return out.T.reshape((vmax + 1,) + c_b.shape)
 
@@ -425,6 +461,24 @@ def comf_word_probability(state: ComfState, word: str, after_update: bool = Fals
         out *= float(probs[old] @ table[:, min(old, horizon), v])
     v_last = cars[-1][0]
     return float(out * (state.ahead[v_last] if after_update else probs[:, v_last].sum()))
+
+
+def comf_equation_terms(vmax: int) -> int:
+    """Upper bound of the sympy products :func:`comf_equations` builds (counted, not built).
+
+    ``(vmax + 1)^2`` per balance equation, ``(2 vmax + 1)(vmax + 1)`` of them, and
+    ``(vmax + 1)(H + 1)`` per ``g_a``.
+
+    Parameters
+    ----------
+    vmax : int
+
+    Returns
+    -------
+    int
+    """
+    nv = vmax + 1
+    return nv ** 3 * (2 * vmax + 1) + nv ** 2 * (max(gap_horizons(vmax)) + 1)
 
 
 def comf_equations(vmax: int) -> list:

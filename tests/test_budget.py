@@ -99,3 +99,53 @@ def test_cli_budget_options():
         assert bad.output.count("error:") == 1
     bad = runner.invoke(main, ["plot", "fundamental", "--budget", "x", "-o", "f.png"])
     assert bad.exit_code == 2 and "budget" in bad.output
+
+
+def test_table_study_and_plot_share_one_ring_choice(monkeypatch):
+    """Issue 17, item 6: with no ring lengths, the three call choose_lengths alike."""
+    import nasch.budget
+    from nasch.plot import fundamental_data
+    from nasch.rings import density_fraction
+    from nasch.study import convergence_study
+
+    calls = []
+    real = nasch.budget.choose_lengths
+
+    def spy(vmax, p, density, budget=None, *, order=2, update="parallel", announce=True):
+        calls.append((vmax, p, density_fraction(density), budget, order, update))
+        return real(vmax, p, density, 0.3, order=order, update=update, announce=announce)
+
+    monkeypatch.setattr(nasch.budget, "choose_lengths", spy)
+    t = flux_table(1, 0.5, densities=[0.25], mc_steps=0, methods=(), serial=True)
+    d = fundamental_data(1, 0.5, lengths=[], extrapolation_densities=[Fraction(1, 4)],
+                         methods=(), mc_steps=0, serial=True)
+    s = convergence_study([1], [0.5], [0.25], methods=["mf"], mc_length=500, mc_steps=200,
+                          serial=True)
+    assert calls == [(1, 0.5, Fraction(1, 4), None, 2, "parallel")] * 3
+    f_table = [r.flux for r in t.rows if r.kind == "extrapolated"]
+    assert f_table == list(d["extrapolated"][1]) == [s.rows[0].exact_flux]
+    assert list(s.rows[0].exact_lengths) == lengths_within_budget(1, 0.5, 0.25, 0.3)
+
+
+def test_the_choice_is_named_on_stderr_and_capped_by_memory(capsys):
+    from nasch.budget import DEFAULT_BUDGET, choose_lengths, predicted_bytes
+    Ls = choose_lengths(1, 0.5, 0.25, 0.3)
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert f"rings for c = 1/4, p = 0.5: L = {', '.join(map(str, Ls))}" in err
+    assert choose_lengths(2, 0.5, 0.25, announce=False) == lengths_within_budget(
+        2, 0.5, 0.25, DEFAULT_BUDGET)
+    # a huge budget stops at the largest ring the memory limit holds
+    limit = predicted_bytes(20, 5, 2, 0.5)
+    capped = lengths_within_budget(2, 0.5, 0.25, 1e9, max_memory=limit)
+    assert capped[-1] == 20 and all(predicted_bytes(L, L // 4, 2, 0.5) <= limit for L in capped)
+    assert lengths_within_budget(2, 0.5, 0.25, 1e9)[-1] > 20
+
+
+def test_predicted_bytes_follow_the_chains_memory_model():
+    from markov import memory
+    from nasch.budget import predicted_bytes
+    n = predicted_classes(16, 8, 2)
+    assert predicted_bytes(16, 8, 2, 0.5) == n * memory.factored_bytes_per_state("bicgstab")
+    assert predicted_bytes(16, 8, 2, 0.2) == n * memory.factored_bytes_per_state("aggregation")
+    assert predicted_bytes(16, 0, 2, 0.5) == 0.0

@@ -1,4 +1,5 @@
-"""Fuzz every subcommand with random valid and invalid option values (issue 12, item 8).
+"""Fuzz every subcommand with random valid and invalid option values (issue 12, item 8),
+and ``load_solution`` with damaged and edited files (issue 17, item 2; at the end).
 
 For each command line hypothesis builds (valid values kept small so that the
 work is short, invalid ones from the usual suspects: NaN, infinities,
@@ -20,17 +21,24 @@ for them, and 1 for the cluster derivations.
 """
 from __future__ import annotations
 
+import functools
+import hashlib
+import io
+import json
 import os
 import signal
 import tempfile
 from contextlib import contextmanager
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from markov import CorruptFileError, Ring, load_solution, solve
+from markov.storage import SUM_TOLERANCE
 from nasch.cli import main
 
 pytestmark = pytest.mark.slow
@@ -269,3 +277,151 @@ def test_derive_cluster_equations_vmax1(method):
                                   ["plot", "nope"], ["solve", "--help"], ["-x"]])
 def test_odd_command_lines(args):
     check(args)
+
+
+# load_solution with mutated files (issue 17, item 2) ----------------------------------
+#
+# A small saved solution is damaged byte by byte (flips, cuts, insertions, deletions),
+# replaced by random bytes, or re-zipped validly with an array or a metadata field
+# edited, its stored SHA-256 sums kept (stale) or fitted to the edit.  The load must
+# either give exactly the original solution, or -- only for edits with fitted sums --
+# exactly what the edited file says, checked; or refuse with one CorruptFileError line
+# naming the file.  Any other exception fails the test.
+
+@functools.lru_cache(maxsize=None)
+def _original():
+    sol = solve(Ring(6, 3, 2, 0.5))
+    with tempfile.TemporaryDirectory() as tmp:
+        data = sol.save(Path(tmp) / "pi.npz").read_bytes()
+    with np.load(io.BytesIO(data), allow_pickle=False) as f:
+        arrays = {k: f[k].copy() for k in ("keys", "probabilities", "rotations")}
+        meta = json.loads(str(f["metadata"][()]))
+    return sol, data, arrays, meta
+
+
+def _fitted_sums(arrays, meta):
+    rest = {k: v for k, v in meta.items() if k != "sha256"}
+    text = json.dumps(rest, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    out = {k: hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()
+           for k, a in arrays.items()}
+    out["metadata"] = hashlib.sha256(text.encode("ascii")).hexdigest()
+    return out
+
+
+def _same(back, sol) -> None:
+    assert back.ring == sol.ring and back.lumped == sol.lumped
+    assert back.keys.tobytes() == sol.keys.tobytes() and back.pi.tobytes() == sol.pi.tobytes()
+    assert (back.result.method, back.residual, back.result.iterations, back.operator) == \
+        (sol.result.method, sol.residual, sol.result.iterations, sol.operator)
+
+
+def _load(data: bytes):
+    """``load_solution`` of ``data`` written to a file: the solution, or None if refused."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "mutated.npz"
+        path.write_bytes(data)
+        try:
+            return load_solution(path)
+        except CorruptFileError as exc:
+            text = str(exc)
+            assert text.startswith(f"cannot load {path}: ") and "\n" not in text, text
+            return None
+
+
+BYTES = st.binary(min_size=1, max_size=32)
+
+
+@st.composite
+def damaged(draw):
+    data = bytearray(_original()[1])
+    n = len(data)
+    kind = draw(st.sampled_from(["flip", "cut", "insert", "delete", "noise", "zip-noise"]))
+    if kind == "flip":
+        for at, mask in draw(st.lists(st.tuples(st.integers(0, n - 1), st.integers(1, 255)),
+                                      min_size=1, max_size=4)):
+            data[at] ^= mask
+    elif kind == "cut":
+        del data[draw(st.integers(0, n - 1)):]
+    elif kind == "insert":
+        at = draw(st.integers(0, n))
+        data[at:at] = draw(BYTES)
+    elif kind == "delete":
+        at = draw(st.integers(0, n - 1))
+        del data[at:at + draw(st.integers(1, 64))]
+    elif kind == "noise":
+        data = bytearray(draw(st.binary(max_size=4000)))
+    else:
+        data = bytearray(b"PK\x03\x04" + draw(st.binary(max_size=4000)))
+    return bytes(data)
+
+
+@_settings(200)
+@given(data=damaged())
+def test_fuzz_load_damaged_bytes(data):
+    back = _load(data)
+    if back is not None:   # the damage hit bytes nobody reads (a time stamp, padding)
+        _same(back, _original()[0])
+
+
+JSON_VALUES = st.one_of(st.none(), st.booleans(), st.integers(-3, 40),
+                        st.integers(-2**70, 2**70), st.floats(allow_nan=True),
+                        st.text(max_size=6), st.lists(st.integers(0, 3), max_size=2))
+ENTRIES = st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=64),
+                    st.integers(-2**63, 2**63 - 1), st.integers(-3, 5000))
+
+
+@st.composite
+def edited(draw):
+    """Contents of a valid archive with one thing changed, and whether the sums fit."""
+    _, _, arrays, meta = _original()
+    arrays = {k: v.copy() for k, v in arrays.items()}
+    meta = dict(meta)
+    kind = draw(st.sampled_from(["entry", "dtype", "drop", "field", "remove-field"]))
+    if kind == "entry":
+        name = draw(st.sampled_from(sorted(arrays)))
+        a = arrays[name]
+        value = draw(ENTRIES)
+        i = draw(st.integers(0, a.size - 1))
+        try:
+            a[i] = value
+        except (OverflowError, ValueError):   # a float into int64, or too large
+            a[i] = -1
+    elif kind == "dtype":
+        name = draw(st.sampled_from(sorted(arrays)))
+        arrays[name] = arrays[name].astype(draw(st.sampled_from(
+            ["<i4", "<u8", ">i8", "<f8", "<f4", ">f8", "<i8", "<c16"])))
+    elif kind == "drop":
+        name = draw(st.sampled_from(sorted(arrays)))
+        cut = draw(st.integers(0, arrays[name].size))
+        arrays[name] = np.delete(arrays[name], cut) if cut < arrays[name].size \
+            else arrays[name][:0]
+    elif kind == "field":
+        meta[draw(st.sampled_from(sorted(meta)))] = draw(JSON_VALUES)
+    else:
+        del meta[draw(st.sampled_from(sorted(meta)))]
+    fit = draw(st.booleans())
+    if fit and isinstance(meta.get("sha256"), dict):
+        meta["sha256"] = _fitted_sums(arrays, meta)
+    return arrays, meta, fit
+
+
+@_settings(200)
+@given(change=edited())
+def test_fuzz_load_edited_contents(change):
+    arrays, meta, fit = change
+    buf = io.BytesIO()
+    np.savez(buf, **arrays, metadata=np.array(json.dumps(meta)))
+    back = _load(buf.getvalue())
+    if back is None:
+        return
+    sol, _, original_arrays, original_meta = _original()
+    if not fit:            # stale sums: only an edit that changed nothing may load
+        _same(back, sol)
+        return
+    # fitted sums: what the file says, and all of it passes the documented checks
+    assert back.keys.tobytes() == np.asarray(arrays["keys"], "<i8").tobytes()
+    assert back.pi.tobytes() == np.asarray(arrays["probabilities"], "<f8").tobytes()
+    assert (back.ring.length, back.ring.cars, back.ring.vmax, back.lumped) == \
+        (meta["length"], meta["cars"], meta["vmax"], meta["lumped"])
+    assert np.isfinite(back.pi).all() and (back.pi >= 0).all()
+    assert abs(back.pi.sum() - 1) <= SUM_TOLERANCE and (np.diff(back.keys) > 0).all()

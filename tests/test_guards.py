@@ -268,3 +268,138 @@ def test_goe_doc_lone_car_pattern_free_but_transient_not_frozen():
     assert pattern_free_count(8, 1, 3) == 16 + 8 + 8
     # for vmax = 2 the identity holds for a lone car too
     assert pattern_free_count(8, 1, 2) - frozen_count(8, 1, 2) == recurrent_class_count(8, 1, 2)
+
+
+# ---------------------------------------------------------------- issue 17: guards before work
+
+def _no_solve(monkeypatch):
+    """Any exact solve, Monte Carlo run or job fan-out fails the test."""
+    import markov.chain  # noqa: F401 - imported before patching: no module binds a fake
+    import nasch.plot  # noqa: F401
+    import nasch.tables  # noqa: F401
+
+    def fail(*a, **k):
+        pytest.fail("work started before the refusal")
+    for target in ("nasch.sweep.run_jobs", "nasch.tables.run_jobs", "nasch.plot.run_jobs",
+                   "markov.chain.solve"):
+        monkeypatch.setattr(target, fail)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["approx", "--method", "mf", "--vmax", "1000000", "--p", "0.5", "-c", "0.25"],
+     "MF is solved for vmax <= 100"),
+    (["derive", "--method", "mf", "--vmax", "21"], "MF equations are printed for vmax <= 20"),
+    (["derive", "--method", "comf", "--vmax", "50"], "COMF is solved for vmax <= 10"),
+    (["derive", "--method", "comf", "--vmax", "10"], "at most 20,000 are built"),
+    (["approx", "--method", "comf", "--vmax", "100", "--p", "0.5", "-c", "0.25"],
+     "COMF is solved for vmax <= 10"),
+    (["approx", "--method", "comf", "--vmax", "2", "--p", "0.5", "-c", "0.001"],
+     "COMF is solved for densities c >= 0.005"),
+    (["derive", "--method", "cluster2", "--vmax", "100000"], "enumerated for vmax <= 253"),
+])
+def test_symbolic_sizes_refused_before_work(args, words, monkeypatch):
+    # the expensive parts fail if reached: sympy's solve, the COMF iteration, the windows
+    monkeypatch.setattr("symbolic.comf._solve_cut", lambda *a, **k: pytest.fail("COMF ran"))
+    monkeypatch.setattr("symbolic.cluster._predecessor_words",
+                        lambda *a, **k: pytest.fail("enumerated"))
+    monkeypatch.setattr("symbolic.comf.comf_equations", lambda *a: pytest.fail("built"))
+    monkeypatch.setattr("symbolic.meanfield.mf_equations", lambda *a: pytest.fail("built"))
+    result = run(*args)
+    assert refused(result, words), result.output
+    assert "--max-memory" not in result.output     # approx and derive have no such option
+
+
+def test_the_api_gets_the_same_guards():
+    from symbolic import approximate, equations
+    from symbolic.comf import comf_state
+    for call in (lambda: approximate("mf", 101, 0.5, 0.5),
+                 lambda: approximate("comf", 11, 0.5, 0.5),
+                 lambda: approximate("comf", 2, 0.5, [0.25, 0.004]),
+                 lambda: comf_state(2, 0.5, 0.001),
+                 lambda: equations("comf", 9 + 1)):
+        with pytest.raises(InvalidParameterError):
+            call()
+
+
+def test_numeric_mf_solves_the_closed_form_equations():
+    """The numeric MF (the linear equations per density) against sympy's closed form."""
+    from symbolic.meanfield import c, d, mf_solution, p, q, velocity_symbols
+    from symbolic.solve import solve_mf
+    cs, ps = np.array([0.05, 0.25, 0.5, 0.9]), np.array([0.1, 0.5, 0.5, 0.75])
+    for vmax in (1, 2, 3):
+        sol = mf_solution(vmax)
+        ref = [[float(sol[s].subs({q: 1 - pv, d: 1 - cv, c: cv, p: pv})) for cv, pv in
+                zip(cs, ps)] for s in velocity_symbols(vmax)]
+        np.testing.assert_allclose(solve_mf(vmax, ps, cs), ref, rtol=1e-12, atol=1e-15)
+    big = solve_mf(100, 0.5, np.array([0.01, 0.5]))      # the largest vmax offered
+    np.testing.assert_allclose(big.sum(axis=0), [0.01, 0.5], rtol=1e-12)
+    assert np.all(big >= -1e-15)
+
+
+def test_plot_refuses_a_curve_too_large_before_the_rings(tmp_path, monkeypatch):
+    _no_solve(monkeypatch)
+    res = run("plot", "fundamental", "--vmax", "7", "--mc-steps", "0", "--lengths", "8",
+              "--extrapolation-lengths", "8,10,12", "-o", str(tmp_path / "x.png"))
+    assert refused(res, "window words"), res.output
+
+
+def test_plot_refuses_budget_with_extrapolation_lengths(tmp_path, monkeypatch):
+    _no_solve(monkeypatch)
+    res = run("plot", "fundamental", "--budget", "5s", "--extrapolation-lengths", "8,10,12",
+              "-o", str(tmp_path / "x.png"))
+    assert refused(res, "give either --extrapolation-lengths or --budget")
+
+
+@pytest.mark.parametrize("option", ["-o", "--figure"])
+def test_study_checks_every_output_path_first(option, tmp_path, monkeypatch):
+    monkeypatch.setattr("nasch.study.convergence_study",
+                        lambda *a, **k: pytest.fail("studied before checking the paths"))
+    suffix = ".png" if option == "--figure" else ".md"
+    res = run("study", "--vmax", "2", "--p", "0.5", "--density", "0.5", option,
+              str(tmp_path / "nonexistent" / f"s{suffix}"))
+    assert refused(res, "does not exist"), res.output
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--lengths", ""], "--lengths must not be empty"),
+    (["--cars", "0,8", "--lengths", "8,10"], "numbers of cars must be >= 1"),
+    (["--cars", "3"], "--cars needs --lengths"),
+])
+def test_table_refusals(args, words, monkeypatch):
+    _no_solve(monkeypatch)
+    assert refused(run("table", "--mc-steps", "0", *args), words)
+
+
+@pytest.mark.parametrize("command", [["study", "--vmax", "2", "--p", "0.5"],
+                                     ["plot", "fundamental", "-o", "x.png"]])
+def test_empty_lengths_mean_the_same_everywhere(command, monkeypatch):
+    monkeypatch.setattr("nasch.study.convergence_study", lambda *a, **k: pytest.fail("ran"))
+    monkeypatch.setattr("nasch.plot.fundamental_data", lambda *a, **k: pytest.fail("ran"))
+    assert refused(run(*command, "--lengths", ""), "--lengths must not be empty")
+
+
+def test_table_says_which_rows_it_leaves_out():
+    res = CliRunner().invoke(main, ["table", "--vmax", "1", "--lengths", "8,10,12",
+                                    "--order", "10", "--mc-steps", "0", "--serial"])
+    assert res.exit_code == 0, res.output
+    assert "warning: no L = inf row for p = 0.5, c = 1/2: 3 ring(s), an order-10 fit needs 11" \
+        in res.output
+    assert "(extrap.)" not in res.output
+    res = CliRunner().invoke(main, ["table", "--vmax", "1", "--lengths", "8,10",
+                                    "--cars", "4,8", "--mc-steps", "0", "--serial"])
+    assert res.exit_code == 0 and "warning: rings with N >= L left out: (8, 8)" in res.output
+
+
+def test_workers_capped_at_the_cores(monkeypatch):
+    from nasch import sweep
+    monkeypatch.setattr(sweep, "default_workers", lambda: 2)
+    assert [sweep.capped_workers(n) for n in (None, 1, 2, 40, 1000)] == [2, 1, 2, 2, 2]
+    seen = {}
+
+    def fake_table(*a, **k):
+        seen.update(k)
+        raise InvalidParameterError("stop here")
+    monkeypatch.setattr("nasch.tables.flux_table", fake_table)
+    res = run("table", "--lengths", "8,10", "--workers", "1000", "--mc-steps", "0")
+    assert "note: --workers 1000 capped at the 2 usable cores" in res.output
+    assert seen["n_workers"] == 1000          # run_jobs caps it (capped_workers)

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import click
 
+from markov.errors import InvalidParameterError
+
 from ..cli_common import (ensure_dask_options, ensure_probabilities, handle_errors, number_list,
                           quiet_option)
 
@@ -25,11 +27,13 @@ def plot():
               help="Braking probability, or a comma-separated list (one panel each).")
 @click.option("--lengths", "lengths_text", default="8,12,16", show_default=True,
               help="Rings drawn with their exact flux at every N.")
-@click.option("--extrapolation-lengths", "ext_text", default="8,9,10,11,12,13,14,15,16",
-              show_default=True, help="Candidate rings of the L -> infinity extrapolation.")
+@click.option("--extrapolation-lengths", "ext_text", default=None,
+              help="Candidate rings of the L -> infinity extrapolation [chosen per density"
+                   " by --budget].")
 @click.option("--budget", "budget_text", default=None,
               help="Time for the exact rings of each extrapolated density, e.g. 30s: the"
-                   " largest rings that fit (instead of --extrapolation-lengths).")
+                   " largest rings that fit it and 75% of the memory, named on stderr"
+                   " (instead of --extrapolation-lengths) [10s, as in table and study].")
 @click.option("--mc-length", type=int, default=3000, show_default=True,
               help="Monte Carlo ring length.")
 @click.option("--mc-steps", type=int, default=2000, show_default=True,
@@ -65,6 +69,8 @@ def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc
     from ..plot import FIGURE_FORMATS, fundamental_data, fundamental_figure, save_figure
 
     check_output_path(output, suffixes=FIGURE_FORMATS)   # before the work
+    if budget_text is not None and ext_text is not None:
+        raise InvalidParameterError("give either --extrapolation-lengths or --budget, not both")
     budget = None if budget_text is None else parse_budget(budget_text)
     ensure_dask_options(serial, scheduler)
     ps = number_list("--p", p_text)
@@ -75,7 +81,8 @@ def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc
         warnings.simplefilter("always", RuntimeWarning)
         panels = fundamental_data(
             vmax, ps, lengths=number_list("--lengths", lengths_text, int),
-            extrapolation_lengths=number_list("--extrapolation-lengths", ext_text, int),
+            extrapolation_lengths=(None if ext_text is None
+                                   else number_list("--extrapolation-lengths", ext_text, int)),
             mc_length=mc_length, mc_steps=mc_steps, seed=seed, budget=budget, methods=methods,
             serial=True if serial else None, scheduler=scheduler)
     for w in caught:

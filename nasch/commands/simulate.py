@@ -17,10 +17,14 @@ __all__ = ["simulate"]
 @click.option("--cars", "-N", type=int, default=None, help="Number of cars N.")
 @click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity.")
 @click.option("--p", "p", type=float, required=True, help="Braking probability in [0, 1].")
-@click.option("--steps", type=int, default=10000, show_default=True, help="Measured time steps.")
-@click.option("--warmup", type=int, default=None, help="Discarded time steps [steps/10].")
-@click.option("--batches", type=int, default=32, show_default=True,
-              help="Batches of the batch-means error bar.")
+@click.option("--steps", type=int, default=10000, show_default=True,
+              help="Recorded time steps per replica.")
+@click.option("--warmup", type=int, default=None,
+              help="Steps run before recording [automatic: cut from the data by MSER].")
+@click.option("--replicas", type=int, default=2, show_default=True,
+              help="Independent runs, each from its own random start.")
+@click.option("--batches", type=int, default=1024, show_default=True,
+              help="Blocks of the recorded flux series (at most one per step).")
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Random seed; the same seed gives identical output.")
 @click.option("--update", type=click.Choice(["parallel", "random-sequential"]),
@@ -30,9 +34,14 @@ __all__ = ["simulate"]
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @quiet_option
 @handle_errors
-def simulate(length, density, cars, vmax, p, steps, warmup, batches, seed, update, max_memory,
-             as_json):
-    """Monte Carlo flux of a large ring, with a batch-means error bar.
+def simulate(length, density, cars, vmax, p, steps, warmup, replicas, batches, seed, update,
+             max_memory, as_json):
+    """Monte Carlo flux of a large ring, with an autocorrelation error bar.
+
+    The warm-up is cut from the data (MSER), the 1-sigma error comes from the
+    integrated autocorrelation time, and a run too short for an honest bar
+    (or whose replicas disagree) says so: a warning on stderr and
+    "reliable": false with the reason in the JSON.
 
     \b
     Example:
@@ -50,15 +59,22 @@ def simulate(length, density, cars, vmax, p, steps, warmup, batches, seed, updat
         cars = int(round(density * ensure_int("--length", length, 1)))
     ring = Ring(length, cars, vmax, p, update)
     max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
-    r = run(ring, steps=steps, warmup=warmup, seed=seed, batches=batches,
+    r = run(ring, steps=steps, warmup=warmup, seed=seed, batches=batches, replicas=replicas,
             max_memory=None if max_memory is None else max_memory * 2**30)
+    if not r.reliable:
+        click.echo(f"warning: no honest error bar: {r.warning}; run longer (--steps)", err=True)
     if as_json:
         emit_json(r.to_dict())
         return
     click.echo(f"NaSch Monte Carlo L={length} N={cars} (c={ring.density:.6g}) vmax={vmax}"
                f" p={p:g} update={update} seed={seed}")
-    click.echo(f"  steps {r.steps} (+ {r.warmup} warm-up) in {r.batches} batches,"
+    warm = (f"{r.warmup} warm-up" if warmup is not None
+            else f"automatic warm-up, at most {r.warmup_used} steps cut")
+    click.echo(f"  {r.replicas} x {r.steps} steps ({warm}) in {r.batches} blocks,"
                f" {r.seconds:.2f} s, {r.car_updates_per_s:.3g} car updates/s")
-    click.echo(f"  flux           {r.flux:.8f} +- {r.flux_error:.2g} (1 sigma)")
+    click.echo(f"  tau_int        {r.tau_int:.3g} steps; {r.measured_steps} steps kept in all"
+               f" (after the warm-up cut)")
+    bar = "1 sigma" if r.reliable else "NOT an honest bar, see the warning"
+    click.echo(f"  flux           {r.flux:.8f} +- {r.flux_error:.2g} ({bar})")
     for v, c in enumerate(r.c_v):
         click.echo(f"  c_{v}            {c:.8f}")

@@ -29,14 +29,20 @@ __all__ = ["study"]
               help="Monte Carlo time steps per replica (plus as many warm-up steps).")
 @click.option("--mc-replicas", type=int, default=2, show_default=True,
               help="Independent Monte Carlo runs per point.")
-@click.option("--lengths", "lengths_text", default="8,9,10,11,12,13,14,15,16",
-              show_default=True,
-              help="Exact rings for the L -> infinity extrapolation ('' for none).")
+@click.option("--lengths", "lengths_text", default=None,
+              help="Candidate exact rings for the L -> infinity extrapolation [chosen per"
+                   " point by --budget].")
+@click.option("--budget", "budget_text", default=None,
+              help="Time for the exact rings of each point, e.g. 30s: the largest rings"
+                   " that fit it and 75% of the memory, named on stderr (instead of"
+                   " --lengths) [10s, as in table and plot].")
+@click.option("--no-extrapolation", is_flag=True, help="No exact rings, no L -> infinity.")
 @click.option("--max-states", type=int, default=300_000, show_default=True,
-              help="Skip exact rings with more rotation classes (estimated first).")
+              help="Skip rings of --lengths with more rotation classes (counted first).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Monte Carlo base seed.")
 @click.option("--format", "fmt", type=click.Choice(["text", "csv", "md", "latex", "json"]),
-              default=None, help="Table format [from the --output extension, else text].")
+              default=None, help="Table format [from the --output extension, else text];"
+                                 " latex needs \\usepackage{booktabs}.")
 @click.option("--output", "-o", type=click.Path(dir_okay=False), default=None,
               help="Write the table here (atomically) instead of stdout.")
 @click.option("--figure", type=click.Path(dir_okay=False), default=None,
@@ -46,7 +52,8 @@ __all__ = ["study"]
 @quiet_option
 @handle_errors
 def study(vmax_text, p_text, density_text, methods_text, mc_length, mc_steps, mc_replicas,
-          lengths_text, max_states, seed, fmt, output, figure, serial, scheduler):
+          lengths_text, budget_text, no_extrapolation, max_states, seed, fmt, output, figure,
+          serial, scheduler):
     """Convergence study: every approximation against Monte Carlo and exact rings.
 
     For each (vmax, p, c): the flux of each approximation, a long Monte Carlo
@@ -59,12 +66,28 @@ def study(vmax_text, p_text, density_text, methods_text, mc_length, mc_steps, mc
       nasch study --vmax 2 --p 0.5 --density 0.25,0.5 --mc-steps 2000
       nasch study --vmax 2,3 --p 0.25,0.5 -o study.csv --figure study.png
     """
+    from markov.files import check_output_path
+
+    from ..budget import parse_budget
     from ..plot import FIGURE_FORMATS
     from ..study import DEFAULT_DENSITIES, DEFAULT_METHODS, convergence_study
 
     if figure is not None and Path(figure).suffix.lower() not in FIGURE_FORMATS:
         raise InvalidParameterError(
             f"--figure must end in {' or '.join(FIGURE_FORMATS)}, got {figure!r}")
+    # every output path before the work: a figure that cannot be written after
+    # the table was would leave half a result
+    for path in (output, figure):
+        if path is not None:
+            check_output_path(path)
+    given = [name for name, value in (("--lengths", lengths_text), ("--budget", budget_text),
+                                      ("--no-extrapolation", no_extrapolation or None))
+             if value is not None]
+    if len(given) > 1:
+        raise InvalidParameterError(f"give at most one of {', '.join(given)}")
+    budget = None if budget_text is None else parse_budget(budget_text)
+    lengths = (() if no_extrapolation else None if lengths_text is None
+               else number_list("--lengths", lengths_text, int))
     ps = number_list("--p", p_text)
     ensure_probabilities(ps)
     if fmt is None:
@@ -75,8 +98,7 @@ def study(vmax_text, p_text, density_text, methods_text, mc_length, mc_steps, mc
         number_list("--vmax", vmax_text, int), ps,
         DEFAULT_DENSITIES if density_text is None else number_list("--density", density_text),
         methods=methods, mc_length=mc_length, mc_steps=mc_steps, mc_replicas=mc_replicas,
-        lengths=[] if not lengths_text.strip() else number_list("--lengths", lengths_text, int),
-        max_states=max_states, seed=seed, serial=True if serial else None,
+        lengths=lengths, budget=budget, max_states=max_states, seed=seed, serial=True if serial else None,
         scheduler=scheduler)
     text = result.render(fmt)
     if output:

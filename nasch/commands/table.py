@@ -17,21 +17,23 @@ __all__ = ["table"]
 @click.option("--p", "p_text", default="0.5", show_default=True,
               help="Braking probability, or a comma-separated list.")
 @click.option("--lengths", "lengths_text", default=None,
-              help="Ring lengths, comma-separated [8,10,12,14, or chosen by --budget].")
+              help="Ring lengths, comma-separated [chosen per density by --budget].")
 @click.option("--budget", "budget_text", default=None,
               help="Time for the exact rings of each density and p, e.g. 60s or 5m: the"
-                   " largest rings that fit are chosen (instead of --lengths).")
+                   " largest rings that fit it and 75% of the memory, named on stderr"
+                   " (instead of --lengths) [10s, as in study and plot].")
 @click.option("--cars", "cars_text", default=None, help="Numbers of cars, comma-separated.")
 @click.option("--density", "density_text", default=None,
               help="Densities, comma-separated (rings with c L integer are used) [0.5].")
 @click.option("--update", type=click.Choice(["parallel", "random-sequential"]),
               default="parallel", show_default=True, help="Update order.")
 @click.option("--format", "fmt", type=click.Choice(["text", "csv", "md", "latex", "json"]),
-              default=None, help="Output format [from the --output extension, else text].")
+              default=None, help="Output format [from the --output extension, else text];"
+                                 " latex needs \\usepackage{booktabs}.")
 @click.option("--output", "-o", type=click.Path(dir_okay=False), default=None,
               help="Write here (atomically) instead of stdout.")
 @click.option("--mc-steps", type=int, default=2000, show_default=True,
-              help="Monte Carlo time steps per (density, p); 0 for none.")
+              help="Monte Carlo time steps per replica and (density, p); 0 for none.")
 @click.option("--mc-length", type=int, default=10000, show_default=True,
               help="Monte Carlo ring length (rounded up to match the density exactly).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Monte Carlo base seed.")
@@ -41,7 +43,8 @@ __all__ = ["table"]
 @click.option("--serial", is_flag=True, help="Run everything in this process (no Dask).")
 @click.option("--scheduler", default=None,
               help="Address of a running Dask scheduler, tcp://HOST:PORT.")
-@click.option("--workers", type=int, default=None, help="Local Dask workers [cores].")
+@click.option("--workers", type=int, default=None,
+              help="Local Dask workers [cores; more than the cores are capped, with a note].")
 @quiet_option
 @handle_errors
 def table(vmax, p_text, lengths_text, budget_text, cars_text, density_text, update, fmt, output,
@@ -56,14 +59,19 @@ def table(vmax, p_text, lengths_text, budget_text, cars_text, density_text, upda
     """
     from ..budget import parse_budget
     from markov.files import check_output_path, write_atomic
-    from ..tables import flux_table
+    from ..tables import flux_table as _flux_table
 
     if cars_text is not None and density_text is not None:
         raise InvalidParameterError("give either --cars or --density, not both")
     ensure_dask_options(serial, scheduler)
     if workers is not None:
         from markov.validate import ensure_int
+        from ..sweep import capped_workers
         workers = ensure_int("--workers", workers, 1)
+        if scheduler is None and capped_workers(workers) < workers:
+            click.echo(f"note: --workers {workers} capped at the {capped_workers(workers)}"
+                       " usable cores (more processes than cores only add start-up time)",
+                       err=True)
     ps = number_list("--p", p_text)
     ensure_probabilities(ps)
     if output is not None:
@@ -72,16 +80,26 @@ def table(vmax, p_text, lengths_text, budget_text, cars_text, density_text, upda
         fmt = format_for_path(output)
     if budget_text is not None and lengths_text is not None:
         raise InvalidParameterError("give either --lengths or --budget, not both")
+    if cars_text is not None and lengths_text is None:
+        raise InvalidParameterError("--cars needs --lengths (--budget chooses rings per density)")
     budget = None if budget_text is None else parse_budget(budget_text)
-    lengths = None if budget is not None else number_list(
-        "--lengths", lengths_text or "8,10,12,14", int)
-    t = flux_table(
-        vmax, ps, lengths, budget=budget,
-        cars=None if cars_text is None else number_list("--cars", cars_text, int),
-        densities=None if density_text is None else number_list("--density", density_text),
-        update=update, mc_steps=mc_steps, mc_length=mc_length, seed=seed, order=order,
-        extrapolation=not no_extrapolation, serial=True if serial else None,
-        scheduler=scheduler, n_workers=workers)
+    lengths = None if lengths_text is None else number_list("--lengths", lengths_text, int)
+    import warnings
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        t = _flux_table(
+            vmax, ps, lengths, budget=budget,
+            cars=None if cars_text is None else number_list("--cars", cars_text, int),
+            densities=None if density_text is None else number_list("--density", density_text),
+            update=update, mc_steps=mc_steps, mc_length=mc_length, seed=seed, order=order,
+            extrapolation=not no_extrapolation, serial=True if serial else None,
+            scheduler=scheduler, n_workers=workers)
+    for w in caught:
+        click.echo(f"warning: {w.message}", err=True)
+    flagged = {(r.p, r.density): r.mc_warning for r in t.rows if r.mc_reliable is False}
+    if flagged:
+        click.echo(f"warning: {len(flagged)} Monte Carlo value(s) marked * have no honest error"
+                   f" bar ({next(iter(flagged.values()))}); use more --mc-steps", err=True)
     text = t.render(fmt)
     if output:
         write_atomic(output, text)
