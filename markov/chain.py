@@ -597,7 +597,8 @@ class Solution:
         """
         r = self.ring
         return {
-            "length": r.length, "cars": r.cars, "vmax": r.vmax, "p": float(r.p),
+            "length": r.length, "cars": r.cars, "vmax": r.vmax,
+            "p": None if r.p is None else float(r.p), "model": r.model.describe(),
             "update": r.update, "density": r.density, "lumped": self.lumped,
             "states": self.n_states, "nonzeros": self.nonzeros, "operator": self.operator,
             "level_sizes": list(self.level_sizes) if self.level_sizes else None,

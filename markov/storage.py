@@ -324,13 +324,16 @@ def save_solution(sol, path) -> Path:
     res = sol.result
     meta = {
         "format": FORMAT, "format_version": FORMAT_VERSION,
-        "length": ring.length, "cars": ring.cars, "vmax": vmax, "p": float(ring.p),
+        "length": ring.length, "cars": ring.cars, "vmax": vmax,
+        "p": None if ring.p is None else float(ring.p),
         "p_exact": str(ring.p) if isinstance(ring.p, Fraction) else None,
         "update": ring.update, "lumped": bool(sol.lumped), "states": int(keys.size),
         "residual": float(res.residual), "method": res.method, "operator": sol.operator,
         "iterations": int(res.iterations),
         "package": "nasch-exact", "version": _package_version(), "encoding": ENCODING,
     }
+    if not ring.is_nasch:
+        meta["model"] = ring.model.describe()
     sums = {name: _digest(a) for name, a in arrays.items()}
     sums["metadata"] = _digest(_canonical_json(meta).encode("ascii"))
     meta["sha256"] = sums
@@ -446,10 +449,37 @@ def _is_real(value) -> bool:
     return type(value) in (int, float)
 
 
+def _model_of(meta: dict):
+    """The model of a file that names one (``model``: name, params, source), else ``None``."""
+    from .rule import load_model
+
+    described = meta.get("model")
+    if described is None:
+        return None
+    if not isinstance(described, dict) or not isinstance(described.get("source"), str) \
+            or not isinstance(described.get("params"), dict):
+        raise _Bad("its model entry is not {name, params, source}")
+    try:
+        model = load_model(described["source"], described["params"])
+    except InvalidParameterError as exc:
+        raise _Bad(f"its model: {exc}") from None
+    if model.vmax != meta["vmax"] or model.params.get("p") != meta["p"]:
+        raise _Bad("its model's vmax or p differs from the vmax or p of its metadata")
+    return model
+
+
 def _ring_of(meta: dict) -> Ring:
     for field in ("length", "cars", "vmax"):
         if not _is_int(meta[field]):
             raise _Bad(f"{field} = {meta[field]!r} in its metadata is not an integer")
+    model = _model_of(meta)
+    if model is not None:
+        try:
+            ring = Ring(meta["length"], meta["cars"], update=meta["update"], model=model)
+            check_encodable(ring.length, ring.vmax)
+        except InvalidParameterError as exc:
+            raise _Bad(f"its metadata: {exc}") from None
+        return ring
     if not _is_real(meta["p"]):
         raise _Bad(f"p = {meta['p']!r} in its metadata is not a number")
     p = meta["p"]
@@ -466,8 +496,6 @@ def _ring_of(meta: dict) -> Ring:
         check_encodable(ring.length, ring.vmax)
     except InvalidParameterError as exc:
         raise _Bad(f"its metadata: {exc}") from None
-    if not ring.trivial and ring.p in (0, 1):
-        raise _Bad(f"p = {ring.p} in its metadata: no unique stationary state to store")
     return ring
 
 

@@ -28,6 +28,8 @@ _LAZY = {
                "Print the equations of an approximation, derived from the update rules."),
     "goe": ("nasch.commands.goe", "goe",
             "Elementary Garden of Eden patterns (exhaustive) or a ring's GoE census."),
+    "models": ("nasch.commands.models", "models",
+               "List the shipped models: parameters, defaults, conventions, references."),
     "plot": ("nasch.commands.plot", "plot", "Figures (PNG or PDF, by the file extension)."),
     "simulate": ("nasch.commands.simulate", "simulate",
                  "Monte Carlo flux of a large ring, with an autocorrelation error bar."),

@@ -49,8 +49,6 @@ def test_solve_text_and_options():
     (["-L", "5", "-N", "6", "--p", "0.5"], "0 <= N <= L = 5"),
     (["-L", "5", "-N", "2", "--p", "1.5"], "p must be in [0, 1]"),
     (["-L", "5", "-N", "2", "--p", "0.5", "--vmax", "0"], "vmax must be an integer >= 1"),
-    (["-L", "5", "-N", "2", "--p", "0"], "p = 0 makes the update deterministic"),
-    (["-L", "5", "-N", "2", "--p", "1"], "p = 1"),
     (["-L", "5", "-N", "2", "--p", "nan"], "p must be a number"),
     (["-L", "5", "-N", "x", "--p", "0.5"], "is not a valid integer"),
     (["-L", "16", "-N", "8", "--p", "0.5", "--no-lump", "--max-memory", "0.001"],
@@ -67,3 +65,26 @@ def test_console_script_runs_in_a_subprocess():
     out = subprocess.run([sys.executable, "-m", "nasch", "solve", "-L", "4", "-N", "5",
                           "--p", "0.5"], capture_output=True, text=True)
     assert out.returncode == 2 and out.stderr.startswith("error:") and "Traceback" not in out.stderr
+
+
+def test_models_lists_every_shipped_model_with_its_defaults():
+    import json
+
+    from markov.rule import MODELS
+
+    out = CliRunner().invoke(main, ["models", "--json"])
+    assert out.exit_code == 0, out.output
+    listing = json.loads(out.output)
+    assert [m["name"] for m in listing] == list(MODELS)
+    for m in listing:
+        assert m["parameters"] == dict(MODELS[m["name"]].parameters) and m["reference"]
+    text = CliRunner().invoke(main, ["models"]).output
+    assert all(f"--param {n}=" in text for n in MODELS["vdr"].parameters)
+
+
+def test_deterministic_limits_answer_the_class_of_the_compact_jam():
+    # p = 0: the jam runs into one periodic orbit, J = min(vmax c, 1 - c); p = 1: it stays
+    for p, flux in (("0", 3 / 5), ("1", 0.0)):
+        out = CliRunner().invoke(main, ["solve", "-L", "5", "-N", "2", "--p", p, "--json"])
+        assert out.exit_code == 0, out.output
+        assert abs(json.loads(out.output)["flux"] - flux) < 1e-14

@@ -337,7 +337,11 @@ def test_the_check_of_velocities_holds_on_every_recurrent_class_and_refuses_othe
     (lambda a, m: (a, dict(m, vmax=3)), "does not have N = 5 cars"),
     (lambda a, m: (a, dict(m, length=0)), "length L must be"),
     (lambda a, m: (a, dict(m, length=40)), "64-bit key"),
-    (lambda a, m: (a, dict(m, p=0.0)), "no unique stationary state"),
+    (lambda a, m: (a, dict(m, model={"name": "x", "params": {}, "source": "nosuch"})),
+     "its model"),
+    (lambda a, m: (a, dict(m, model={"name": "vdr", "params": {"vmax": 3},
+                                     "source": "vdr"})), "differs from the vmax or p"),
+    (lambda a, m: (a, dict(m, model="vdr")), "not {name, params, source}"),
     (lambda a, m: (a, dict(m, p="half")), "not a number"),
     (lambda a, m: (a, dict(m, p_exact="1/3")), "does not match"),
     (lambda a, m: (a, dict(m, p_exact="1/0")), "does not match"),
@@ -435,3 +439,15 @@ def test_cli_save_top_bad_values_refused_before_work(args, words, monkeypatch):
     monkeypatch.setattr("markov.chain.solve", no_work)
     res = CliRunner().invoke(main, ["solve", "-L", "8", "-N", "3", "--p", "0.5", *args])
     assert res.exit_code == 2 and words in res.output and "Traceback" not in res.output
+
+
+@pytest.mark.parametrize("model,update", [("vdr", "parallel"), ("kkw", "random-sequential"),
+                                          ("tt", "ordered-sequential")])
+def test_a_model_round_trips_with_its_parameters(tmp_path, model, update):
+    from markov.rule import load_model
+
+    m = load_model(model, {"vmax": 2} if model != "kkw" else {"vmax": 2, "a": 0.3})
+    sol = solve(Ring(7, 3, update=update, model=m))
+    back = load_solution(sol.save(tmp_path / "m.npz"))
+    assert back.ring == sol.ring and back.ring.model.params == m.params
+    assert back.flux == sol.flux and np.array_equal(back.pi, sol.pi)
