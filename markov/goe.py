@@ -35,10 +35,10 @@ from numba import njit
 
 from ._kernels import cars_of, digits_of, gap
 from .encoding import check_encodable, encode, from_text, unique_keys
-from .errors import InvalidParameterError
+from .errors import InvalidParameterError, StateSpaceTooLargeError
 from .goe_census import frozen_count, pattern_free_count, recurrent_class_count
 from .goe_patterns import order_automaton, rule_support
-from .ring import PARALLEL, RANDOM_SEQUENTIAL, Ring
+from .ring import PARALLEL, Ring
 from .rule import Model, load_model
 from .statespace import all_keys, count_all, recurrent_keys
 from .transition import successors
@@ -360,8 +360,10 @@ def census(length: int, cars: int, vmax: int | None = None, enumerate_limit: int
     -------
     dict
         ``model, update, length, cars, vmax, all, goe, pattern_free, frozen,
-        recurrent, recurrent_predicted``; ``goe`` and ``recurrent`` are
-        ``None`` beyond ``enumerate_limit``.
+        recurrent, recurrent_predicted, notes``; ``goe`` and ``recurrent`` are
+        ``None`` beyond ``enumerate_limit``; ``notes`` says why any other
+        entry is ``None`` (or that ``pattern_free`` was enumerated because the
+        rule has infinitely many elementary patterns).
 
     Examples
     --------
@@ -378,23 +380,38 @@ def census(length: int, cars: int, vmax: int | None = None, enumerate_limit: int
     length, cars, vmax = ring.length, ring.cars, ring.vmax
     parallel = update == PARALLEL
     nasch = ring.is_nasch
-    # refuses vmax beyond the automata before any enumeration
-    pattern_free = pattern_free_count(length, cars, vmax, model) if parallel else None
+    rule_support(vmax, model)    # refuses vmax beyond the automata before any enumeration
+    notes = []
+    pattern_free = automaton = None
+    if parallel:
+        try:
+            automaton = order_automaton(vmax, None, model)
+            pattern_free = pattern_free_count(length, cars, vmax, model)
+        except (InvalidParameterError, StateSpaceTooLargeError) as exc:
+            notes.append(f"pattern-free: {exc}")
+    else:
+        notes.append("pattern-free: the word automata are those of parallel update")
     total = count_all(ring)
     row = {"model": model.name, "update": update, "length": length, "cars": cars,
            "vmax": vmax, "all": total, "goe": None, "pattern_free": pattern_free,
            "frozen": frozen_count(length, cars, vmax) if nasch and parallel else None,
            "recurrent": None,
            "recurrent_predicted": (recurrent_class_count(length, cars, vmax)
-                                   if nasch and parallel else None)}
+                                   if nasch and parallel else None),
+           "notes": notes}
+    if not nasch:
+        notes.append("frozen and recurrent counts are derived for NaSch only")
     if total <= enumerate_limit:
         if parallel:
             keys = all_keys(ring, lump=False)
             row["goe"] = int(goe_mask(keys, length, vmax, model).sum())
-            enumerated = int(pattern_free_mask(keys, length, vmax, None, model).sum())
-            if enumerated != row["pattern_free"]:
-                raise RuntimeError(f"transfer-matrix count {row['pattern_free']} differs from"
-                                   f" the enumeration {enumerated}")
+            if automaton is not None:
+                enumerated = int(pattern_free_mask(keys, length, vmax, None, model).sum())
+                if pattern_free is None:       # no transfer matrix (infinitely many patterns)
+                    row["pattern_free"] = enumerated
+                elif enumerated != pattern_free:
+                    raise RuntimeError(f"transfer-matrix count {pattern_free} differs from"
+                                       f" the enumeration {enumerated}")
         else:
             row["goe"] = goe_count(ring)
         if nasch:

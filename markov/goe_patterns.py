@@ -57,7 +57,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .encoding import EMPTY_DIGIT, from_text, to_text
-from .errors import InvalidParameterError
+from .errors import InvalidParameterError, StateSpaceTooLargeError
 from .rule import Model, load_model, tabulate
 
 # the construction steps (preimage_automaton, same_language,
@@ -379,7 +379,8 @@ def preimage_automaton(prev: WordAutomaton, support: RuleSupport) -> WordAutomat
         succ.append(row)
         i += 1
         if len(states) > 50 * _MAX_STATES:
-            raise RuntimeError("preimage automaton too large")
+            raise StateSpaceTooLargeError(
+                f"the preimage automaton passed {50 * _MAX_STATES:,} states")
     n = len(states)
     # live = can reach a terminal state (backward search)
     preds = [[] for _ in range(n)]
@@ -416,7 +417,8 @@ def preimage_automaton(prev: WordAutomaton, support: RuleSupport) -> WordAutomat
                 j = dindex[nxt] = len(dstates)
                 dstates.append(nxt)
                 if len(dstates) > _MAX_STATES:
-                    raise RuntimeError("determinised automaton too large")
+                    raise StateSpaceTooLargeError(
+                        f"the determinised automaton passed {_MAX_STATES:,} states")
             row.append(j)
         rows.append(row)
         i += 1
@@ -461,12 +463,21 @@ def _orders(support: RuleSupport) -> tuple:
             " ahead out of its reach (the last car of a word has none in reach)")
     autos = [_all_words(support.vmax)]
     while True:
-        nxt = preimage_automaton(autos[-1], support)
+        try:
+            if len(autos) > _MAX_ORDER:
+                raise StateSpaceTooLargeError(f"{_MAX_ORDER} orders were built")
+            nxt = preimage_automaton(autos[-1], support)
+        except StateSpaceTooLargeError as exc:
+            # e.g. FI at vmax >= 2: every order adds longer patterns (issue 18, docs/goe.md)
+            _, _, longest = minimal_forbidden_words(autos[-1], 2)
+            raise StateSpaceTooLargeError(
+                f"rule {support.name} (vmax = {support.vmax}): the languages of allowed words"
+                f" have not stabilised by order {len(autos) - 1} (longest elementary pattern"
+                f" of that order: {longest} cells) and order {len(autos)} is out of reach:"
+                f" {exc}") from None
         if same_language(nxt, autos[-1]):
             return tuple(autos)
         autos.append(nxt)
-        if len(autos) > _MAX_ORDER:
-            raise RuntimeError(f"allowed languages did not stabilise within {_MAX_ORDER} orders")
 
 
 def order_automaton(vmax: int | None, order: int | None = None,
