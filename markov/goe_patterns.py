@@ -470,11 +470,11 @@ def _orders(support: RuleSupport) -> tuple:
         except StateSpaceTooLargeError as exc:
             # e.g. FI at vmax >= 2: every order adds longer patterns (issue 18, docs/goe.md)
             _, _, longest = minimal_forbidden_words(autos[-1], 2)
+            longest = "infinitely many" if longest is None else f"the longest has {longest} cells"
             raise StateSpaceTooLargeError(
                 f"rule {support.name} (vmax = {support.vmax}): the languages of allowed words"
-                f" have not stabilised by order {len(autos) - 1} (longest elementary pattern"
-                f" of that order: {longest} cells) and order {len(autos)} is out of reach:"
-                f" {exc}") from None
+                f" have not stabilised by order {len(autos) - 1} (its forbidden words:"
+                f" {longest}) and order {len(autos)} is out of reach: {exc}") from None
         if same_language(nxt, autos[-1]):
             return tuple(autos)
         autos.append(nxt)
