@@ -1,21 +1,30 @@
-"""Garden of Eden (GoE) configurations of NaSch rings under parallel update.
+"""Garden of Eden (GoE) configurations of traffic rings: parallel and random-sequential update.
 
 A configuration is *GoE* when no configuration reaches it in one step with
-positive probability (``0 < p < 1``).  Write car ``j`` (numbered along the
-ring) with velocity ``v_j`` and ``d_j`` empty cells ahead.  Its velocity is the
-distance it just moved, so a predecessor has car ``j`` at ``x_j - v_j`` with
-gap ``g_j = d_j + v_j - v_{j+1}`` (these positions are forced; the gaps sum to
-``L - N``, so they describe a valid configuration when all are ``>= 0``); only
-its old velocity ``u_j`` is free, and the rules R1-R3 must be able to produce
-``v_j`` from ``(u_j, g_j)``.  Each car's condition involves only its own
-``u_j``, so
+positive probability.  Only the support of the rule matters (which new
+velocities have positive weight: :class:`markov.goe_patterns.RuleSupport`,
+read from :func:`markov.rule.tabulate`), so any model works.  Write car ``j``
+(numbered along the ring) with velocity ``v_j`` and ``d_j`` empty cells
+ahead.  Its velocity is the distance it just moved, so under parallel update a
+predecessor has car ``j`` at ``x_j - v_j`` with gap ``g_j = d_j + v_j -
+v_{j+1}`` (these positions are forced; the gaps sum to ``L - N``, so they
+describe a valid configuration when all are ``>= 0``); only its old velocity
+``u_j`` is free, and the rule must be able to produce ``v_j`` from
+``(u_j, g_j, u_{j+1})`` -- the car ahead's *old* velocity, which the rule may
+read.  Hence
 
-.. math:: \\text{not GoE} \\iff \\forall j:\\ \\exists u_j \\in \\{0..v_{max}\\}:
-          v_j \\in \\{R2(R1(u_j), g_j),\\ R3(R2(R1(u_j), g_j))\\},
+.. math:: \text{not GoE} \iff \exists u_0, \dots, u_{N-1}:\ \forall j:\
+          v_j \in \mathrm{supp}(u_j, g_j, u_{j+1}) \quad (u_N = u_0),
 
-and that condition works out to ``v_{j+1} <= d_j`` (the car ahead cannot have
-moved farther than the present gap).  :func:`goe_mask` checks the condition
-with the functions of :mod:`markov.rules`, per car, in a numba kernel.
+a closed walk of a relation on the old velocities around the ring, which
+:func:`goe_mask` searches in a numba kernel.  For NaSch the condition involves
+only ``u_j`` and works out to ``v_{j+1} <= d_j`` (the car ahead cannot have
+moved farther than the present gap).
+
+:func:`goe_count` counts GoE configurations by brute force (all
+configurations, their successors from the row generator) for any model and
+either update: under random-sequential update the only GoE configurations are
+the full rings with every car moving.
 
 Configurations that occur at arbitrarily late times are those free of the
 elementary GoE patterns of all orders (:mod:`markov.goe_patterns`);
@@ -325,7 +334,7 @@ def goe_count(ring: Ring) -> int:
     Examples
     --------
     >>> goe_count(Ring(6, 3, 2, 0.5)), goe_count(Ring(6, 3, 2, 0.5, "random-sequential"))
-    (447, 0)
+    (434, 0)
     """
     return count_all(ring) - int(_image(ring, all_keys(ring, lump=False)).size)
 

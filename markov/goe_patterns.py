@@ -9,7 +9,7 @@ allowed words form a factorial language ``L_n``; ``L_0`` is every word and
 ``L_{n+1} = Pre(L_n)`` (the words with a one-step preimage word in ``L_n``).
 
 Window of the past.  In one step a car moves at most ``vmax`` cells and looks
-at most ``vmax`` cells ahead, so the cells ``[a, a + K)`` at time ``t`` are a
+at most ``vmax`` cells ahead (the rule's horizon, for rules that look farther), so the cells ``[a, a + K)`` at time ``t`` are a
 function of the cells ``[a - vmax, a + K + vmax)`` at time ``t - 1`` and of
 the coins of the cars among them; ``n`` steps back the window is
 ``[a - n vmax, a + K + n vmax)``.  We never enumerate these windows: we work
@@ -20,7 +20,9 @@ has velocity ``v_j`` and ``d_j`` empty cells ahead.  A car's velocity is the
 distance it just moved, so one step back car ``j`` stood at ``x_j - v_j``
 and had the gap ``g_j = d_j + v_j - v_{j+1}`` (the paper's relation between
 ``d_j(t)`` and ``d_j(t-1)``); only its old velocity ``u_j`` is unknown, and
-the rules demand ``v_j`` in ``{w, max(w - 1, 0)}`` with ``w = R2(R1(u_j), g_j)``.
+the rule demands ``v_j`` in its support at ``(u_j, g_j, u_{j+1})`` (for NaSch
+``{w, max(w - 1, 0)}`` with ``w = R2(R1(u_j), g_j)``; any model through
+:class:`RuleSupport`, gaps capped at the rule's horizon).
 The one-step preimage of a word is therefore a word with the same cars, forced
 gaps and free old velocities, checked car after car: a finite transducer.
 :func:`preimage_automaton` composes it with the automaton of ``L_n`` and
