@@ -1,21 +1,30 @@
-"""Garden of Eden (GoE) configurations of NaSch rings under parallel update.
+"""Garden of Eden (GoE) configurations of traffic rings: parallel and random-sequential update.
 
 A configuration is *GoE* when no configuration reaches it in one step with
-positive probability (``0 < p < 1``).  Write car ``j`` (numbered along the
-ring) with velocity ``v_j`` and ``d_j`` empty cells ahead.  Its velocity is the
-distance it just moved, so a predecessor has car ``j`` at ``x_j - v_j`` with
-gap ``g_j = d_j + v_j - v_{j+1}`` (these positions are forced; the gaps sum to
-``L - N``, so they describe a valid configuration when all are ``>= 0``); only
-its old velocity ``u_j`` is free, and the rules R1-R3 must be able to produce
-``v_j`` from ``(u_j, g_j)``.  Each car's condition involves only its own
-``u_j``, so
+positive probability.  Only the support of the rule matters (which new
+velocities have positive weight: :class:`markov.goe_patterns.RuleSupport`,
+read from :func:`markov.rule.tabulate`), so any model works.  Write car ``j``
+(numbered along the ring) with velocity ``v_j`` and ``d_j`` empty cells
+ahead.  Its velocity is the distance it just moved, so under parallel update a
+predecessor has car ``j`` at ``x_j - v_j`` with gap ``g_j = d_j + v_j -
+v_{j+1}`` (these positions are forced; the gaps sum to ``L - N``, so they
+describe a valid configuration when all are ``>= 0``); only its old velocity
+``u_j`` is free, and the rule must be able to produce ``v_j`` from
+``(u_j, g_j, u_{j+1})`` -- the car ahead's *old* velocity, which the rule may
+read.  Hence
 
-.. math:: \\text{not GoE} \\iff \\forall j:\\ \\exists u_j \\in \\{0..v_{max}\\}:
-          v_j \\in \\{R2(R1(u_j), g_j),\\ R3(R2(R1(u_j), g_j))\\},
+.. math:: \text{not GoE} \iff \exists u_0, \dots, u_{N-1}:\ \forall j:\
+          v_j \in \mathrm{supp}(u_j, g_j, u_{j+1}) \quad (u_N = u_0),
 
-and that condition works out to ``v_{j+1} <= d_j`` (the car ahead cannot have
-moved farther than the present gap).  :func:`goe_mask` checks the condition
-with the functions of :mod:`markov.rules`, per car, in a numba kernel.
+a closed walk of a relation on the old velocities around the ring, which
+:func:`goe_mask` searches in a numba kernel.  For NaSch the condition involves
+only ``u_j`` and works out to ``v_{j+1} <= d_j`` (the car ahead cannot have
+moved farther than the present gap).
+
+:func:`goe_count` counts GoE configurations by brute force (all
+configurations, their successors from the row generator) for any model and
+either update: under random-sequential update the only GoE configurations are
+the full rings with every car moving.
 
 Configurations that occur at arbitrarily late times are those free of the
 elementary GoE patterns of all orders (:mod:`markov.goe_patterns`);
@@ -35,53 +44,68 @@ from numba import njit
 
 from ._kernels import cars_of, digits_of, gap
 from .encoding import check_encodable, encode, from_text, unique_keys
-from .errors import InvalidParameterError
+from .errors import InvalidParameterError, StateSpaceTooLargeError
 from .goe_census import frozen_count, pattern_free_count, recurrent_class_count
-from .goe_patterns import order_automaton
+from .goe_patterns import order_automaton, rule_support
 from .ring import PARALLEL, Ring
-from .rules import deterministic_velocity, randomize
+from .rule import Model, load_model
 from .statespace import all_keys, count_all, recurrent_keys
 from .transition import successors
 
-__all__ = ["is_goe", "goe_mask", "pattern_free_mask", "is_pattern_free", "image_keys", "census"]
+__all__ = ["is_goe", "goe_mask", "pattern_free_mask", "is_pattern_free", "image_keys", "goe_count",
+           "census"]
 
 
 @njit(cache=True)
-def _reachable_velocity(v, g, vmax):
-    """Some old velocity ``u`` gives ``v`` under R1-R3 with old gap ``g``."""
-    if g < 0:
-        return False
-    for u in range(vmax + 1):
-        w = deterministic_velocity(u, g, vmax)
-        if v == w or v == randomize(w):
-            return True
-    return False
-
-
-@njit(cache=True)
-def _goe_kernel(keys, length, vmax, out):
+def _goe_kernel(keys, length, vmax, ok, horizon, out):
     pos = np.empty(length, dtype=np.int64)
     vel = np.empty(length, dtype=np.int64)
+    old_gap = np.empty(length, dtype=np.int64)
+    reach = np.empty(vmax + 1, dtype=np.bool_)
+    nxt = np.empty(vmax + 1, dtype=np.bool_)
     for i in range(keys.shape[0]):
         n = cars_of(keys[i], length, vmax + 2, pos, vel)
         goe = False
         for j in range(n):
             k = j + 1 if j + 1 < n else 0
-            old_gap = gap(pos, n, j, length) + vel[j] - vel[k]
-            if not _reachable_velocity(vel[j], old_gap, vmax):
+            old_gap[j] = gap(pos, n, j, length) + vel[j] - vel[k]
+            if old_gap[j] < 0:      # two cars would come from one cell, or overtake
                 goe = True
-                break
+        if not goe and n > 0:
+            # the old velocities u_0 .. u_{n-1} around the ring: car j's condition
+            # links u_j and u_{j+1} (the car ahead), so a predecessor is a closed
+            # walk u_0 -> u_1 -> ... -> u_0 of the relation ok[v_j, ., g_j, .]
+            goe = True
+            for u0 in range(vmax + 1):
+                reach[:] = False
+                reach[u0] = True
+                for j in range(n):
+                    g = min(old_gap[j], horizon)
+                    nxt[:] = False
+                    for u in range(vmax + 1):
+                        if reach[u]:
+                            for a in range(vmax + 1):
+                                if ok[vel[j], u, g, a]:
+                                    nxt[a] = True
+                    reach[:] = nxt
+                if reach[u0]:
+                    goe = False
+                    break
         out[i] = goe
 
 
-def goe_mask(keys, length: int, vmax: int) -> np.ndarray:
-    """True for each configuration key that is a Garden of Eden state.
+def goe_mask(keys, length: int, vmax: int | None, model: Model | None = None) -> np.ndarray:
+    """True for each configuration key that is a Garden of Eden state (parallel update).
 
     Parameters
     ----------
     keys : (n,) int64 array
         Configuration keys (:mod:`markov.encoding`) of a ring of ``length`` cells.
-    length, vmax : int
+    length : int
+    vmax : int or None
+        ``None`` with ``model``: the model's.
+    model : Model, optional
+        The rule (default NaSch); only its support matters.
 
     Returns
     -------
@@ -93,10 +117,11 @@ def goe_mask(keys, length: int, vmax: int) -> np.ndarray:
     >>> goe_mask([encode([0, 1, -1], 1), encode([0, -1, 1], 1)], 3, 1).tolist()
     [True, False]
     """
-    check_encodable(length, vmax)
+    support = rule_support(vmax, model)
+    check_encodable(length, support.vmax)
     keys = np.ascontiguousarray(keys, dtype=np.int64)
     out = np.empty(keys.shape[0], dtype=np.bool_)
-    _goe_kernel(keys, int(length), int(vmax), out)
+    _goe_kernel(keys, int(length), support.vmax, support.ok, support.horizon, out)
     return out
 
 
@@ -110,14 +135,17 @@ def _cells(config, vmax: int) -> list[int]:
     return cells
 
 
-def is_goe(config, vmax: int) -> bool:
-    """Whether a ring configuration has no predecessor.
+def is_goe(config, vmax: int | None, model: Model | None = None) -> bool:
+    """Whether a ring configuration has no predecessor (parallel update).
 
     Parameters
     ----------
     config : str or sequence of int
         ``"0..2"`` notation, or cells (``-1`` empty, else the velocity).
-    vmax : int
+    vmax : int or None
+        ``None`` with ``model``: the model's.
+    model : Model, optional
+        The rule (default NaSch).
 
     Returns
     -------
@@ -128,10 +156,11 @@ def is_goe(config, vmax: int) -> bool:
     >>> is_goe("0.2.", 2), is_goe("0..2..", 2)
     (True, False)
     """
+    vmax = rule_support(vmax, model).vmax
     cells = _cells(config, vmax)
     if not cells:
         raise InvalidParameterError("a ring needs at least one cell")
-    return bool(goe_mask([encode(cells, vmax)], len(cells), vmax)[0])
+    return bool(goe_mask([encode(cells, vmax)], len(cells), vmax, model)[0])
 
 
 @njit(cache=True)
@@ -159,7 +188,8 @@ def _periodic_kernel(keys, length, vmax, delta, out):
         out[i] = ok
 
 
-def pattern_free_mask(keys, length: int, vmax: int, order: int | None = None) -> np.ndarray:
+def pattern_free_mask(keys, length: int, vmax: int | None, order: int | None = None,
+                      model: Model | None = None) -> np.ndarray:
     """True for each ring configuration whose periodic extension avoids every
     elementary GoE pattern of order ``<= order`` (``None``: all orders).
 
@@ -169,9 +199,13 @@ def pattern_free_mask(keys, length: int, vmax: int, order: int | None = None) ->
     Parameters
     ----------
     keys : (n,) int64 array
-    length, vmax : int
+    length : int
+    vmax : int or None
+        ``None`` with ``model``: the model's.
     order : int, optional
         Highest pattern order checked; ``None``: all orders.
+    model : Model, optional
+        The rule (default NaSch), parallel update.
 
     Returns
     -------
@@ -184,24 +218,29 @@ def pattern_free_mask(keys, length: int, vmax: int, order: int | None = None) ->
     >>> pattern_free_mask(keys, 6, 2).tolist()
     [False, True]
     """
+    vmax = rule_support(vmax, model).vmax
     check_encodable(length, vmax)
-    delta = np.ascontiguousarray(order_automaton(vmax, order).delta, dtype=np.int64)
+    delta = np.ascontiguousarray(order_automaton(vmax, order, model).delta, dtype=np.int64)
     keys = np.ascontiguousarray(keys, dtype=np.int64)
     out = np.empty(keys.shape[0], dtype=np.bool_)
     _periodic_kernel(keys, int(length), int(vmax), delta, out)
     return out
 
 
-def is_pattern_free(config, vmax: int, order: int | None = None) -> bool:
+def is_pattern_free(config, vmax: int | None, order: int | None = None,
+                    model: Model | None = None) -> bool:
     """Whether a ring configuration avoids all elementary GoE patterns (cyclically).
 
     Parameters
     ----------
     config : str or sequence of int
         ``"0..2"`` notation, or cells (``-1`` empty, else the velocity).
-    vmax : int
+    vmax : int or None
+        ``None`` with ``model``: the model's.
     order : int, optional
         Highest pattern order checked; ``None``: all orders.
+    model : Model, optional
+        The rule (default NaSch).
 
     Returns
     -------
@@ -212,24 +251,26 @@ def is_pattern_free(config, vmax: int, order: int | None = None) -> bool:
     >>> is_pattern_free("0..2..", 2), is_pattern_free("0...2.", 2)
     (False, True)
     """
+    vmax = rule_support(vmax, model).vmax
     cells = _cells(config, vmax)
     if not cells:
         raise InvalidParameterError("a ring needs at least one cell")
-    return bool(pattern_free_mask([encode(cells, vmax)], len(cells), vmax, order)[0])
+    return bool(pattern_free_mask([encode(cells, vmax)], len(cells), vmax, order, model)[0])
 
 
 def image_keys(ring: Ring, order: int | None = None) -> tuple[np.ndarray, int]:
     """Configurations of the ring that occur at times ``>= order`` (by iteration).
 
-    Starts from every configuration and applies the support of one parallel
-    step ``order`` times (``None``: until the set stops shrinking -- the
-    configurations lying on arbitrarily long backward paths).  Exact, but it
-    enumerates all ``C(L, N) (vmax+1)^N`` configurations: small rings only.
+    Starts from every configuration and applies the support of one step of the
+    ring's model and update (:func:`markov.transition.successors`) ``order``
+    times (``None``: until the set stops shrinking -- the configurations lying
+    on arbitrarily long backward paths).  Exact, but it enumerates all
+    ``C(L, N) (vmax+1)^N`` configurations: small rings only.
 
     Parameters
     ----------
     ring : Ring
-        Parallel update.
+        Any model; parallel or random-sequential update (one sub-step).
     order : int, optional
         Steps to apply; ``None`` until the set stops shrinking.
 
@@ -245,12 +286,10 @@ def image_keys(ring: Ring, order: int | None = None) -> tuple[np.ndarray, int]:
     >>> len(image_keys(Ring(3, 1, 1, 0.5), 1)[0])   # the car at v=1 anywhere, or v=0
     6
     """
-    if ring.update != PARALLEL:
-        raise InvalidParameterError("Garden of Eden states exist only for parallel update")
     keys = all_keys(ring, lump=False)
     steps = 0
     while order is None or steps < order:
-        nxt = unique_keys(successors(ring, keys, lump=False).keys)
+        nxt = _image(ring, keys)
         steps += 1
         if order is None and np.array_equal(nxt, keys):
             return keys, steps - 1
@@ -258,27 +297,82 @@ def image_keys(ring: Ring, order: int | None = None) -> tuple[np.ndarray, int]:
     return keys, steps
 
 
-def census(length: int, cars: int, vmax: int, enumerate_limit: int = 2_000_000) -> dict:
+def _image(ring: Ring, keys: np.ndarray) -> np.ndarray:
+    """Sorted distinct successors of ``keys`` (chunked: a parallel row has ``2**N`` entries)."""
+    parts = [unique_keys(successors(ring, keys[lo:lo + _CHUNK], lump=False).keys)
+             for lo in range(0, keys.size, _CHUNK)]
+    return unique_keys(np.concatenate(parts)) if parts else keys[:0]
+
+
+_CHUNK = 1 << 12
+
+
+def goe_count(ring: Ring) -> int:
+    """Garden of Eden configurations of a ring, by brute force over all configurations.
+
+    A configuration is GoE when no configuration reaches it in one step (one
+    sub-step for random-sequential update) with positive probability: the
+    count is ``C(L, N) (vmax+1)^N`` minus the distinct successors of all of
+    them, from the row generator, for any model and either update.  For
+    parallel update :func:`goe_mask` gives the same set without the
+    successors (checked in the tests and by :func:`census`).
+
+    Random-sequential update: with an empty cell on the ring, drawing it
+    leaves the configuration unchanged, so every configuration is its own
+    predecessor and none is GoE; on a full ring (``N = L``) the drawn car
+    has gap 0 and stops, so the configurations with every car moving are GoE
+    (``vmax**L`` of them) -- whatever the model.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    >>> goe_count(Ring(6, 3, 2, 0.5)), goe_count(Ring(6, 3, 2, 0.5, "random-sequential"))
+    (434, 0)
+    """
+    return count_all(ring) - int(_image(ring, all_keys(ring, lump=False)).size)
+
+
+def census(length: int, cars: int, vmax: int | None = None, enumerate_limit: int = 2_000_000,
+           model: Model | None = None, update: str = PARALLEL) -> dict:
     """One census row: all, GoE, pattern-free, frozen and recurrent-class counts.
 
     The GoE count and the recurrent class are enumerated when the ring has at
     most ``enumerate_limit`` configurations (else ``None``); the pattern-free
     count always comes from the transfer matrix, and is also checked against
-    the enumeration when there is one.
+    the enumeration when there is one.  For a model other than NaSch the
+    frozen count, the recurrent class and its prediction are ``None`` (they
+    are derived for NaSch's rule); for random-sequential update the patterns
+    do not apply (``pattern_free`` is ``None``) and the GoE count is the
+    brute force of :func:`goe_count`.
 
     Parameters
     ----------
-    length, cars, vmax : int
-        The ring (vmax 1..6).
+    length, cars : int
+        The ring.
+    vmax : int, optional
+        1..6; default the model's (NaSch: 2).
     enumerate_limit : int
         Enumerate (GoE, recurrent class) up to this many configurations.
+    model : Model, optional
+        The rule (default NaSch).
+    update : str
+        ``"parallel"`` or ``"random-sequential"``.
 
     Returns
     -------
     dict
-        ``length, cars, vmax, all, goe, pattern_free, frozen, recurrent,
-        recurrent_predicted``; ``goe`` and ``recurrent`` are ``None`` beyond
-        ``enumerate_limit``.
+        ``model, update, length, cars, vmax, all, goe, pattern_free, frozen,
+        recurrent, recurrent_predicted, notes``; ``goe`` and ``recurrent`` are
+        ``None`` beyond ``enumerate_limit``; ``notes`` says why any other
+        entry is ``None`` (or that ``pattern_free`` was enumerated because the
+        rule has infinitely many elementary patterns).
 
     Examples
     --------
@@ -286,20 +380,49 @@ def census(length: int, cars: int, vmax: int, enumerate_limit: int = 2_000_000) 
     >>> row["all"], row["pattern_free"], row["recurrent"]
     (5670, 480, 480)
     """
-    ring = Ring(length, cars, vmax, 0.5)
+    if model is None:
+        model = load_model("nasch", {"vmax": 2 if vmax is None else vmax, "p": 0.5})
+    elif vmax is not None and vmax != model.vmax:
+        raise InvalidParameterError(f"vmax = {vmax} disagrees with the model {model.name}"
+                                    f" (vmax = {model.vmax})")
+    ring = Ring(length, cars, update=update, model=model)
     length, cars, vmax = ring.length, ring.cars, ring.vmax
-    pattern_free = pattern_free_count(length, cars, vmax)   # refuses vmax beyond the automata
+    parallel = update == PARALLEL
+    nasch = ring.is_nasch
+    rule_support(vmax, model)    # refuses vmax beyond the automata before any enumeration
+    notes = []
+    pattern_free = automaton = None
+    if parallel:
+        try:
+            automaton = order_automaton(vmax, None, model)
+            pattern_free = pattern_free_count(length, cars, vmax, model)
+        except (InvalidParameterError, StateSpaceTooLargeError) as exc:
+            notes.append(f"pattern-free: {exc}")
+    else:
+        notes.append("pattern-free: the word automata are those of parallel update")
     total = count_all(ring)
-    row = {"length": length, "cars": cars, "vmax": vmax, "all": total,
-           "goe": None, "pattern_free": pattern_free,
-           "frozen": frozen_count(length, cars, vmax), "recurrent": None,
-           "recurrent_predicted": recurrent_class_count(length, cars, vmax)}
+    row = {"model": model.name, "update": update, "length": length, "cars": cars,
+           "vmax": vmax, "all": total, "goe": None, "pattern_free": pattern_free,
+           "frozen": frozen_count(length, cars, vmax) if nasch and parallel else None,
+           "recurrent": None,
+           "recurrent_predicted": (recurrent_class_count(length, cars, vmax)
+                                   if nasch and parallel else None),
+           "notes": notes}
+    if not nasch:
+        notes.append("frozen and recurrent counts are derived for NaSch only")
     if total <= enumerate_limit:
-        keys = all_keys(ring, lump=False)
-        row["goe"] = int(goe_mask(keys, length, vmax).sum())
-        enumerated = int(pattern_free_mask(keys, length, vmax).sum())
-        if enumerated != row["pattern_free"]:
-            raise RuntimeError(f"transfer-matrix count {row['pattern_free']} differs from"
-                               f" the enumeration {enumerated}")
-        row["recurrent"] = 1 if ring.trivial else len(recurrent_keys(ring, lump=False))
+        if parallel:
+            keys = all_keys(ring, lump=False)
+            row["goe"] = int(goe_mask(keys, length, vmax, model).sum())
+            if automaton is not None:
+                enumerated = int(pattern_free_mask(keys, length, vmax, None, model).sum())
+                if pattern_free is None:       # no transfer matrix (infinitely many patterns)
+                    row["pattern_free"] = enumerated
+                elif enumerated != pattern_free:
+                    raise RuntimeError(f"transfer-matrix count {pattern_free} differs from"
+                                       f" the enumeration {enumerated}")
+        else:
+            row["goe"] = goe_count(ring)
+        if nasch:
+            row["recurrent"] = 1 if ring.trivial else len(recurrent_keys(ring, lump=False))
     return row

@@ -32,8 +32,10 @@ import math
 import numpy as np
 import scipy.sparse as sp
 
-from .goe_patterns import elementary_patterns, order_automaton, _ensure_vmax
+from .errors import InvalidParameterError
+from .goe_patterns import RuleSupport, _orders, minimal_forbidden_words, rule_support
 from .ring import PARALLEL, Ring
+from .rule import Model
 from .statespace import count_all
 
 __all__ = ["pattern_free_count", "frozen_count", "recurrent_class_count",
@@ -43,21 +45,30 @@ __all__ = ["pattern_free_count", "frozen_count", "recurrent_class_count",
 _BOUND_VMAX = 5
 
 
-def _ensure_ring_numbers(length, cars, vmax) -> tuple[int, int, int]:
-    ring = Ring(length, cars, vmax, 0.5)   # validates length, cars, vmax
-    _ensure_vmax(ring.vmax)
+def _ensure_ring_numbers(length, cars, vmax, model=None) -> tuple[int, int, int]:
+    support = rule_support(vmax, model)    # validates vmax against the model and the automata
+    ring = Ring(length, cars, support.vmax, 0.5)   # validates length, cars
     return ring.length, ring.cars, ring.vmax
 
 
+def _ensure_nasch(what: str, model: Model | None) -> None:
+    if model is not None and model.source != "nasch":
+        raise InvalidParameterError(
+            f"{what} is derived for NaSch's rule only, not for the model {model.name}")
+
+
 @functools.lru_cache(maxsize=None)
-def _sync_transfer(vmax: int):
+def _sync_transfer(support: RuleSupport):
     """Sparse 0/1 matrices of empty and car moves on the synchronised states."""
-    search = elementary_patterns(vmax, 2)   # the automata and the pattern-set bound
-    if search.longest is None:
-        raise RuntimeError(f"infinitely many elementary patterns for vmax={vmax}")
-    delta = order_automaton(vmax).delta
+    delta = _orders(support)[-1].delta
+    _, finite, longest = minimal_forbidden_words(_orders(support)[-1], 2)
+    if not finite:
+        raise InvalidParameterError(
+            f"rule {support.name} (vmax = {support.vmax}) has infinitely many elementary"
+            " patterns: its limit language is no shift of finite type, and the transfer"
+            " matrix count does not apply")
     n = delta.shape[0]
-    m = max(search.longest - 1, 0)
+    m = max(longest - 1, 0)
     reach = np.zeros(n, dtype=bool)
     reach[0] = True
     for _ in range(m):   # states reachable by words of exactly m cells
@@ -128,7 +139,8 @@ def _trace_mod(empty, car, length: int, cars: int, prime: int) -> int:
     return int(np.trace(V[:, cars, :]) % prime)
 
 
-def pattern_free_count(length: int, cars: int, vmax: int) -> int:
+def pattern_free_count(length: int, cars: int, vmax: int | None,
+                       model: Model | None = None) -> int:
     """Number of configurations (``L`` cells, ``N`` cars) free of elementary GoE patterns.
 
     Exact integer; counts configurations, not rotation classes.  They are the
@@ -142,21 +154,28 @@ def pattern_free_count(length: int, cars: int, vmax: int) -> int:
         Ring length ``L >= 1``.
     cars : int
         ``0 <= N <= L``.
-    vmax : int
-        1..6 (:data:`markov.goe_patterns.MAX_VMAX`).
+    vmax : int or None
+        1..6 (:data:`markov.goe_patterns.MAX_VMAX`); ``None`` with ``model``: the model's.
+    model : Model, optional
+        The rule (default NaSch), parallel update.
 
     Returns
     -------
     int
+
+    Raises
+    ------
+    InvalidParameterError
+        Bad ring numbers, or a rule with infinitely many elementary patterns.
 
     Examples
     --------
     >>> pattern_free_count(6, 2, 1)
     48
     """
-    length, cars, vmax = _ensure_ring_numbers(length, cars, vmax)
+    length, cars, vmax = _ensure_ring_numbers(length, cars, vmax, model)
     bound = count_all(Ring(length, cars, vmax, 0.5))
-    empty, car = _sync_transfer(vmax)
+    empty, car = _sync_transfer(rule_support(vmax, model))
     residues, moduli = [], []
     prod = 1
     i = 0
@@ -174,7 +193,8 @@ def pattern_free_count(length: int, cars: int, vmax: int) -> int:
     return x % prod
 
 
-def frozen_count(length: int, cars: int, vmax: int) -> int:
+def frozen_count(length: int, cars: int, vmax: int | None,
+                 model: Model | None = None) -> int:
     """Frozen configurations: every car stopped with ``>= 2`` empty cells ahead (vmax >= 2).
 
     Such a configuration can only come from itself (a stopped car with a gap of
@@ -186,23 +206,32 @@ def frozen_count(length: int, cars: int, vmax: int) -> int:
     Parameters
     ----------
     length, cars, vmax : int
+    model : Model, optional
+        Only NaSch (the default): the argument is NaSch's rule.
 
     Returns
     -------
     int
+
+    Raises
+    ------
+    InvalidParameterError
+        For any other model.
 
     Examples
     --------
     >>> frozen_count(9, 2, 2)    # 0..0....., 0...0...., ... : gaps (2,5), (3,4), ... x 9 / 2
     18
     """
-    length, cars, vmax = _ensure_ring_numbers(length, cars, vmax)
+    _ensure_nasch("the frozen count", model)
+    length, cars, vmax = _ensure_ring_numbers(length, cars, vmax, model)
     if vmax < 2 or cars == 0 or length - 2 * cars - 1 < cars - 1:
         return 0
     return length * math.comb(length - 2 * cars - 1, cars - 1) // cars
 
 
-def recurrent_class_count(length: int, cars: int, vmax: int) -> int:
+def recurrent_class_count(length: int, cars: int, vmax: int | None,
+                          model: Model | None = None) -> int:
     """Predicted ``len(recurrent_keys(Ring(L, N, vmax, p), lump=False))``.
 
     ``pattern_free_count - frozen_count`` for ``N >= 2``.  A single car sees
@@ -216,18 +245,26 @@ def recurrent_class_count(length: int, cars: int, vmax: int) -> int:
     ----------
     length, cars, vmax : int
         The ring (vmax 1..6).
+    model : Model, optional
+        Only NaSch (the default): the lone car and the frozen states are NaSch's.
 
     Returns
     -------
     int
         Configurations (not rotation classes) of the recurrent class.
 
+    Raises
+    ------
+    InvalidParameterError
+        For any other model.
+
     Examples
     --------
     >>> recurrent_class_count(10, 5, 2)
     2684
     """
-    length, cars, vmax = _ensure_ring_numbers(length, cars, vmax)
+    _ensure_nasch("the recurrent class count", model)
+    length, cars, vmax = _ensure_ring_numbers(length, cars, vmax, model)
     if cars in (0, length):
         return 1
     if cars == 1:
@@ -241,8 +278,9 @@ def recurrent_class_bound(ring: Ring, lump: bool) -> int | None:
     The size estimator of :class:`markov.chain.RingChain` (``state_bound=``):
     :func:`recurrent_class_count` for parallel update, divided by ``L`` when
     lumped (an orbit has at most ``L`` members).  ``None`` where no count is
-    offered: random-sequential update, ``vmax > 5`` (the automata take
-    seconds there), and the trivial rings.
+    offered: models other than NaSch (the count is derived for its rule),
+    random-sequential update, ``vmax > 5`` (the automata take seconds there),
+    and the trivial rings.
 
     Parameters
     ----------
@@ -261,7 +299,7 @@ def recurrent_class_bound(ring: Ring, lump: bool) -> int | None:
     >>> recurrent_class_bound(Ring(10, 5, 2, 0.5), lump=True)     # at least 2684 / 10
     269
     """
-    if ring.update != PARALLEL or ring.trivial or ring.vmax > _BOUND_VMAX:
+    if not ring.is_nasch or ring.update != PARALLEL or ring.trivial or ring.vmax > _BOUND_VMAX:
         return None
     count = recurrent_class_count(ring.length, ring.cars, ring.vmax)
     return -(-count // ring.length) if lump else count

@@ -9,7 +9,7 @@ allowed words form a factorial language ``L_n``; ``L_0`` is every word and
 ``L_{n+1} = Pre(L_n)`` (the words with a one-step preimage word in ``L_n``).
 
 Window of the past.  In one step a car moves at most ``vmax`` cells and looks
-at most ``vmax`` cells ahead, so the cells ``[a, a + K)`` at time ``t`` are a
+at most ``vmax`` cells ahead (the rule's horizon, for rules that look farther), so the cells ``[a, a + K)`` at time ``t`` are a
 function of the cells ``[a - vmax, a + K + vmax)`` at time ``t - 1`` and of
 the coins of the cars among them; ``n`` steps back the window is
 ``[a - n vmax, a + K + n vmax)``.  We never enumerate these windows: we work
@@ -20,7 +20,9 @@ has velocity ``v_j`` and ``d_j`` empty cells ahead.  A car's velocity is the
 distance it just moved, so one step back car ``j`` stood at ``x_j - v_j``
 and had the gap ``g_j = d_j + v_j - v_{j+1}`` (the paper's relation between
 ``d_j(t)`` and ``d_j(t-1)``); only its old velocity ``u_j`` is unknown, and
-the rules demand ``v_j`` in ``{w, max(w - 1, 0)}`` with ``w = R2(R1(u_j), g_j)``.
+the rule demands ``v_j`` in its support at ``(u_j, g_j, u_{j+1})`` (for NaSch
+``{w, max(w - 1, 0)}`` with ``w = R2(R1(u_j), g_j)``; any model through
+:class:`RuleSupport`, gaps capped at the rule's horizon).
 The one-step preimage of a word is therefore a word with the same cars, forced
 gaps and free old velocities, checked car after car: a finite transducer.
 :func:`preimage_automaton` composes it with the automaton of ``L_n`` and
@@ -57,13 +59,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .encoding import EMPTY_DIGIT, from_text, to_text
-from .errors import InvalidParameterError
-from .rules import deterministic_velocity, randomize
+from .errors import InvalidParameterError, StateSpaceTooLargeError
+from .rule import Model, load_model, tabulate
 
-# the construction steps (outcome_set, preimage_automaton, same_language,
+# the construction steps (preimage_automaton, same_language,
 # minimal_forbidden_words) are documented for readers of docs/goe.md
-__all__ = ["WordAutomaton", "Pattern", "PatternSearch", "order_automaton", "elementary_patterns",
-           "word_allowed", "limit_order", "MAX_VMAX"]
+__all__ = ["RuleSupport", "rule_support", "WordAutomaton", "Pattern", "PatternSearch",
+           "order_automaton", "elementary_patterns", "word_allowed", "limit_order", "MAX_VMAX"]
 
 # Words are read as digits (markov.encoding: 0 empty, v + 1 a car of velocity v),
 # the columns of the automata.
@@ -88,21 +90,99 @@ def _ensure_vmax(vmax) -> int:
     return int(vmax)
 
 
-@functools.lru_cache(maxsize=None)
-def outcome_set(u: int, gap: int, vmax: int) -> frozenset:
-    """Velocities a car of velocity ``u`` and gap ``gap`` can take after R1-R3.
+@dataclass(frozen=True, eq=False)
+class RuleSupport:
+    """Which new velocities a rule can give, as the automata read it.
 
-    Both branches of the random brake are included (``0 < p < 1``).
+    Attributes
+    ----------
+    name : str
+        The model's name.
+    vmax, horizon : int
+        Maximal velocity; largest gap the rule distinguishes (rows above repeat it).
+    ok : (vmax+1, vmax+1, horizon+1, vmax+1) bool array
+        ``ok[w, u, g, a]``: a car of velocity ``u``, gap ``g`` (capped at the
+        horizon) and car ahead of velocity ``a`` takes the new velocity ``w``
+        with positive probability.
+
+    Equal supports compare equal whatever the probabilities (the automata and
+    patterns depend only on the support), so their caches are shared.
+    """
+
+    name: str
+    vmax: int
+    horizon: int
+    ok: np.ndarray = field(repr=False)
+
+    def _key(self):
+        return (self.vmax, self.horizon, self.ok.tobytes())
+
+    def __hash__(self) -> int:
+        return hash(self._key())
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, RuleSupport) and self._key() == other._key()
+
+    def allows(self, w: int, u: int, g: int, a: int) -> bool:
+        """Whether ``(u, g, a)`` can give the new velocity ``w`` (any ``g >= 0``)."""
+        return bool(self.ok[w, u, min(g, self.horizon), a])
+
+    def far(self, w: int, u: int) -> bool:
+        """Whether a car with no car ahead in reach (gap beyond the horizon) can give ``w``."""
+        return bool(self.ok[w, u, self.horizon, 0])
+
+
+def rule_support(vmax: int | None = None, model: Model | None = None) -> RuleSupport:
+    """The support of a model's rule (default NaSch with ``vmax``), validated for the automata.
+
+    Parameters
+    ----------
+    vmax : int, optional
+        1..6 (:data:`MAX_VMAX`); with ``model`` it must agree with the model's.
+    model : Model, optional
+        Any rule (:func:`markov.rule.load_model`); default NaSch.
+
+    Returns
+    -------
+    RuleSupport
+
+    Raises
+    ------
+    InvalidParameterError
+        vmax out of range (1..6) or disagreeing with the model.  (The word
+        automata further refuse a rule whose support beyond its horizon still
+        depends on the car ahead: they give the last car of a word no car
+        ahead in reach, which such a rule leaves undefined.)
 
     Examples
     --------
-    >>> sorted(outcome_set(0, 5, 2))
-    [0, 1]
-    >>> sorted(outcome_set(2, 0, 2))
-    [0]
+    >>> s = rule_support(2)
+    >>> s.allows(1, 0, 5, 0), s.allows(2, 0, 5, 0)
+    (True, False)
     """
-    w = int(deterministic_velocity(u, gap, vmax))
-    return frozenset((w, int(randomize(w))))
+    if model is None:
+        model = load_model("nasch", {"vmax": _ensure_vmax(vmax), "p": 0.5})
+    elif not isinstance(model, Model):
+        raise InvalidParameterError(
+            f"model must be a markov.rule.Model (see load_model), got {type(model).__name__}")
+    elif vmax is not None and vmax != model.vmax:
+        raise InvalidParameterError(f"vmax = {vmax} disagrees with the model {model.name}"
+                                    f" (vmax = {model.vmax})")
+    return _support_of(model)
+
+
+@functools.lru_cache(maxsize=64)
+def _support_of(model: Model) -> RuleSupport:
+    vmax = _ensure_vmax(model.vmax)
+    table = tabulate(model)
+    horizon = table.horizon
+    ok = np.zeros((vmax + 1, vmax + 1, horizon + 1, vmax + 1), dtype=bool)
+    for u in range(vmax + 1):
+        for g in range(horizon + 1):
+            for a in range(vmax + 1):
+                for w in table.support(u, g, a):
+                    ok[w, u, g, a] = True
+    return RuleSupport(model.name, vmax, horizon, ok)
 
 
 @dataclass(frozen=True)
@@ -214,30 +294,31 @@ def _make(vmax: int, delta: np.ndarray) -> WordAutomaton:
     return WordAutomaton(vmax, delta, _saturation(delta))
 
 
-def preimage_automaton(prev: WordAutomaton) -> WordAutomaton:
+def preimage_automaton(prev: WordAutomaton, support: RuleSupport) -> WordAutomaton:
     """Automaton of ``Pre(L)``: words with a one-step preimage word in ``L(prev)``.
 
     Nondeterministic states ``(q, u, v, t)``: ``q`` the state of ``prev`` after
     reading the preimage word up to and including the last car (old velocity
     ``u``), ``v`` that car's present velocity, ``t`` the empty cells read since
     (capped at ``T``).  When the next car (present velocity ``v'``) is read the
-    old gap ``g = t + v - v'`` is known; the rules must give ``v`` from
-    ``(u, g)``; ``g`` empties and the next car's old velocity (any) are fed to
+    old gap ``g = t + v - v'`` is known and its old velocity ``u'`` is chosen:
+    the rule must give ``v`` from ``(u, g, u')`` (``u'`` is the velocity of
+    the car ahead in the predecessor); ``g`` empties and ``u'`` are fed to
     ``prev``.  A state is *live* if some continuation ends the word legally:
-    the last car with no car ahead (gap unbounded, ``prev`` still live after
-    its empties) -- cars ahead are reached through further moves.
+    the last car with no car ahead in reach (gap beyond the horizon, ``prev``
+    still live after its empties) -- cars ahead are reached through further moves.
 
     Examples
     --------
-    >>> first = preimage_automaton(_all_words(1))     # L_1 for vmax = 1
+    >>> first = preimage_automaton(_all_words(1), rule_support(1))     # L_1 for vmax = 1
     >>> first.accepts("0.1"), first.accepts("01")
     (True, False)
     """
     vmax = prev.vmax
     B = vmax + 2
     G = prev.saturation
-    T = vmax + max(vmax, G)  # t >= T: g >= max(vmax, G), where nothing changes any more
-    big = T + vmax + 1
+    # t >= T: g >= max(horizon, G), where neither the rule nor prev changes any more
+    T = vmax + max(support.horizon, G)
 
     pd = prev.delta
     empt = np.full((prev.n_states, G + 1), -1, dtype=np.int64)  # q . ^ g
@@ -263,7 +344,7 @@ def preimage_automaton(prev: WordAutomaton) -> WordAutomaton:
             return [(q, u, v, min(t + 1, T))]
         v2 = c - 1
         g = t + v - v2
-        if g < 0 or v not in outcome_set(u, g, vmax):
+        if g < 0:
             return []
         q1 = int(empt[q, min(g, G)])
         if q1 < 0:
@@ -271,7 +352,7 @@ def preimage_automaton(prev: WordAutomaton) -> WordAutomaton:
         out = []
         for u2 in range(vmax + 1):
             q2 = int(pd[q1, u2 + 1])
-            if q2 >= 0:
+            if q2 >= 0 and support.allows(v, u, g, u2):
                 out.append((q2, u2, v2, 0))
         return out
 
@@ -279,7 +360,7 @@ def preimage_automaton(prev: WordAutomaton) -> WordAutomaton:
         if state == START:
             return True
         q, u, v, t = state
-        return v in outcome_set(u, big, vmax) and empt[q, G] >= 0
+        return support.far(v, u) and empt[q, G] >= 0
 
     # forward exploration of the nondeterministic states
     index = {START: 0}
@@ -300,7 +381,8 @@ def preimage_automaton(prev: WordAutomaton) -> WordAutomaton:
         succ.append(row)
         i += 1
         if len(states) > 50 * _MAX_STATES:
-            raise RuntimeError("preimage automaton too large")
+            raise StateSpaceTooLargeError(
+                f"the preimage automaton passed {50 * _MAX_STATES:,} states")
     n = len(states)
     # live = can reach a terminal state (backward search)
     preds = [[] for _ in range(n)]
@@ -337,7 +419,8 @@ def preimage_automaton(prev: WordAutomaton) -> WordAutomaton:
                 j = dindex[nxt] = len(dstates)
                 dstates.append(nxt)
                 if len(dstates) > _MAX_STATES:
-                    raise RuntimeError("determinised automaton too large")
+                    raise StateSpaceTooLargeError(
+                        f"the determinised automaton passed {_MAX_STATES:,} states")
             row.append(j)
         rows.append(row)
         i += 1
@@ -372,19 +455,35 @@ def same_language(a: WordAutomaton, b: WordAutomaton) -> bool:
 
 
 @functools.lru_cache(maxsize=None)
-def _orders(vmax: int) -> tuple:
-    """``(L_0, L_1, ..., L_n)`` with ``L_n == L_{n-1}`` (the limit), cached per vmax."""
-    autos = [_all_words(vmax)]
+def _orders(support: RuleSupport) -> tuple:
+    """``(L_0, L_1, ..., L_n)`` with ``L_n == L_{n-1}`` (the limit), cached per support."""
+    ok = support.ok
+    if not (ok[:, :, support.horizon, :] == ok[:, :, support.horizon, :1]).all():
+        raise InvalidParameterError(
+            f"rule {support.name}: its support at gaps beyond the horizon ({support.horizon})"
+            " depends on the car ahead; the word automata need a rule that ignores a car"
+            " ahead out of its reach (the last car of a word has none in reach)")
+    autos = [_all_words(support.vmax)]
     while True:
-        nxt = preimage_automaton(autos[-1])
+        try:
+            if len(autos) > _MAX_ORDER:
+                raise StateSpaceTooLargeError(f"{_MAX_ORDER} orders were built")
+            nxt = preimage_automaton(autos[-1], support)
+        except StateSpaceTooLargeError as exc:
+            # e.g. FI at vmax >= 2: every order adds longer patterns (issue 18, docs/goe.md)
+            _, _, longest = minimal_forbidden_words(autos[-1], 2)
+            longest = "infinitely many" if longest is None else f"the longest has {longest} cells"
+            raise StateSpaceTooLargeError(
+                f"rule {support.name} (vmax = {support.vmax}): the languages of allowed words"
+                f" have not stabilised by order {len(autos) - 1} (its forbidden words:"
+                f" {longest}) and order {len(autos)} is out of reach: {exc}") from None
         if same_language(nxt, autos[-1]):
             return tuple(autos)
         autos.append(nxt)
-        if len(autos) > _MAX_ORDER:
-            raise RuntimeError(f"allowed languages did not stabilise within {_MAX_ORDER} orders")
 
 
-def order_automaton(vmax: int, order: int | None = None) -> WordAutomaton:
+def order_automaton(vmax: int | None, order: int | None = None,
+                    model: Model | None = None) -> WordAutomaton:
     """Automaton of ``L_order`` (words that occur at times ``>= order``).
 
     ``order=None`` gives the limit language ``L_inf`` (words that occur at
@@ -392,10 +491,12 @@ def order_automaton(vmax: int, order: int | None = None) -> WordAutomaton:
 
     Parameters
     ----------
-    vmax : int
-        1..6 (:data:`MAX_VMAX`).
+    vmax : int or None
+        1..6 (:data:`MAX_VMAX`); ``None`` with ``model``: the model's.
     order : int, optional
         ``n >= 0``; ``None`` for the limit language.
+    model : Model, optional
+        The rule (default NaSch); parallel update.
 
     Returns
     -------
@@ -408,8 +509,7 @@ def order_automaton(vmax: int, order: int | None = None) -> WordAutomaton:
     >>> order_automaton(2).accepts("0..2")
     False
     """
-    vmax = _ensure_vmax(vmax)
-    autos = _orders(vmax)
+    autos = _orders(rule_support(vmax, model))
     if order is None or order >= len(autos):
         return autos[-1]
     if order < 0:
@@ -417,29 +517,34 @@ def order_automaton(vmax: int, order: int | None = None) -> WordAutomaton:
     return autos[order]
 
 
-def limit_order(vmax: int) -> int:
+def limit_order(vmax: int | None, model: Model | None = None) -> int:
     """Smallest ``n`` with ``L_n == L_inf`` (the highest order of any GoE pattern).
 
     Parameters
     ----------
-    vmax : int
+    vmax : int or None
+    model : Model, optional
+        The rule (default NaSch).
 
     Returns
     -------
     int
     """
-    return len(_orders(_ensure_vmax(vmax))) - 1
+    return len(_orders(rule_support(vmax, model))) - 1
 
 
-def word_allowed(text: str, vmax: int, order: int | None = None) -> bool:
+def word_allowed(text: str, vmax: int | None, order: int | None = None,
+                 model: Model | None = None) -> bool:
     """Whether the word occurs at times ``>= order`` (``None``: arbitrarily late).
 
     Parameters
     ----------
     text : str
         The word, ``"0..2"`` notation.
-    vmax : int
+    vmax : int or None
     order : int, optional
+    model : Model, optional
+        The rule (default NaSch).
 
     Returns
     -------
@@ -450,7 +555,7 @@ def word_allowed(text: str, vmax: int, order: int | None = None) -> bool:
     >>> word_allowed("0..2", 2, order=1), word_allowed("0..2", 2, order=2)
     (True, False)
     """
-    return order_automaton(vmax, order).accepts(text)
+    return order_automaton(vmax, order, model).accepts(text)
 
 
 @dataclass(frozen=True)
@@ -494,6 +599,8 @@ class PatternSearch:
     automaton_states : tuple of int
         States of the minimal automata of ``L_0 .. L_n``.
     seconds : float
+    model : str
+        The rule's name (``nasch`` by default).
     """
 
     vmax: int
@@ -504,6 +611,7 @@ class PatternSearch:
     limit_order: int
     automaton_states: tuple
     seconds: float
+    model: str = "nasch"
 
     def to_dict(self) -> dict:
         """JSON-ready dict of the result.
@@ -512,7 +620,7 @@ class PatternSearch:
         -------
         dict
         """
-        return {"vmax": self.vmax, "max_cells": self.max_cells,
+        return {"model": self.model, "vmax": self.vmax, "max_cells": self.max_cells,
                 "patterns": [p.to_dict() for p in self.patterns],
                 "complete": self.complete, "longest": self.longest,
                 "limit_order": self.limit_order, "seconds": self.seconds}
@@ -631,7 +739,8 @@ def minimal_forbidden_words(auto: WordAutomaton, max_cells: int):
     return words, finite, (longest if finite else None)
 
 
-def elementary_patterns(vmax: int, max_cells: int) -> PatternSearch:
+def elementary_patterns(vmax: int | None, max_cells: int,
+                        model: Model | None = None) -> PatternSearch:
     """All elementary GoE patterns with at most ``max_cells`` cells, with their order.
 
     An elementary pattern is a minimal forbidden word of the limit language
@@ -641,10 +750,12 @@ def elementary_patterns(vmax: int, max_cells: int) -> PatternSearch:
 
     Parameters
     ----------
-    vmax : int
-        Maximal velocity, 1..6 (:data:`MAX_VMAX`).
+    vmax : int or None
+        Maximal velocity, 1..6 (:data:`MAX_VMAX`); ``None`` with ``model``: the model's.
     max_cells : int
         Longest word searched (``K``), >= 2.
+    model : Model, optional
+        The rule (default NaSch), parallel update; only its support matters.
 
     Returns
     -------
@@ -655,12 +766,13 @@ def elementary_patterns(vmax: int, max_cells: int) -> PatternSearch:
     >>> [(p.pattern, p.order) for p in elementary_patterns(1, 6).patterns]
     [('01', 1), ('11', 1)]
     """
-    vmax = _ensure_vmax(vmax)
+    support = rule_support(vmax, model)
+    vmax = support.vmax
     if isinstance(max_cells, bool) or not isinstance(max_cells, (int, np.integer)) or max_cells < 2:
         raise InvalidParameterError(f"max_cells must be an integer >= 2, got {max_cells!r}")
     max_cells = int(max_cells)
     start = time.perf_counter()
-    autos = _orders(vmax)
+    autos = _orders(support)
     words, finite, longest = minimal_forbidden_words(autos[-1], max_cells)
     pats = []
     for w in words:
@@ -670,4 +782,4 @@ def elementary_patterns(vmax: int, max_cells: int) -> PatternSearch:
     pats.sort(key=lambda p: (p.order, len(p.pattern), p.pattern))
     return PatternSearch(vmax, max_cells, tuple(pats), finite and longest <= max_cells,
                          longest, len(autos) - 1, tuple(a.n_states for a in autos),
-                         time.perf_counter() - start)
+                         time.perf_counter() - start, support.name)

@@ -4,66 +4,89 @@ from __future__ import annotations
 import click
 
 from ..cli_common import emit_json, handle_errors, quiet_option
+from ..model_options import build_model, model_options
 from markov.errors import InvalidParameterError
 
 __all__ = ["goe"]
 
 
 @click.command()
-@click.option("--vmax", type=int, default=2, show_default=True,
-              help="Maximal velocity, 1..6 (the automata grow about tenfold per velocity).")
+@click.option("--vmax", type=int, default=None,
+              help="Maximal velocity, 1..6 (the automata grow about tenfold per velocity);"
+                   " default the model's (nasch: 2).")
+@model_options
 @click.option("--max-cells", "-K", "max_cells", type=int, default=12, show_default=True,
               help="Longest pattern searched (cells).")
 @click.option("--census", "do_census", is_flag=True,
               help="Count configurations of one ring instead (needs --length, --cars).")
 @click.option("--length", "-L", type=int, default=None, help="Ring length L (with --census).")
 @click.option("--cars", "-N", type=int, default=None, help="Number of cars N (with --census).")
+@click.option("--update", type=click.Choice(["parallel", "random-sequential"]),
+              default="parallel", show_default=True,
+              help="Update of the census (the patterns are those of parallel update).")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @quiet_option
 @handle_errors
-def goe(vmax, max_cells, do_census, length, cars, as_json):
+def goe(vmax, model, params, max_cells, do_census, length, cars, update, as_json):
     """Elementary Garden of Eden patterns (exhaustive) or a ring's GoE census.
 
     Patterns are written with '.' for an empty cell and a digit for a car of
     that velocity, cars moving to the right; order n means the pattern cannot
-    occur at any time t >= n.
+    occur at any time t >= n.  Any model (--model, --param) can be analysed;
+    only the support of its rule matters (which new velocities have positive
+    probability).
 
     \b
     Example:
       nasch goe --vmax 2 --max-cells 12
+      nasch goe --model cc --vmax 3 -K 10
       nasch goe --census --length 16 --cars 8 --vmax 2 --json
+      nasch goe --census -L 8 -N 4 --model kkw --param vmax=2 --update random-sequential
     """
+    rule = build_model(model, params, vmax=vmax)
     if do_census:
         if length is None or cars is None:
             raise InvalidParameterError("--census needs --length L and --cars N")
         from markov.goe import census
-        row = census(length, cars, vmax)
+        row = census(length, cars, model=rule, update=update)
         if as_json:
             emit_json(row)
             return
         def fmt(x):
-            return "n/a (too many to enumerate)" if x is None else f"{x:,}"
-        click.echo(f"GoE census L={row['length']} N={row['cars']} vmax={row['vmax']}")
+            return "n/a" if x is None else f"{x:,}"
+        enumerated = row["goe"] is not None
+        click.echo(f"GoE census L={row['length']} N={row['cars']} vmax={row['vmax']}"
+                   f" model={row['model']} update={row['update']}")
         click.echo(f"  all configurations        {fmt(row['all'])}")
-        click.echo(f"  GoE (no predecessor)      {fmt(row['goe'])}")
+        click.echo(f"  GoE (no predecessor)      {fmt(row['goe'])}"
+                   + ("" if enumerated else "  (too many to enumerate)"))
         click.echo(f"  pattern-free              {fmt(row['pattern_free'])}")
         click.echo(f"  frozen (pattern-free, unreachable) {fmt(row['frozen'])}")
+        predicted = row["recurrent_predicted"]
         click.echo(f"  recurrent class           {fmt(row['recurrent'])}"
-                   f"  (predicted {row['recurrent_predicted']:,})")
+                   + ("" if predicted is None else f"  (predicted {predicted:,})"))
+        for note in row["notes"]:
+            click.echo(f"  note: {note}")
         return
     if length is not None or cars is not None:
         raise InvalidParameterError("--length and --cars are used only with --census")
+    if update != "parallel":
+        raise InvalidParameterError(
+            "--update random-sequential has no elementary patterns: a configuration with an"
+            " empty cell is its own predecessor (use --census to count GoE rings)")
     from markov.goe_patterns import elementary_patterns
-    result = elementary_patterns(vmax, max_cells)
+    result = elementary_patterns(None, max_cells, rule)
     if as_json:
         emit_json(result.to_dict())
         return
-    click.echo(f"Elementary GoE patterns, vmax={vmax}, up to {max_cells} cells"
-               f" ({len(result.patterns)} found, {result.seconds:.2f} s)")
+    click.echo(f"Elementary GoE patterns, model={rule.name}, vmax={rule.vmax}, up to"
+               f" {max_cells} cells ({len(result.patterns)} found, {result.seconds:.2f} s)")
     for order in sorted({p.order for p in result.patterns}):
         words = [p.pattern for p in result.patterns if p.order == order]
         click.echo(f"  order {order} ({len(words)}): " + "  ".join(words))
     if result.complete:
         click.echo(f"  complete: no elementary pattern is longer than {result.longest} cells")
+    elif result.longest is None:
+        click.echo("  infinitely many elementary patterns: longer ones exist beyond any window")
     else:
         click.echo("  longer patterns exist beyond the search window")
