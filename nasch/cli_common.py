@@ -181,6 +181,17 @@ def _echo_interrupted() -> None:
     click.echo(f"{lead}interrupted", err=True)
 
 
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    """True when a KeyboardInterrupt is in the chain of causes and contexts of ``exc``."""
+    chain = set()
+    while exc is not None and id(exc) not in chain:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        chain.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 def run_console(group: click.Group) -> None:
     """Entry point of the ``nasch`` program: ``group()`` with a clean Ctrl-C exit.
 
@@ -202,8 +213,20 @@ def run_console(group: click.Group) -> None:
         code = EXIT_INTERRUPTED
     except SystemExit as exc:
         code = exc.code
+    except BaseException as exc:
+        if not _caused_by_interrupt(exc):
+            raise
+        _echo_interrupted()
+        code = EXIT_INTERRUPTED
     if code == EXIT_INTERRUPTED:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        # A KeyboardInterrupt that went through exec() or eval() of a string
+        # (namedtuple, dataclasses, numba, sympy do that while they load or
+        # compile) sets CPython's "unhandled KeyboardInterrupt" flag even though
+        # it was caught here, and the interpreter would then kill itself with
+        # SIGINT at exit instead of exiting with 130.  Running a string through
+        # exec() again clears that flag.
+        exec("")
     sys.exit(code)
 
 
@@ -267,6 +290,15 @@ class NaschGroup(click.Group):
         try:
             result = super().invoke(ctx)
         except KeyboardInterrupt:
+            result = None
+            seen.append(signal.SIGINT)
+        except BaseException as exc:
+            # A Ctrl-C that lands inside a compiled (numba) kernel surfaces as
+            # "SystemError: CPUDispatcher(...) returned a result with an exception
+            # set", the KeyboardInterrupt as its __context__: once a SIGINT was
+            # seen, the interrupt is what ended the command, whatever was raised.
+            if not (seen or _caused_by_interrupt(exc)):
+                raise
             result = None
             seen.append(signal.SIGINT)
         finally:
