@@ -373,8 +373,8 @@ class RingChain:
         StateSpaceTooLargeError
             When the method's work vectors do not fit beside the operator.
         """
-        _ensure_unique(self.ring)
         ensure_chain_arguments(self.ring, method=method, tol=tol)
+        _ensure_unique(self.ring)
         if method == "aggregation" and self.ring.update != PARALLEL:
             raise InvalidParameterError(
                 "aggregation needs parallel update (the predecessors of a state share"
@@ -608,8 +608,8 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     >>> round(solve(Ring(3, 1, 1, 0.25)).flux, 12)
     0.25
     """
-    _ensure_unique(ring)
     ensure_chain_arguments(ring, method=method, tol=tol, max_memory=max_memory)
+    _ensure_unique(ring)
     return RingChain(ring, lump=lump, max_memory=max_memory, operator=operator,
                      state_bound=state_bound).solution(method=method, tol=tol)
 
