@@ -26,7 +26,7 @@ from .encoding import compact_jam_key
 from .transition import successor_counts, transition_matrix
 from .validate import ensure_chain_arguments, format_count
 
-__all__ = ["RingChain", "Solution", "solve", "load_solution", "representable"]
+__all__ = ["RingChain", "Solution", "solve", "load_solution", "representable", "min_p", "MIN_P"]
 
 # OPERATORS (markov.choices): how ``x -> x P`` is applied (see
 # RingChain.operator_kind for ``auto``): ``matrix`` the assembled CSR matrix
@@ -55,6 +55,39 @@ _LIGHTEST = "power"
 #: braking probability and with BiCGSTAB above (:meth:`RingChain._auto_method`).
 AGGREGATION_MAX_P = 0.3
 
+#: Smallest ``p`` (and ``1 - p``) the floating-point chain accepts.  Below
+#: about 1.1e-16, ``1 - p`` rounds to 1 and the chain is no longer the
+#: model's; at 1e-15 it still carries ``p`` to about 10 %.  Fluxes measured
+#: down to 1e-16 agree with ``symbolic.exact`` to 2e-16 (L = 8, N = 4,
+#: vmax = 2); at 1e-20 LU of that chain meets a zero pivot.
+MIN_P = 1e-15
+
+_TINY = float(np.finfo(float).tiny)   # the smallest normal double, 2.2e-308
+
+
+def min_p(ring: Ring) -> float:
+    """The smallest braking probability (and ``1 - p``) the exact chain of ``ring`` supports.
+
+    :data:`MIN_P`, or more when the weight ``p**N`` of a step in which all
+    ``N`` cars brake (``(1 - p)**N``: all go) would fall below the smallest
+    normal double, 2.2e-308: then it underflows and the chain falls apart.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> min_p(Ring(8, 4, 2, 0.5)), f"{min_p(Ring(24, 23, 2, 0.5)):.2g}"
+    (1e-15, '4.2e-14')
+    """
+    return max(MIN_P, _TINY ** (1.0 / max(ring.cars, 1)))
+
+
 def _ensure_unique(ring: Ring) -> None:
     if ring.trivial:
         return
@@ -68,6 +101,15 @@ def _ensure_unique(ring: Ring) -> None:
             "p = 1 makes every car brake to v - 1 after accelerating, so a stopped car"
             " never moves again and every configuration of stopped cars is absorbing:"
             " there are many stationary states; use 0 < p < 1")
+    smallest = min_p(ring)
+    p = float(ring.p)
+    if min(p, 1 - p) < smallest:
+        n = ring.cars
+        raise InvalidParameterError(
+            f"p = {p!r} is too close to {0 if p < 0.5 else 1}: the weights p^k (1 - p)^(N - k)"
+            f" of the chain underflow in double precision (1 - p rounds to 1 for p < 1.1e-16;"
+            f" p^{n} drops below 2.2e-308 for p < {_TINY ** (1.0 / n):.2g}); this ring"
+            f" supports {smallest:.2g} <= p <= 1 - {smallest:.2g}")
 
 
 def representable(ring: Ring) -> bool:
