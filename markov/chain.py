@@ -113,10 +113,13 @@ def _ensure_unique(ring: Ring) -> None:
 
 
 def representable(ring: Ring) -> bool:
-    """Whether the exact solver can encode the ring at all.
+    """Whether the exact solver can encode the ring on both of its paths.
 
     A configuration must fit a signed 64-bit key, and under parallel update a
     word of the factored operator (positions and car values) must fit 62 bits.
+    Without the word a ring is still solved when its chain is small enough for
+    the matrix (L = 24, N = 23, vmax = 2: two states), but the sizes a budget
+    chooses from (:mod:`nasch.budget`) need the matrix-free path.
 
     Parameters
     ----------
@@ -131,17 +134,12 @@ def representable(ring: Ring) -> bool:
     >>> representable(Ring(24, 12, 2, 0.5)), representable(Ring(60, 30, 2, 0.5))
     (True, False)
     """
-    from ._factored import word_bits
+    from ._factored import factored_fits
     from .encoding import max_length
 
     if ring.length > max_length(ring.vmax):
         return False
-    if ring.update == PARALLEL and 0 < ring.cars:
-        try:
-            word_bits(ring)
-        except InvalidParameterError:
-            return False
-    return True
+    return ring.update != PARALLEL or ring.cars == 0 or factored_fits(ring)
 
 
 class RingChain:
@@ -326,7 +324,9 @@ class RingChain:
 
         ``auto`` resolves to the CSR matrix up to :data:`AUTO_MATRIX_STATES`
         states if it fits in the memory limit, else to matrix-free if that
-        fits, else to the matrix if that fits.
+        fits, else to the matrix if that fits.  A parallel ring whose factored
+        word does not fit 62 bits (:func:`markov._factored.word_bits`) has
+        only the matrix.
 
         Raises
         ------
@@ -344,8 +344,15 @@ class RingChain:
         free_fits = self.matrix_free_bytes(_LIGHTEST) <= self.limit
         if self.operator == "auto":
             matrix_fits = self.matrix_bytes() <= self.limit
-            if matrix_fits and (self.n_states <= AUTO_MATRIX_STATES or not free_fits):
+            # without a factored word (L + N bits(vmax) > 62) only the matrix is left
+            from ._factored import factored_fits, word_bits
+
+            factored = self.ring.update != PARALLEL or factored_fits(self.ring)
+            if matrix_fits and (self.n_states <= AUTO_MATRIX_STATES or not free_fits
+                                or not factored):
                 return "matrix"
+            if not factored:
+                word_bits(self.ring)   # refuses, naming the bits
         memory.check_fits(f"the matrix-free operator on {self.n_states:,} states",
                           self.matrix_free_bytes(_LIGHTEST), self.limit)
         return "matrix-free"
