@@ -153,7 +153,8 @@ class RingChain:
         Lump configurations related by a rotation of the ring (about ``L`` times
         fewer states; exact for every translation-invariant observable).
     max_memory : float, optional
-        Bytes allowed; default 75 % of physical memory.
+        Memory allowed, in bytes (the command line's ``--max-memory`` is in
+        GiB, 2**30 bytes); default 75 % of physical memory.
     operator : {"auto", "matrix", "matrix-free"}
         How ``x -> x P`` is applied (:data:`markov.choices.OPERATORS`).
     state_bound : callable, optional
@@ -625,7 +626,8 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     tol : float
         Residual target of iterative solvers.
     max_memory : float, optional
-        Byte limit for the state space; refuse beyond it.
+        Memory allowed, in bytes (``nasch solve --max-memory`` is in GiB,
+        2**30 bytes); default 75 % of physical memory; refuse beyond it.
     operator : {"auto", "matrix", "matrix-free"}
         Assemble ``P`` or apply it without storing it (``auto``: see
         :attr:`RingChain.operator_kind`).

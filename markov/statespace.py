@@ -100,7 +100,7 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
     lump : bool
         Return canonical rotation keys (one per rotation orbit).
     max_memory : float, optional
-        Bytes allowed for the whole solve; default 75 % of physical memory.
+        Bytes (not GiB) allowed for the whole solve; default 75 % of physical memory.
     per_state : float, optional
         Bytes per state the caller will need (:mod:`markov.memory`); default
         and at least the search's own :func:`markov.memory.search_bytes_per_state`.

@@ -40,7 +40,7 @@ _LAZY = {
     "simulate": ("nasch.commands.simulate", "simulate",
                  "Monte Carlo flux of a large ring, with a batch-means error bar."),
     "solve": ("nasch.commands.solve", "solve",
-              "Exact stationary state of one ring: flux, c_v, gap distribution."),
+              "Exact stationary state of one ring: flux, c_v; --json adds the gap distribution."),
     "study": ("nasch.commands.study", "study",
               "Convergence study: every approximation against Monte Carlo and exact rings."),
     "table": ("nasch.commands.table", "table",
