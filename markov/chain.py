@@ -88,6 +88,14 @@ def min_p(ring: Ring) -> float:
     return max(MIN_P, _TINY ** (1.0 / max(ring.cars, 1)))
 
 
+def _ensure_ring(ring) -> Ring:
+    if not isinstance(ring, Ring):
+        raise InvalidParameterError(
+            f"ring must be a markov.Ring, e.g. Ring(12, 6, 2, 0.5), got {type(ring).__name__}"
+            f" {ring!r:.60}")
+    return ring
+
+
 def _ensure_unique(ring: Ring) -> None:
     if ring.trivial:
         return
@@ -181,7 +189,7 @@ class RingChain:
     def __init__(self, ring: Ring, lump: bool = True, max_memory: float | None = None,
                  operator: str = "auto",
                  state_bound: Callable[[Ring, bool], int | None] | None = None):
-        ensure_chain_arguments(ring, max_memory=max_memory)
+        ensure_chain_arguments(_ensure_ring(ring), max_memory=max_memory)
         self.ring = ring
         self.lump = lump
         self.max_memory = max_memory
@@ -659,7 +667,7 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     >>> round(solve(Ring(3, 1, 1, 0.25)).flux, 12)
     0.25
     """
-    ensure_chain_arguments(ring, method=method, tol=tol, max_memory=max_memory)
+    ensure_chain_arguments(_ensure_ring(ring), method=method, tol=tol, max_memory=max_memory)
     _ensure_unique(ring)
     return RingChain(ring, lump=lump, max_memory=max_memory, operator=operator,
                      state_bound=state_bound).solution(method=method, tol=tol)

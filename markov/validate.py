@@ -243,8 +243,7 @@ def ensure_chain_arguments(ring, method: str | None = None, tol=None,
                            max_memory=None) -> None:
     """The exact solver's up-front checks: all instant, all before enumerating.
 
-    ``ring`` must be a :class:`markov.ring.Ring` that fits the 64-bit key
-    (:func:`markov.encoding.check_encodable`),
+    The ring must fit the 64-bit key (:func:`markov.encoding.check_encodable`),
     ``method`` be a solver name, ``tol`` lie in :data:`TOL_RANGE` and
     ``max_memory`` (bytes) be ``None`` or positive and finite.
 
@@ -257,12 +256,6 @@ def ensure_chain_arguments(ring, method: str | None = None, tol=None,
     """
     from .encoding import check_encodable
     from .choices import METHODS
-    from .ring import Ring
-
-    if not isinstance(ring, Ring):
-        raise InvalidParameterError(
-            f"ring must be a markov.Ring, e.g. Ring(12, 6, 2, 0.5), got {type(ring).__name__}"
-            f" {ring!r:.60}")
     check_encodable(ring.length, ring.vmax)
     if method is not None and method not in METHODS:
         raise InvalidParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
