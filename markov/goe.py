@@ -261,10 +261,12 @@ def image_keys(ring: Ring, order: int | None = None) -> tuple[np.ndarray, int]:
 def census(length: int, cars: int, vmax: int, enumerate_limit: int = 2_000_000) -> dict:
     """One census row: all, GoE, pattern-free, frozen and recurrent-class counts.
 
-    The GoE count and the recurrent class are enumerated when the ring has at
-    most ``enumerate_limit`` configurations (else ``None``); the pattern-free
-    count always comes from the transfer matrix, and is also checked against
-    the enumeration when there is one.
+    The GoE count is enumerated when the ring has at most ``enumerate_limit``
+    configurations (else ``None``), the recurrent class (a search from the
+    compact jam) when the ring or the predicted class is that small; the
+    pattern-free count always comes from the transfer matrix, and is also
+    checked against the enumeration when there is one.  Counts are
+    configurations, not rotation classes.
 
     Parameters
     ----------
@@ -277,11 +279,18 @@ def census(length: int, cars: int, vmax: int, enumerate_limit: int = 2_000_000) 
     -------
     dict
         ``length, cars, vmax, all, goe, pattern_free, frozen, recurrent,
-        recurrent_predicted``; ``goe`` and ``recurrent`` are ``None`` beyond
-        ``enumerate_limit``.
+        recurrent_predicted``; ``goe`` is ``None`` beyond ``enumerate_limit``
+        configurations, ``recurrent`` when the predicted class is larger too.
 
     Examples
     --------
+    One empty cell (N = L - 1): a stopped column of cars and the car that
+    just drove into the hole, at v = 0 or 1, in each of L rotations.
+
+    >>> row = census(24, 23, 2)   # 2.3e12 configurations: no GoE count
+    >>> row["goe"], row["recurrent"], row["recurrent_predicted"]
+    (None, 48, 48)
+
     >>> row = census(8, 4, 2)
     >>> row["all"], row["pattern_free"], row["recurrent"]
     (5670, 480, 480)
@@ -302,4 +311,8 @@ def census(length: int, cars: int, vmax: int, enumerate_limit: int = 2_000_000) 
             raise RuntimeError(f"transfer-matrix count {row['pattern_free']} differs from"
                                f" the enumeration {enumerated}")
         row["recurrent"] = 1 if ring.trivial else len(recurrent_keys(ring, lump=False))
+    elif row["recurrent_predicted"] <= enumerate_limit:
+        # too many configurations to test each, but the recurrent class itself is
+        # small (L = 24, N = 23, vmax = 2: 48 of 2.3e12): the search finds it
+        row["recurrent"] = len(recurrent_keys(ring, lump=False))
     return row

@@ -43,7 +43,8 @@ def goe(vmax, max_cells, do_census, length, cars, as_json):
             return
         def fmt(x):
             return "n/a (too many to enumerate)" if x is None else f"{x:,}"
-        click.echo(f"GoE census L={row['length']} N={row['cars']} vmax={row['vmax']}")
+        click.echo(f"GoE census L={row['length']} N={row['cars']} vmax={row['vmax']}"
+                   " (configurations; nasch solve counts rotation classes)")
         click.echo(f"  all configurations        {fmt(row['all'])}")
         click.echo(f"  GoE (no predecessor)      {fmt(row['goe'])}")
         click.echo(f"  pattern-free              {fmt(row['pattern_free'])}")
