@@ -57,7 +57,7 @@ from .errors import InvalidParameterError
 from .ring import PARALLEL, Ring
 from .rules import deterministic_velocity
 
-__all__ = ["FactoredOperator", "word_bits", "frontier_successors"]
+__all__ = ["FactoredOperator", "word_bits", "factored_fits", "frontier_successors"]
 
 _MAX_WORD_BITS = 62
 
@@ -72,11 +72,25 @@ def word_bits(ring: Ring) -> tuple[int, int]:
     """
     w = int(ring.vmax).bit_length()
     total = ring.length + ring.cars * w
-    if total > _MAX_WORD_BITS:
+    if not factored_fits(ring):
         raise InvalidParameterError(
             f"the factored operator packs a configuration into {ring.length} + {ring.cars}"
             f" x {w} = {total} bits, more than {_MAX_WORD_BITS}")
     return w, total
+
+
+def factored_fits(ring: Ring) -> bool:
+    """Whether :func:`word_bits` accepts the ring (its words fit 62 bits).
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    bool
+    """
+    return ring.length + ring.cars * int(ring.vmax).bit_length() <= _MAX_WORD_BITS
 
 
 @njit(cache=True)

@@ -24,6 +24,7 @@ rules car by car instead of row by row; it shares :func:`cars_of`,
 """
 from __future__ import annotations
 
+import numba
 import numpy as np
 from numba import njit
 from numba.core import cgutils, types
@@ -102,15 +103,23 @@ def shift_bits(vmax: int) -> int:
     return b.bit_length() - 1 if b & (b - 1) == 0 else 0
 
 
-@intrinsic
-def _cttz(typingctx, x):
-    """Count trailing zeros of an int64 (LLVM ``cttz``; the argument is nonzero)."""
-    sig = types.int64(types.int64)
+if numba.config.DISABLE_JIT:
+    # NUMBA_DISABLE_JIT=1 (debugging, coverage): an intrinsic has no Python
+    # body, so count the trailing zeros in Python.
+    def _cttz(x):
+        """Count trailing zeros of a nonzero integer."""
+        x = int(x)
+        return (x & -x).bit_length() - 1
+else:
+    @intrinsic
+    def _cttz(typingctx, x):
+        """Count trailing zeros of an int64 (LLVM ``cttz``; the argument is nonzero)."""
+        sig = types.int64(types.int64)
 
-    def codegen(context, builder, signature, args):
-        return builder.cttz(args[0], cgutils.false_bit)
+        def codegen(context, builder, signature, args):
+            return builder.cttz(args[0], cgutils.false_bit)
 
-    return sig, codegen
+        return sig, codegen
 
 
 @njit(cache=True, inline="always")

@@ -27,7 +27,7 @@ from .transition import successor_counts, transition_matrix
 from .validate import ensure_chain_arguments, format_count
 
 __all__ = ["RingChain", "Solution", "ClassSolution", "solve", "solve_classes", "load_solution",
-           "representable", "known_irreducible"]
+           "representable", "known_irreducible", "min_p", "MIN_P"]
 
 # OPERATORS (markov.choices): how ``x -> x P`` is applied (see
 # RingChain.operator_kind for ``auto``): ``matrix`` the assembled CSR matrix
@@ -55,6 +55,66 @@ _LIGHTEST = "power"
 #: ``auto`` solves matrix-free chains with aggregation/disaggregation up to this
 #: braking probability and with BiCGSTAB above (:meth:`RingChain._auto_method`).
 AGGREGATION_MAX_P = 0.3
+
+#: Smallest ``p`` (and ``1 - p``) the floating-point chain accepts.  Below
+#: about 1.1e-16, ``1 - p`` rounds to 1 and the chain is no longer the
+#: model's; at 1e-15 it still carries ``p`` to about 10 %.  Fluxes measured
+#: down to 1e-16 agree with ``symbolic.exact`` to 2e-16 (L = 8, N = 4,
+#: vmax = 2); at 1e-20 LU of that chain meets a zero pivot.  ``p = 0`` and
+#: ``p = 1`` themselves are exact (the outcome of weight 0 is no transition).
+MIN_P = 1e-15
+
+_TINY = float(np.finfo(float).tiny)   # the smallest normal double, 2.2e-308
+
+
+def min_p(ring: Ring) -> float:
+    """The smallest probability (and ``1 -`` it) the exact chain of ``ring`` supports.
+
+    :data:`MIN_P`, or more when the weight ``p**N`` of a step in which all
+    ``N`` cars take an outcome of weight ``p`` would fall below the smallest
+    normal double, 2.2e-308: then it underflows and the chain falls apart.
+    It applies to every probability parameter of the model; 0 and 1 are exact.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> min_p(Ring(8, 4, 2, 0.5)), f"{min_p(Ring(24, 23, 2, 0.5)):.2g}"
+    (1e-15, '4.2e-14')
+    """
+    return max(MIN_P, _TINY ** (1.0 / max(ring.cars, 1)))
+
+
+def _ensure_ring(ring) -> Ring:
+    if not isinstance(ring, Ring):
+        raise InvalidParameterError(
+            f"ring must be a markov.Ring, e.g. Ring(12, 6, 2, 0.5), got {type(ring).__name__}"
+            f" {ring!r:.60}")
+    return ring
+
+
+def _ensure_representable(ring: Ring) -> None:
+    """Refuse probabilities so close to 0 or 1 (but not equal) that the weights underflow."""
+    if ring.trivial:
+        return
+    smallest = min_p(ring)
+    for name in ring.model.spec.probability_parameters():
+        p = float(ring.model.params[name])
+        if 0 < min(p, 1 - p) < smallest:
+            n = ring.cars
+            raise InvalidParameterError(
+                f"{name} = {p!r} is too close to {0 if p < 0.5 else 1}: the weights of the"
+                f" chain underflow in double precision (1 - {name} rounds to 1 below 1.1e-16;"
+                f" {name}^{n} drops below 2.2e-308 for {name} < {_TINY ** (1.0 / n):.2g});"
+                f" this ring supports {name} = 0, 1 or {smallest:.2g} <= {name} <="
+                f" 1 - {smallest:.2g}")
+
 
 def known_irreducible(ring: Ring) -> bool:
     """Whether everything reachable from the compact jam is one closed class, proven.
@@ -116,10 +176,13 @@ def describe_classes(ring: Ring, classes: list[np.ndarray]) -> str:
 
 
 def representable(ring: Ring) -> bool:
-    """Whether the exact solver can encode the ring at all.
+    """Whether the exact solver can encode the ring on both of its paths.
 
     A configuration must fit a signed 64-bit key, and under parallel update a
     word of the factored operator (positions and car values) must fit 62 bits.
+    Without the word a ring is still solved when its chain is small enough for
+    the matrix (L = 24, N = 23, vmax = 2: two states), but the sizes a budget
+    chooses from (:mod:`nasch.budget`) need the matrix-free path.
 
     Parameters
     ----------
@@ -134,17 +197,12 @@ def representable(ring: Ring) -> bool:
     >>> representable(Ring(24, 12, 2, 0.5)), representable(Ring(60, 30, 2, 0.5))
     (True, False)
     """
-    from ._factored import word_bits
+    from ._factored import factored_fits
     from .encoding import max_length
 
     if ring.length > max_length(ring.vmax):
         return False
-    if ring.update == PARALLEL and 0 < ring.cars:
-        try:
-            word_bits(ring)
-        except InvalidParameterError:
-            return False
-    return True
+    return ring.update != PARALLEL or ring.cars == 0 or factored_fits(ring)
 
 
 class RingChain:
@@ -158,7 +216,8 @@ class RingChain:
         Lump configurations related by a rotation of the ring (about ``L`` times
         fewer states; exact for every translation-invariant observable).
     max_memory : float, optional
-        Bytes allowed; default 75 % of physical memory.
+        Memory allowed, in bytes (the command line's ``--max-memory`` is in
+        GiB, 2**30 bytes); default 75 % of physical memory.
     operator : {"auto", "matrix", "matrix-free"}
         How ``x -> x P`` is applied (:data:`markov.choices.OPERATORS`).
     state_bound : callable, optional
@@ -186,7 +245,7 @@ class RingChain:
                  operator: str = "auto",
                  state_bound: Callable[[Ring, bool], int | None] | None = None,
                  start: str | None = None):
-        ensure_chain_arguments(ring, max_memory=max_memory)
+        ensure_chain_arguments(_ensure_ring(ring), max_memory=max_memory)
         self.ring = ring
         self.start = _start_key(ring, start, lump)
         self.lump = lump
@@ -372,7 +431,9 @@ class RingChain:
 
         ``auto`` resolves to the CSR matrix up to :data:`AUTO_MATRIX_STATES`
         states if it fits in the memory limit, else to matrix-free if that
-        fits, else to the matrix if that fits.
+        fits, else to the matrix if that fits.  A parallel ring whose factored
+        word does not fit 62 bits (:func:`markov._factored.word_bits`) has
+        only the matrix.
 
         Raises
         ------
@@ -400,8 +461,15 @@ class RingChain:
         free_fits = self.matrix_free_bytes(_LIGHTEST) <= self.limit
         if self.operator == "auto":
             matrix_fits = self.matrix_bytes() <= self.limit
-            if matrix_fits and (self.n_states <= AUTO_MATRIX_STATES or not free_fits):
+            # without a factored word (L + N bits(vmax) > 62) only the matrix is left
+            from ._factored import factored_fits, word_bits
+
+            factored = self.ring.update != PARALLEL or factored_fits(self.ring)
+            if matrix_fits and (self.n_states <= AUTO_MATRIX_STATES or not free_fits
+                                or not factored):
                 return "matrix"
+            if not factored:
+                word_bits(self.ring)   # refuses, naming the bits
         memory.check_fits(f"the matrix-free operator on {self.n_states:,} states",
                           self.matrix_free_bytes(_LIGHTEST), self.limit)
         return "matrix-free"
@@ -472,6 +540,7 @@ class RingChain:
             When the method's work vectors do not fit beside the operator.
         """
         ensure_chain_arguments(self.ring, method=method, tol=tol)
+        _ensure_representable(self.ring)
         if method == "aggregation" and self.ring.update != PARALLEL:
             raise InvalidParameterError(
                 "aggregation needs parallel update (the predecessors of a state share"
@@ -676,7 +745,8 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     tol : float
         Residual target of iterative solvers.
     max_memory : float, optional
-        Byte limit for the state space; refuse beyond it.
+        Memory allowed, in bytes (``nasch solve --max-memory`` is in GiB,
+        2**30 bytes); default 75 % of physical memory; refuse beyond it.
     operator : {"auto", "matrix", "matrix-free"}
         Assemble ``P`` or apply it without storing it (``auto``: see
         :attr:`RingChain.operator_kind`).
@@ -708,7 +778,8 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     >>> round(solve(Ring(3, 1, 1, 0.25)).flux, 12)
     0.25
     """
-    ensure_chain_arguments(ring, method=method, tol=tol, max_memory=max_memory)
+    ensure_chain_arguments(_ensure_ring(ring), method=method, tol=tol, max_memory=max_memory)
+    _ensure_representable(ring)
     return RingChain(ring, lump=lump, max_memory=max_memory, operator=operator,
                      state_bound=state_bound).solution(method=method, tol=tol)
 
@@ -778,7 +849,8 @@ def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
     from .classes import all_configurations_classes
     from .encoding import decode, to_text
 
-    ensure_chain_arguments(ring, tol=tol, max_memory=max_memory)
+    ensure_chain_arguments(_ensure_ring(ring), tol=tol, max_memory=max_memory)
+    _ensure_representable(ring)
     chain = RingChain(ring, lump=lump, max_memory=max_memory, operator="matrix", start=start)
     reachable = chain.classes
     classes = all_configurations_classes(ring, lump, max_memory) if every else reachable

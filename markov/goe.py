@@ -343,10 +343,12 @@ def census(length: int, cars: int, vmax: int | None = None, enumerate_limit: int
            model: Model | None = None, update: str = PARALLEL) -> dict:
     """One census row: all, GoE, pattern-free, frozen and recurrent-class counts.
 
-    The GoE count and the recurrent class are enumerated when the ring has at
-    most ``enumerate_limit`` configurations (else ``None``); the pattern-free
-    count always comes from the transfer matrix, and is also checked against
-    the enumeration when there is one.  For a model other than NaSch the
+    The GoE count is enumerated when the ring has at most ``enumerate_limit``
+    configurations (else ``None``), the recurrent class (a search from the
+    compact jam) when the ring or the predicted class is that small; the
+    pattern-free count always comes from the transfer matrix, and is also
+    checked against the enumeration when there is one.  Counts are
+    configurations, not rotation classes.  For a model other than NaSch the
     frozen count, the recurrent class and its prediction are ``None`` (they
     are derived for NaSch's rule); for random-sequential update the patterns
     do not apply (``pattern_free`` is ``None``) and the GoE count is the
@@ -369,13 +371,21 @@ def census(length: int, cars: int, vmax: int | None = None, enumerate_limit: int
     -------
     dict
         ``model, update, length, cars, vmax, all, goe, pattern_free, frozen,
-        recurrent, recurrent_predicted, notes``; ``goe`` and ``recurrent`` are
-        ``None`` beyond ``enumerate_limit``; ``notes`` says why any other
-        entry is ``None`` (or that ``pattern_free`` was enumerated because the
-        rule has infinitely many elementary patterns).
+        recurrent, recurrent_predicted, notes``; ``goe`` is ``None`` beyond
+        ``enumerate_limit`` configurations, ``recurrent`` when the predicted
+        class is larger too; ``notes`` says why any other entry is ``None`` (or
+        that ``pattern_free`` was enumerated because the rule has infinitely
+        many elementary patterns).
 
     Examples
     --------
+    One empty cell (N = L - 1): a stopped column of cars and the car that
+    just drove into the hole, at v = 0 or 1, in each of L rotations.
+
+    >>> row = census(24, 23, 2)   # 2.3e12 configurations: no GoE count
+    >>> row["goe"], row["recurrent"], row["recurrent_predicted"]
+    (None, 48, 48)
+
     >>> row = census(8, 4, 2)
     >>> row["all"], row["pattern_free"], row["recurrent"]
     (5670, 480, 480)
@@ -425,4 +435,8 @@ def census(length: int, cars: int, vmax: int | None = None, enumerate_limit: int
             row["goe"] = goe_count(ring)
         if nasch:
             row["recurrent"] = 1 if ring.trivial else len(recurrent_keys(ring, lump=False))
+    elif nasch and parallel and row["recurrent_predicted"] <= enumerate_limit:
+        # too many configurations to test each, but the recurrent class itself is
+        # small (L = 24, N = 23, vmax = 2: 48 of 2.3e12): the search finds it
+        row["recurrent"] = len(recurrent_keys(ring, lump=False))
     return row

@@ -61,6 +61,7 @@ def memory_limit(max_memory: float | None) -> float:
     Parameters
     ----------
     max_memory : float or None
+        In bytes, as everywhere in the library (the command line converts its GiB).
 
     Returns
     -------

@@ -24,6 +24,7 @@ from numba import njit
 from ._kernels import ahead_velocity, cars_of, digits_of, gap
 from .errors import InvalidParameterError
 from .ring import Ring
+from .validate import ensure_int
 
 __all__ = ["cluster_probabilities", "velocity_densities", "gap_distribution", "expected_move"]
 
@@ -69,8 +70,7 @@ def cluster_probabilities(ring: Ring, keys: np.ndarray, pi: np.ndarray, n: int) 
     >>> float(cluster_probabilities(ring, keys, pi, 2)[2, 0])   # P(car v=1, empty)
     0.5
     """
-    if not 1 <= n <= ring.length:
-        raise InvalidParameterError(f"cluster size must be in 1..L = {ring.length}, got {n}")
+    n = ensure_int("cluster size n", n, 1, ring.length)
     b = ring.vmax + 2
     out = np.zeros(b**n)
     _cluster_histogram(np.ascontiguousarray(keys, np.int64), np.ascontiguousarray(pi, np.float64),

@@ -126,10 +126,29 @@ def _l1_distance(a: np.ndarray, b: np.ndarray, work: np.ndarray) -> float:
     return float(work.sum())
 
 
+def _generator_transpose(P) -> sp.csr_array:
+    """``(I - P)^T`` with each diagonal entry the state's outflow, not ``1 - P_ii``.
+
+    At small ``p`` a state leaves with probability ``O(p)``: ``1 - P_ii``
+    loses that to rounding (it is exactly 0 once ``1 - p`` rounds to 1,
+    ``p < 1.1e-16``) and LU meets a zero pivot; the sum of the row's
+    off-diagonal entries keeps it to full relative precision (the
+    Grassmann-Taksar-Heyman idea).
+    """
+    coo = sp.coo_array(P)
+    off = coo.row != coo.col
+    rows, cols, vals = coo.row[off], coo.col[off], coo.data[off]
+    n = P.shape[0]
+    outflow = np.bincount(rows, weights=vals, minlength=n)
+    return sp.csr_array((np.concatenate([outflow, -vals]),
+                         (np.concatenate([np.arange(n), cols]),
+                          np.concatenate([np.arange(n), rows]))), shape=(n, n))
+
+
 def _direct(P, tol, maxiter):
     n = P.shape[0]
     # n - 1 balance equations of (I - P^T) pi = 0 and the normalisation sum(pi) = 1
-    A = sp.vstack([(sp.identity(n, format="csr") - P.T.tocsr())[: n - 1],
+    A = sp.vstack([_generator_transpose(P)[: n - 1],
                    sp.csr_array(np.ones((1, n)))]).tocsc()
     b = np.zeros(n)
     b[-1] = 1.0

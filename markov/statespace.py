@@ -58,14 +58,36 @@ def _not_in(sorted_set: np.ndarray, candidates: np.ndarray) -> np.ndarray:
 
 def _successor_set(ring: Ring, frontier: np.ndarray, lump: bool) -> np.ndarray:
     """Sorted distinct successors of the frontier states (the support of ``x P``)."""
-    # the factored levels carry NaSch's support for 0 < p < 1 (both coins possible)
-    if ring.update == PARALLEL and ring.is_nasch and 0 < ring.p < 1:
-        from ._factored import frontier_successors
+    if ring.update == PARALLEL:
+        from ._factored import factored_fits, frontier_successors
 
-        return frontier_successors(ring, frontier, lump)
+        # the NaSch levels carry NaSch's support for 0 < p < 1 (both coins possible)
+        if ring.is_nasch and 0 < ring.p < 1 and factored_fits(ring):
+            return frontier_successors(ring, frontier, lump)
+        return _row_successors(ring, frontier, lump)
     from ._sequential import successor_keys
 
     return unique_keys(successor_keys(ring, frontier, lump)[1])
+
+
+def _row_successors(ring: Ring, frontier: np.ndarray, lump: bool) -> np.ndarray:
+    """:func:`_successor_set` from the row generator, ``2**k`` keys per state.
+
+    For parallel rings whose factored word does not fit 62 bits (e.g. L = 24,
+    N = 23, vmax = 2: 70 bits); the frontier is cut so that each piece has
+    about ``_CHUNK`` successors.
+    """
+    from .transition import successor_counts, successors
+
+    ends = np.cumsum(successor_counts(ring, frontier))
+    found = []
+    lo = 0
+    while lo < frontier.size:
+        before = ends[lo - 1] if lo else 0
+        hi = max(lo + 1, int(np.searchsorted(ends, before + _CHUNK, side="right")))
+        found.append(unique_keys(successors(ring, frontier[lo:hi], lump).keys))
+        lo = hi
+    return found[0] if len(found) == 1 else unique_keys(np.concatenate(found))
 
 
 def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = None,
@@ -83,7 +105,7 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
     lump : bool
         Return canonical rotation keys (one per rotation orbit).
     max_memory : float, optional
-        Bytes allowed for the whole solve; default 75 % of physical memory.
+        Bytes (not GiB) allowed for the whole solve; default 75 % of physical memory.
     per_state : float, optional
         Bytes per state the caller will need (:mod:`markov.memory`); default
         and at least the search's own :func:`markov.memory.search_bytes_per_state`.

@@ -256,7 +256,6 @@ def ensure_chain_arguments(ring, method: str | None = None, tol=None,
     """
     from .encoding import check_encodable
     from .choices import METHODS
-
     check_encodable(ring.length, ring.vmax)
     if method is not None and method not in METHODS:
         raise InvalidParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")

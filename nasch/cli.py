@@ -13,9 +13,17 @@ and a small ``nasch solve`` do not pay for the libraries they do not use.
 """
 from __future__ import annotations
 
-import click
+try:
+    import click
 
-from .cli_common import NaschGroup, run_console
+    from .cli_common import NaschGroup, run_console
+except KeyboardInterrupt:   # Ctrl-C while the program starts: the same one line and 130
+    import signal
+    import sys
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.stderr.write("interrupted\n")
+    sys.exit(130)
 
 __all__ = ["main", "run"]
 
@@ -34,7 +42,7 @@ _LAZY = {
     "simulate": ("nasch.commands.simulate", "simulate",
                  "Monte Carlo flux of a large ring, with an autocorrelation error bar."),
     "solve": ("nasch.commands.solve", "solve",
-              "Exact stationary state of one ring: flux, c_v, gap distribution."),
+              "Exact stationary state of one ring: flux, c_v; --json adds the gap distribution."),
     "study": ("nasch.commands.study", "study",
               "Convergence study: every approximation against Monte Carlo and exact rings."),
     "table": ("nasch.commands.table", "table",

@@ -6,6 +6,7 @@ numpy or another heavy library: ``nasch --help`` loads only click and this.
 """
 from __future__ import annotations
 
+import errno
 import functools
 import importlib
 import json
@@ -24,6 +25,9 @@ __all__ = ["handle_errors", "emit_json", "quiet_option", "NaschGroup", "run_cons
 EXIT_BAD_INPUT = 2
 #: Exit status after Ctrl-C: 128 + SIGINT, as a shell reports it.
 EXIT_INTERRUPTED = 130
+
+# write errors of a pipe or a device: stdout that cannot take the output
+_OUTPUT_ERRNOS = {errno.EPIPE, errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO}
 
 
 def number_list(name: str, text: str, kind: type = float) -> list:
@@ -181,6 +185,49 @@ def _echo_interrupted() -> None:
     click.echo(f"{lead}interrupted", err=True)
 
 
+def _is_output_error(exc: OSError) -> bool:
+    """True for a failed write of standard output: a closed pipe, a full disk.
+
+    Files are written through :mod:`markov.files`, which turns their errors
+    into :class:`~markov.errors.OutputError` naming the file; an ``OSError``
+    of this kind that gets this far, with no file name, is a write to stdout
+    (a failed write drops its data, so flushing again cannot tell).
+    """
+    return exc.filename is None and exc.errno in _OUTPUT_ERRNOS
+
+
+def _report_output_error(exc: OSError) -> None:
+    """``error: cannot write output: ...`` on stderr; stdout sent to the null device.
+
+    The interpreter flushes stdout once more at exit; on the null device that
+    flush succeeds instead of printing "Exception ignored ... BrokenPipeError".
+    """
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError):
+        pass
+    reason = exc.strerror or str(exc)
+    try:
+        click.echo(f"error: cannot write output: {reason}", err=True)
+    except OSError:   # stderr is the same broken pipe: nothing left to tell
+        pass
+
+
+def _caused_by_interrupt(exc: BaseException) -> bool:
+    """True when a KeyboardInterrupt is in the chain of causes and contexts of ``exc``."""
+    chain = set()
+    while exc is not None and id(exc) not in chain:
+        if isinstance(exc, KeyboardInterrupt):
+            return True
+        chain.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return False
+
+
 def run_console(group: click.Group) -> None:
     """Entry point of the ``nasch`` program: ``group()`` with a clean Ctrl-C exit.
 
@@ -202,8 +249,20 @@ def run_console(group: click.Group) -> None:
         code = EXIT_INTERRUPTED
     except SystemExit as exc:
         code = exc.code
+    except BaseException as exc:
+        if not _caused_by_interrupt(exc):
+            raise
+        _echo_interrupted()
+        code = EXIT_INTERRUPTED
     if code == EXIT_INTERRUPTED:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        # A KeyboardInterrupt that went through exec() or eval() of a string
+        # (namedtuple, dataclasses, numba, sympy do that while they load or
+        # compile) sets CPython's "unhandled KeyboardInterrupt" flag even though
+        # it was caught here, and the interpreter would then kill itself with
+        # SIGINT at exit instead of exiting with 130.  Running a string through
+        # exec() again clears that flag.
+        exec("")
     sys.exit(code)
 
 
@@ -218,7 +277,9 @@ class NaschGroup(click.Group):
       print ``error: ...`` on one line with exit status 2, like the package's
       own refusals, instead of click's four-line block.
     * Ctrl-C prints ``interrupted`` and exits with status 130, wherever it
-      lands (imports, work, clean-up), without a traceback.
+      lands (imports, work, a compiled kernel, clean-up), without a traceback.
+    * Standard output that cannot be written (a closed pipe, a full disk)
+      gives ``error: cannot write output: ...`` and status 2.
     """
 
     def __init__(self, *args, lazy: dict[str, tuple[str, str, str]] | None = None, **kwargs):
@@ -266,9 +327,24 @@ class NaschGroup(click.Group):
             previous = None
         try:
             result = super().invoke(ctx)
+            sys.stdout.flush()   # a write error of buffered output surfaces here, not at exit
         except KeyboardInterrupt:
             result = None
             seen.append(signal.SIGINT)
+        except BaseException as exc:
+            # A Ctrl-C that lands inside a compiled (numba) kernel surfaces as
+            # "SystemError: CPUDispatcher(...) returned a result with an exception
+            # set", the KeyboardInterrupt as its __context__: once a SIGINT was
+            # seen, the interrupt is what ended the command, whatever was raised.
+            if seen or _caused_by_interrupt(exc):
+                result = None
+                seen.append(signal.SIGINT)
+            elif isinstance(exc, OSError) and _is_output_error(exc):
+                # here, before click's own handler, which ends a closed pipe with 1 silently
+                _report_output_error(exc)
+                ctx.exit(EXIT_BAD_INPUT)
+            else:
+                raise
         finally:
             if previous is not None:
                 signal.signal(signal.SIGINT, previous)
@@ -284,6 +360,12 @@ class NaschGroup(click.Group):
         _interrupt_reported[0] = False
         try:
             code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+            sys.stdout.flush()   # a write error of buffered output surfaces here, not at exit
+        except OSError as exc:
+            if not _is_output_error(exc):
+                raise
+            _report_output_error(exc)
+            sys.exit(EXIT_BAD_INPUT)
         except click.exceptions.NoArgsIsHelpError as exc:
             exc.show()   # bare ``nasch`` or ``nasch plot``: the help, as click does
             sys.exit(exc.exit_code)

@@ -56,7 +56,8 @@ def goe(vmax, model, params, max_cells, do_census, length, cars, update, as_json
             return "n/a" if x is None else f"{x:,}"
         enumerated = row["goe"] is not None
         click.echo(f"GoE census L={row['length']} N={row['cars']} vmax={row['vmax']}"
-                   f" model={row['model']} update={row['update']}")
+                   f" model={row['model']} update={row['update']}"
+                   " (configurations; nasch solve counts rotation classes)")
         click.echo(f"  all configurations        {fmt(row['all'])}")
         click.echo(f"  GoE (no predecessor)      {fmt(row['goe'])}"
                    + ("" if enumerated else "  (too many to enumerate)"))

@@ -27,7 +27,8 @@ __all__ = ["solve"]
               help="Target ||pi P - pi||_1 of the iterative solvers, 1e-15..1e-3.")
 @click.option("--no-lump", is_flag=True, help="Do not lump rotations of the ring.")
 @click.option("--max-memory", type=float, default=None,
-              help="Refuse chains needing more than this many GiB (default 75% of RAM).")
+              help="Refuse chains needing more than this many GiB (2**30 bytes; default"
+                   " 75% of RAM). The Python API's max_memory is in bytes.")
 @click.option("--top", type=int, default=None, metavar="K",
               help="Also print the K most probable configurations ('.' empty, digit = velocity).")
 @click.option("--save", type=click.Path(dir_okay=False), default=None, metavar="FILE.npz",
@@ -37,11 +38,12 @@ __all__ = ["solve"]
 @handle_errors
 def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_memory, top,
           save, as_json):
-    """Exact stationary state of one ring: flux, c_v, gap distribution.
+    """Exact stationary state of one ring: flux, c_v; --json adds the gap distribution.
 
-    With --no-lump off (the default) a state is a rotation class of the ring
-    and its probability is the sum over the class; --top and --save report
-    the classes by their canonical configuration.
+    By default a state is a rotation class of the ring and its probability is
+    the sum over the class; --top and --save report the classes by their
+    canonical configuration.  --no-lump keeps one state per configuration.
+    --json adds the gap distribution P(g), g = 0..L-N, and solver details.
 
     \b
     Example:
