@@ -7,8 +7,7 @@ import pytest
 
 import naive
 from reference import vmax1_infinite_flux
-from markov import (NoUniqueStationaryStateError, Ring, RingChain, SOLVERS,
-                    StateSpaceTooLargeError, solve)
+from markov import Ring, RingChain, SOLVERS, StateSpaceTooLargeError, solve
 from markov.statespace import all_keys, count_all, recurrent_keys
 from markov.encoding import decode, encode
 from markov.transition import transition_matrix
@@ -138,10 +137,12 @@ def test_empty_and_full_rings_are_exact(N, p, update):
     np.testing.assert_array_equal(sol.c_v, [N / 6, 0, 0])
 
 
-@pytest.mark.parametrize("p, words", [(0.0, "deterministic"), (1.0, "absorbing")])
-def test_no_unique_stationary_state(p, words):
-    with pytest.raises(NoUniqueStationaryStateError, match=words):
-        solve(Ring(8, 4, 2, p))
+@pytest.mark.parametrize("p, flux", [(0.0, 0.5), (1.0, 0.0)])
+def test_deterministic_limits_solve_the_class_of_the_compact_jam(p, flux):
+    # p = 0: the jam runs into a periodic orbit with J = min(vmax c, 1 - c);
+    # p = 1: every car brakes back to rest, the jam is absorbing
+    sol = solve(Ring(8, 4, 2, p))
+    assert abs(sol.flux - flux) < 1e-14 and sol.residual < 1e-12
 
 
 def test_memory_guard_refuses_with_the_number():

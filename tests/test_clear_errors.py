@@ -96,7 +96,7 @@ def test_p_too_close_to_0_or_1_is_refused_with_the_range(p):
     proc = _run(["solve", "-L", "8", "-N", "4", "--p", repr(p)], stdout=subprocess.PIPE)
     assert proc.returncode == 2
     [line] = proc.stderr.splitlines()
-    assert "underflow" in line and "this ring supports 1e-15 <= p <= 1 - 1e-15" in line
+    assert "underflow" in line and "this ring supports p = 0, 1 or 1e-15 <= p <= 1 - 1e-15" in line
     with pytest.raises(InvalidParameterError, match="underflow"):
         solve(Ring(8, 4, 2, p))
 
