@@ -77,7 +77,8 @@ from .errors import InvalidParameterError
 from .ring import PARALLEL, Ring
 from .rule import Model, RuleTable, tabulate
 
-__all__ = ["FactoredOperator", "LevelRule", "level_rule", "word_bits", "frontier_successors"]
+__all__ = ["FactoredOperator", "LevelRule", "level_rule", "word_bits", "link_bytes_per_word",
+           "frontier_successors"]
 
 _MAX_WORD_BITS = 62
 
@@ -208,6 +209,26 @@ def _reweigh(rule: LevelRule, table: RuleTable) -> LevelRule | None:
 @lru_cache(maxsize=64)
 def _model_rule(model: Model) -> LevelRule:
     return level_rule(tabulate(model))
+
+
+def link_bytes_per_word(ring: Ring) -> float:
+    """Bytes of level links per word, estimated before the levels exist.
+
+    The NaSch form holds two int32 parents per word; any other rule an int64
+    row pointer per word and an int32 parent and int16 slot per link, at most
+    ``K`` (the most outcomes of a row) links per word on average when the
+    levels do not shrink.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    float
+    """
+    rule = _model_rule(ring.model)
+    return 8.0 if rule.nasch_form else 8.0 + 6.0 * rule.new_velocity.shape[1]
 
 
 def word_bits(ring: Ring) -> tuple[int, int]:

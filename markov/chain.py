@@ -103,7 +103,7 @@ def representable(ring: Ring) -> bool:
 
 
 class RingChain:
-    """The finite Markov chain of one NaSch ring, built lazily.
+    """The finite Markov chain of one ring (any model), built lazily.
 
     Parameters
     ----------
@@ -174,7 +174,10 @@ class RingChain:
 
     def _matrix_free_bytes_per_state(self, method: str) -> float:
         if self.ring.update == PARALLEL:
-            return memory.factored_bytes_per_state(method)
+            from ._factored import link_bytes_per_word
+
+            return memory.factored_bytes_per_state(
+                method, link_bytes=link_bytes_per_word(self.ring))
         return memory.rows_bytes_per_state(method)
 
     def _guard_bytes_per_state(self) -> float:
