@@ -271,8 +271,10 @@ class RingChain:
         (its orthogonalisation outweighs the cheap product) and is kept as
         BiCGSTAB's fallback in ``iterative``; power iteration is the lightest.
         """
+        # a model without a braking probability p takes the ladder of large p
+        small_p = self.ring.p is not None and self.ring.p <= AGGREGATION_MAX_P
         prefer = (("aggregation", "iterative", "bicgstab", "power")
-                  if self.ring.p <= AGGREGATION_MAX_P
+                  if small_p
                   else ("iterative", "bicgstab", "aggregation", "power"))
         for method in prefer:
             if method == "aggregation" and self.ring.update != PARALLEL:
