@@ -12,6 +12,10 @@ Every case runs in a fresh subprocess, so its peak resident memory
   (a ``git worktree`` of ``--previous``, its ``auto`` path: the compact
   operator) and by this one, both to ``--agree-tol``, in the same run: the
   speed ratio and the flux and ``c_v`` differences.
+* **models**: every shipped model (:data:`markov.rule.MODELS`) at vmax = 2
+  and its default probabilities, N = L/2, L = 24 (L = 22 for a rule with
+  three outcomes per car), matrix-free (the factored operator): its rows,
+  NaSch form or general merge, links per state, seconds per product.
 * **solvers**: every product method on the factored operator, L = 18..22,
   p = 0.1, 0.5, 0.9: products and seconds (what ``auto`` is chosen from).
 * **vmax1**: vmax = 1, L = 24, N = 12, p = 0.5.
@@ -58,7 +62,8 @@ from pathlib import Path  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
-TABLES = ("baseline", "large", "previous", "solvers", "vmax1", "psweep", "budget", "compare")
+TABLES = ("baseline", "large", "previous", "models", "solvers", "vmax1", "psweep", "budget",
+          "compare")
 # (vmax, L, N, p) of the budget table: half filling, low and high density
 BUDGET_CASES = [(2, 16, 8, 0.5), (2, 20, 10, 0.5), (2, 22, 11, 0.1), (2, 22, 11, 0.5),
                 (2, 22, 11, 0.9), (2, 24, 6, 0.5), (2, 24, 18, 0.5), (1, 24, 12, 0.5),
@@ -119,10 +124,32 @@ def work_previous(tree, L, N, vmax, p, tol=1e-10, max_memory_gib=20.0) -> dict:
     from markov import Ring, RingChain, solve
 
     assert Path(sys.modules["markov"].__file__).resolve().is_relative_to(Path(tree).resolve())
-    for operator in ("matrix", "compact", "matrix-free"):  # its kernels, outside the timing
+    from markov.choices import OPERATORS
+
+    for operator in OPERATORS:  # its kernels, outside the timing
         solve(Ring(6, 3, 2, 0.5), operator=operator)
     chain = RingChain(Ring(L, N, vmax, p), max_memory=max_memory_gib * 2**30)
     return {**_timed_solve(chain, "auto", tol)[1], "lumped": True}
+
+
+def work_model(name, L, N, vmax, tol=1e-10, max_memory_gib=20.0) -> dict:
+    """A shipped model at its default probabilities: search, factored operator, solve."""
+    from markov import Ring, RingChain, solve
+    from markov.rule import load_model
+
+    _warm_up()
+    model = load_model(name, {"vmax": vmax})
+    solve(Ring(6, 3, model=model), operator="matrix-free")  # its kernels, outside the timing
+    chain = RingChain(Ring(L, N, model=model), max_memory=max_memory_gib * 2**30,
+                      operator="matrix-free")
+    sol, row = _timed_solve(chain, "auto", tol)
+    op = chain.transition_operator
+    probs = ", ".join(f"{k}={v:g}" for k, v in model.params.items() if k != "vmax")
+    return {**row, "p": model.params.get("p"), "level_words": sum(sol.level_sizes),
+            "lumped": True, "note": f"{name} ({probs}); {op.rule.rows} rows,"
+            f" {'NaSch form' if op.rule.nasch_form else 'general merge'},"
+            f" {op.edges / op.n:.2f} links per state, {op.seconds / max(op.products, 1):.3f}"
+            " s per product"}
 
 
 def work_budget(L, N, vmax, p) -> dict:
@@ -239,6 +266,7 @@ def work_baseline() -> dict:
 
 
 WORKERS = {"ours": work_ours, "previous": work_previous, "psweep": work_psweep,
+           "model": work_model,
            "budget": work_budget,
            "naive": work_naive, "quantecon": work_quantecon, "storm": work_storm,
            "baseline": work_baseline}
@@ -381,9 +409,13 @@ def main(argv=None) -> None:
                     help="tables to run")
     ap.add_argument("--sizes", type=int, nargs="*", default=[16, 18, 20, 22, 24],
                     help="ring lengths of the large table (vmax=2, N=L/2, p=0.5)")
-    ap.add_argument("--previous", default="e33dd72",
-                    help="git revision of the previous version (before the factored operator)")
+    ap.add_argument("--previous", default="fa862af",
+                    help="git revision of the previous version (before issue 18: NaSch only)")
     ap.add_argument("--previous-sizes", type=int, nargs="*", default=[16, 18, 20, 22])
+    ap.add_argument("--model-size", type=int, default=24,
+                    help="L of the models table (N = L/2, vmax = 2) for two-outcome rules")
+    ap.add_argument("--model-size-three", type=int, default=22,
+                    help="L of the models table for rules with three outcomes (kkw)")
     ap.add_argument("--solver-sizes", type=int, nargs="*", default=[18, 20, 22])
     ap.add_argument("--psweep-size", type=int, default=22)
     ap.add_argument("--compare", type=int, nargs="*", default=[8, 10, 12, 14, 16, 18],
@@ -449,6 +481,16 @@ def main(argv=None) -> None:
             record(run_case("previous", "previous", args.timeout, env={"PYTHONPATH": str(tree)},
                             tree=str(tree), **half(L), **agree))
             record(run_case("previous", "ours", args.timeout, **half(L), **agree))
+    if "models" in args.only:
+        from markov.rule import MODELS, load_model, tabulate
+
+        for name in MODELS:
+            outcomes = int(tabulate(load_model(name, {"vmax": 2})).count.max())
+            L = args.model_size if outcomes <= 2 else args.model_size_three
+            row = run_case("models", "model", args.timeout, name=name, L=L, N=L // 2,
+                           vmax=2, **common)
+            row["tool"] = name
+            record(row)
     if "solvers" in args.only:
         for L in args.solver_sizes:
             for p in (0.1, 0.5, 0.9):

@@ -1,6 +1,6 @@
 """Position configurations as the aggregates of aggregation/disaggregation.
 
-The slow modes of the NaSch chain are the motions of the cars (jams forming
+The slow modes of a traffic chain are the motions of the cars (jams forming
 and dissolving); the velocities relax within a few steps.  Summing the
 velocities out leaves the *position configurations* (rotation classes of the
 occupied cells when the chain is lumped): about ``C(L, N) / L`` aggregates,

@@ -1,40 +1,56 @@
 """The parallel step factored car by car: ``x -> x P`` without enumerating successors.
 
-One parallel time step is R1+R2 (deterministic: a configuration gives every
-car its pre-braking velocity ``u``), then one independent coin per car with
-``u > 0`` (R3), then the move R4, which is one-to-one.  A state has ``2**k``
-successors (``k`` movable cars), but the coins can be applied one car at a
-time while the positions stay where they are:
+Under parallel update every car draws its new velocity from its *row* of the
+rule table (:class:`markov.rule.RuleTable`): the outcome distribution fixed by
+its velocity, ``min(gap, horizon)`` and the velocity of the car ahead, all
+known before anybody moves.  The draws are independent and the move (R4) is
+one-to-one, so a state with cars of ``c_0, c_1, ...`` outcomes has
+``c_0 c_1 ...`` successors; but the draws can be applied one car at a time
+while the positions stay where they are:
 
-* level 0: the distinct *words* (positions, ``u``) of the states; the states
-  that share a word are summed (``x`` restricted to a word's states);
+* level 0: the distinct *words* (positions, row of every car) of the states;
+  the states that share a word are summed (``x`` restricted to a word's
+  states: they have the same successors with the same weights);
 * level ``j`` (``j = 1..N``): words in which cars ``0..j-1`` already carry
-  their final velocity and the others still carry ``u``.  A word of level
-  ``j`` has at most two parents in level ``j - 1``: the word with car ``j-1``
-  unchanged (weight ``q = 1 - p`` if that car could move, ``1`` if not) and
-  the word with car ``j-1`` one faster (it braked: weight ``p``);
+  their new velocity and the others still carry their row.  A word of level
+  ``j`` has one parent in level ``j - 1`` per outcome of car ``j - 1`` that
+  leads to it, with that outcome's weight;
 * level ``N`` maps onto the successor states through R4 (and the canonical
   rotation when lumped).
 
-The levels are index arrays built once; they do not depend on ``p``.  A
-product is a segmented sum into level 0, one two-parent gather per level and
-a segmented sum into the states: about ``2 * sum(level sizes)`` reads, against
-``2**k`` successor keys, canonical rotations and hash look-ups per state for
-a row-by-row product.
+The levels are index arrays built once; they depend on the rule's outcomes,
+not on its probabilities (while none is 0 or 1): :meth:`FactoredOperator.with_params`
+swaps the weights only.  A product is a segmented sum into level 0, one
+gather per level and a segmented sum into the states: about
+``sum(parents over the levels)`` reads, against one successor key, canonical
+rotation and hash look-up per transition for a row-by-row product.
+
+Rows
+----
+:func:`level_rule` numbers the distinct rows of the table (same new
+velocities, same weights) in the order of their outcome lists.  For NaSch
+that makes the row id the pre-braking velocity ``u`` with outcomes ``{u}``
+(``u = 0``, weight 1) or ``{u - 1, u}`` (weights ``p``, ``q``): the *NaSch
+form*, for which a level is the linear merge of the previous one with its
+braked copy and each word has at most two parents (arrays ``a`` and ``b``,
+weights ``q``/1 and ``p``).  Any other rule takes the general route: the
+children of a level, one per (row, outcome), are ``R K`` sorted runs (each
+run shifts the words of one row by one constant), merged ``K``-way into the
+next level with a CSR of (parent, outcome slot) per word.
 
 Words
 -----
 A word is one int64: the occupancy of the ``L`` cells as a bit mask in the
-high bits and the ``N`` car values (``w = bit_length(vmax)`` bits each, car 0
-the lowest occupied cell) in the low bits::
+high bits and the ``N`` car values (``w`` bits each, enough for the largest
+row id and ``vmax``; car 0 the lowest occupied cell) in the low bits::
 
     word = mask << (N w)  |  sum_j value_j << (j w)
 
-Braking car ``j`` subtracts the constant ``1 << (j w)`` whatever its position,
-so the braked children of a sorted level are again sorted, and level ``j + 1``
-is the linear merge of level ``j`` with them: no sort, no hash per level.
-Sorting words sorts them by position set first, so the words of one position
-configuration are contiguous.
+Replacing car ``j``'s row ``r`` by the new velocity ``v'`` adds the constant
+``(v' - r) << (j w)`` whatever the other cars, so the children of a sorted
+level through one (row, outcome) are again sorted.  Sorting words sorts them
+by position set first, so the words of one position configuration are
+contiguous.
 
 Lumping
 -------
@@ -47,19 +63,173 @@ onto the same state; the final segmented sum adds them.
 """
 from __future__ import annotations
 
+import itertools
+from dataclasses import dataclass, replace
+from functools import lru_cache
+
 import numpy as np
 from numba import njit, prange
 
 from ._chain_operator import ChainOperator
-from ._kernels import canonical, cars_of, gap, rotate_mask, shift_bits, term
+from ._kernels import ahead_velocity, canonical, cars_of, gap, rotate_mask, shift_bits, term
 from .encoding import powers, unique_keys
 from .errors import InvalidParameterError
 from .ring import PARALLEL, Ring
-from .rules import deterministic_velocity
+from .rule import Model, RuleTable, tabulate
 
-__all__ = ["FactoredOperator", "word_bits", "factored_fits", "frontier_successors"]
+__all__ = ["FactoredOperator", "LevelRule", "level_rule", "word_bits", "factored_fits",
+           "link_bytes_per_word", "frontier_successors"]
 
 _MAX_WORD_BITS = 62
+
+
+# --------------------------------------------------------------------------- rows
+
+@dataclass(frozen=True, eq=False)
+class LevelRule:
+    """The distinct rows of a rule table, as the levels read them.
+
+    Attributes
+    ----------
+    row_id : (vmax+1, horizon+1, vmax+1) int64 array
+        Row of a car of velocity ``v``, gap ``min(gap, horizon)``, car ahead at ``a``.
+    count : (R,) int64 array
+        Outcomes of each row.
+    new_velocity : (R, K) int64 array
+        Their new velocities, ascending, padded with ``-1``.
+    weight : (R K,) float64 array
+        Their weights; outcome ``k`` of row ``r`` is *slot* ``r K + k``.
+    horizon : int
+    nasch_form : bool
+        Row ``u`` has the outcomes ``{u}`` (``u = 0``, weight 1) or ``{u - 1, u}``
+        with the same two weights for every ``u >= 1``, ``R = vmax + 1``: the
+        two-parent levels apply.
+    """
+
+    row_id: np.ndarray
+    count: np.ndarray
+    new_velocity: np.ndarray
+    weight: np.ndarray
+    horizon: int
+    nasch_form: bool
+
+    @property
+    def rows(self) -> int:
+        return int(self.count.shape[0])
+
+    @property
+    def brake_weights(self) -> tuple[float, float]:
+        """``(p, q)``: the weights of ``u - 1`` and ``u`` (NaSch form only)."""
+        k = self.new_velocity.shape[1]
+        return float(self.weight[k]), float(self.weight[k + 1])
+
+
+def _cells(table: RuleTable):
+    vmax = table.count.shape[0] - 1
+    return itertools.product(range(vmax + 1), range(table.horizon + 1), range(vmax + 1))
+
+
+def _nasch_form(count, new, weight) -> bool:
+    k = new.shape[1]
+    if count[0] != 1 or new[0, 0] != 0 or k < 2:
+        return False
+    for r in range(1, count.shape[0]):
+        if count[r] != 2 or new[r, 0] != r - 1 or new[r, 1] != r \
+                or weight[r * k] != weight[k] or weight[r * k + 1] != weight[k + 1]:
+            return False
+    return True
+
+
+def level_rule(table: RuleTable) -> LevelRule:
+    """Number the distinct rows of a rule table (NaSch: the row id is ``u``).
+
+    Parameters
+    ----------
+    table : RuleTable
+        Numeric, tabulated up to its horizon (:meth:`markov.ring.Ring.table`).
+
+    Returns
+    -------
+    LevelRule
+    """
+    vmax = table.count.shape[0] - 1
+    signature = {}
+    for v, g, a in _cells(table):
+        n = int(table.count[v, g, a])
+        signature[v, g, a] = (tuple(int(x) for x in table.new_velocity[v, g, a, :n]),
+                              tuple(float(x) for x in table.weight[v, g, a, :n]))
+    rows = sorted(set(signature.values()))
+    number = {s: r for r, s in enumerate(rows)}
+    row_id = np.zeros((vmax + 1, table.horizon + 1, vmax + 1), dtype=np.int64)
+    for cell, s in signature.items():
+        row_id[cell] = number[s]
+    k = max(len(new) for new, _ in rows)
+    if len(rows) * k > np.iinfo(np.int16).max:
+        raise InvalidParameterError(
+            f"the factored operator numbers outcomes with int16: {len(rows)} distinct rows of"
+            f" {k} outcomes are too many")
+    count = np.array([len(new) for new, _ in rows], dtype=np.int64)
+    new = np.full((len(rows), k), -1, dtype=np.int64)
+    weight = np.zeros(len(rows) * k)
+    for r, (vs, ws) in enumerate(rows):
+        new[r, :len(vs)] = vs
+        weight[r * k:r * k + len(ws)] = ws
+    return LevelRule(row_id, count, new, weight, int(table.horizon),
+                     _nasch_form(count, new, weight))
+
+
+def _reweigh(rule: LevelRule, table: RuleTable) -> LevelRule | None:
+    """``rule``'s rows with the weights of another table of the same outcomes.
+
+    ``None`` when the rows of ``table`` do not refine into ``rule``'s (other
+    outcomes, or two cells of one row with different weights now): the levels
+    must be rebuilt.
+    """
+    if table.horizon != rule.horizon or table.count.shape[0] != rule.row_id.shape[0]:
+        return None
+    k = rule.new_velocity.shape[1]
+    weight = np.full(rule.weight.shape, np.nan)
+    for v, g, a in _cells(table):
+        r = int(rule.row_id[v, g, a])
+        n = int(table.count[v, g, a])
+        if n != rule.count[r] or \
+                not np.array_equal(table.new_velocity[v, g, a, :n], rule.new_velocity[r, :n]):
+            return None
+        mine = weight[r * k:r * k + n]
+        if np.isnan(mine[0]):
+            mine[:] = table.weight[v, g, a, :n]
+        elif not np.array_equal(mine, table.weight[v, g, a, :n]):
+            return None
+    weight[np.isnan(weight)] = 0.0
+    if rule.nasch_form and not _nasch_form(rule.count, rule.new_velocity, weight):
+        return None
+    return replace(rule, weight=weight)
+
+
+@lru_cache(maxsize=64)
+@lru_cache(maxsize=64)
+def _model_rule(model: Model) -> LevelRule:
+    return level_rule(tabulate(model))
+
+
+def link_bytes_per_word(ring: Ring) -> float:
+    """Bytes of level links per word, estimated before the levels exist.
+
+    The NaSch form holds two int32 parents per word; any other rule an int64
+    row pointer per word and an int32 parent and int16 slot per link, at most
+    ``K`` (the most outcomes of a row) links per word on average when the
+    levels do not shrink.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    float
+    """
+    rule = _model_rule(ring.model)
+    return 8.0 if rule.nasch_form else 8.0 + 6.0 * rule.new_velocity.shape[1]
 
 
 def word_bits(ring: Ring) -> tuple[int, int]:
@@ -68,9 +238,11 @@ def word_bits(ring: Ring) -> tuple[int, int]:
     Raises
     ------
     InvalidParameterError
-        When a word would not fit in 62 bits (``L + N bit_length(vmax)``).
+        When a word would not fit in 62 bits (``L + N w``, ``w`` the bits of
+        the largest row id and ``vmax``).
     """
-    w = int(ring.vmax).bit_length()
+    rule = _model_rule(ring.model)
+    w = max(int(ring.vmax), rule.rows - 1).bit_length()
     total = ring.length + ring.cars * w
     if not factored_fits(ring):
         raise InvalidParameterError(
@@ -90,16 +262,21 @@ def factored_fits(ring: Ring) -> bool:
     -------
     bool
     """
-    return ring.length + ring.cars * int(ring.vmax).bit_length() <= _MAX_WORD_BITS
+    rule = _model_rule(ring.model)
+    w = max(int(ring.vmax), rule.rows - 1).bit_length()
+    return ring.length + ring.cars * w <= _MAX_WORD_BITS
 
+
+# -------------------------------------------------------------------------- level 0
 
 @njit(cache=True)
-def _frame_word(key, length, vmax, w, lump, pos, vel, u):
-    """Level-0 word of a state: positions in its frame and the velocities after R1+R2."""
+def _frame_word(key, length, vmax, w, lump, row_id, horizon, pos, vel, u):
+    """Level-0 word of a state: positions in its frame and the row of every car."""
     n = cars_of(key, length, vmax + 2, pos, vel)
     mask = np.int64(0)
     for i in range(n):
-        u[i] = deterministic_velocity(vel[i], gap(pos, n, i, length), vmax)
+        u[i] = row_id[vel[i], min(gap(pos, n, i, length), horizon), ahead_velocity(vel, n, i)]
+    for i in range(n):
         mask |= np.int64(1) << pos[i]
     shift = n * w
     best = np.int64(-1)
@@ -120,7 +297,7 @@ def _frame_word(key, length, vmax, w, lump, pos, vel, u):
 
 
 @njit(cache=True, parallel=True)
-def _frame_words(keys, length, vmax, w, lump, out):
+def _frame_words(keys, length, vmax, w, lump, row_id, horizon, out):
     n = keys.shape[0]
     nblocks = (n + 4095) // 4096
     for blk in prange(nblocks):
@@ -128,18 +305,26 @@ def _frame_words(keys, length, vmax, w, lump, out):
         vel = np.empty(length, np.int64)
         u = np.empty(length, np.int64)
         for i in range(blk * 4096, min(n, (blk + 1) * 4096)):
-            out[i] = _frame_word(keys[i], length, vmax, w, lump, pos, vel, u)
+            out[i] = _frame_word(keys[i], length, vmax, w, lump, row_id, horizon, pos, vel, u)
 
+
+def _level0(ring: Ring, keys: np.ndarray, w: int, lump: bool, rule: LevelRule) -> np.ndarray:
+    words = np.empty_like(keys)
+    _frame_words(keys, ring.length, ring.vmax, w, bool(lump), rule.row_id, rule.horizon, words)
+    return words
+
+
+# ----------------------------------------------------------------------- the levels
 
 @njit(cache=True)
 def _next_level(words, j, w, links):
-    """Merge a sorted level with its words in which car ``j`` braked.
+    """NaSch form: merge a sorted level with its words in which car ``j`` braked.
 
     Returns the next level (sorted) and, if ``links``, for each of its words
     the index of the parent with car ``j`` unchanged (``a``; encoded
-    ``-i - 2`` when that car could not move, so the weight is 1 instead of
-    ``q``; ``-1`` for none) and of the parent in which car ``j`` was one
-    faster (``b``, weight ``p``; ``-1`` for none).
+    ``-i - 2`` when that car's row has one outcome, so the weight is 1
+    instead of ``q``; ``-1`` for none) and of the parent in which car ``j``
+    was one faster (``b``, weight ``p``; ``-1`` for none).
     """
     m = words.shape[0]
     step = np.int64(1) << (j * w)
@@ -174,6 +359,91 @@ def _next_level(words, j, w, links):
         k += 1
     return out[:k].copy(), a[:k].copy(), b[:k].copy()
 
+
+@njit(cache=True)
+def _merge_level(words, j, w, count, new_velocity, links):
+    """Any rule: the next level as the ``K``-way merge of one sorted run per (row, outcome).
+
+    Returns the next level (sorted) and, if ``links``, its CSR of parents:
+    word ``t`` of the next level has the parents ``parent[indptr[t]:indptr[t+1]]``
+    (indices into ``words``) through the outcome slots ``slot[...]`` (row
+    ``r``, outcome ``k``: ``r K + k``).
+    """
+    m = words.shape[0]
+    rows, kmax = new_velocity.shape
+    shift = j * w
+    vmask = (np.int64(1) << w) - 1
+    # the parents bucketed by car j's row, in order: bucket r is the run of row r
+    start = np.zeros(rows + 1, np.int64)
+    total = 0
+    for i in range(m):
+        r = (words[i] >> shift) & vmask
+        start[r + 1] += 1
+        total += count[r]
+    for r in range(rows):
+        start[r + 1] += start[r]
+    fill = start[:rows].copy()
+    bucket = np.empty(m, np.int64)
+    for i in range(m):
+        r = (words[i] >> shift) & vmask
+        bucket[fill[r]] = i
+        fill[r] += 1
+    # one stream per (row, outcome): the row's run shifted by (v' - r) << shift
+    g = 0
+    cur = np.empty(rows * kmax, np.int64)
+    end = np.empty(rows * kmax, np.int64)
+    delta = np.empty(rows * kmax, np.int64)
+    slot_of = np.empty(rows * kmax, np.int64)
+    head = np.empty(rows * kmax, np.int64)
+    for r in range(rows):
+        if start[r + 1] == start[r]:
+            continue
+        for k in range(count[r]):
+            cur[g] = start[r]
+            end[g] = start[r + 1]
+            delta[g] = (new_velocity[r, k] - r) << shift
+            slot_of[g] = r * kmax + k
+            head[g] = words[bucket[start[r]]] + delta[g]
+            g += 1
+    out = np.empty(total, np.int64)
+    indptr = np.empty(total + 1 if links else 0, np.int64)
+    parent = np.empty(total if links else 0, np.int32)
+    slot = np.empty(total if links else 0, np.int16)
+    done = np.iinfo(np.int64).max
+    k = -1
+    for e in range(total):
+        best = 0
+        for s in range(1, g):
+            if head[s] < head[best]:
+                best = s
+        word = head[best]
+        if k < 0 or word != out[k]:
+            k += 1
+            out[k] = word
+            if links:
+                indptr[k] = e
+        if links:
+            parent[e] = bucket[cur[best]]
+            slot[e] = slot_of[best]
+        cur[best] += 1
+        head[best] = words[bucket[cur[best]]] + delta[best] if cur[best] < end[best] else done
+    k += 1
+    if links:
+        indptr[k] = total
+        return out[:k].copy(), indptr[:k + 1].copy(), parent, slot
+    return out[:k].copy(), indptr, parent, slot
+
+
+def _step(words, j, w, rule: LevelRule, links: bool):
+    """Level ``j + 1`` from level ``j`` and its links (``(a, b)`` or ``(indptr, parent, slot)``)."""
+    if rule.nasch_form:
+        out, a, b = _next_level(words, j, w, links)
+        return out, (a, b)
+    out, indptr, parent, slot = _merge_level(words, j, w, rule.count, rule.new_velocity, links)
+    return out, (indptr, parent, slot)
+
+
+# ------------------------------------------------------------------------ the move
 
 @njit(cache=True)
 def _moved_key(word, length, ncars, w, pw, bits, lump):
@@ -217,23 +487,40 @@ def _segments(sorted_values, targets, offsets):
 
 
 def frontier_successors(ring: Ring, keys: np.ndarray, lump: bool) -> np.ndarray:
-    """Sorted distinct successor states of a set of states (parallel update).
+    """Sorted distinct successor states of a set of states (parallel update, any model).
 
     The support of ``x P`` for ``x`` supported on ``keys``, found through the
-    levels (merged at every level) instead of ``2**k`` keys per state: the
+    levels (merged at every level) instead of one key per transition: the
     step of the recurrent-class search.
     """
     w, _ = word_bits(ring)
+    rule = _model_rule(ring.model)
     keys = np.ascontiguousarray(keys, dtype=np.int64)
-    words = np.empty_like(keys)
-    _frame_words(keys, ring.length, ring.vmax, w, bool(lump), words)
-    words = unique_keys(words)
+    words = unique_keys(_level0(ring, keys, w, lump, rule))
     for j in range(ring.cars):
-        words = _next_level(words, j, w, False)[0]
+        words = _step(words, j, w, rule, False)[0]
     out = np.empty_like(words)
     _moved_keys(words, ring.length, ring.cars, w, powers(ring.length, ring.vmax),
                 shift_bits(ring.vmax), bool(lump), out)
     return unique_keys(out)
+
+
+@njit(cache=True)
+def _permute_rows(indptr, parent, slot, order):
+    """The CSR rows ``order[0], order[1], ...`` of a level, as a new CSR."""
+    n = order.shape[0]
+    out_ptr = np.empty(n + 1, np.int64)
+    out_ptr[0] = 0
+    for t in range(n):
+        out_ptr[t + 1] = out_ptr[t] + indptr[order[t] + 1] - indptr[order[t]]
+    out_parent = np.empty_like(parent)
+    out_slot = np.empty_like(slot)
+    for t in range(n):
+        lo = indptr[order[t]]
+        for e in range(out_ptr[t + 1] - out_ptr[t]):
+            out_parent[out_ptr[t] + e] = parent[lo + e]
+            out_slot[out_ptr[t] + e] = slot[lo + e]
+    return out_ptr, out_parent, out_slot
 
 
 # ----------------------------------------------------------------------- products
@@ -262,18 +549,39 @@ def _two_parents(a, b, z, p, q):
 
 @njit(cache=True, parallel=True)
 def _gather_level(a, b, z, p, q, out):
-    """Level ``j``: ``out[w] = weight_a z[a[w]] + p z[b[w]]``."""
+    """NaSch form, level ``j``: ``out[w] = weight_a z[a[w]] + p z[b[w]]``."""
     for i in prange(a.shape[0]):
         out[i] = _two_parents(a[i], b[i], z, p, q)
 
 
 @njit(cache=True, parallel=True)
 def _gather_last(a, b, offsets, z, p, q, out):
-    """Level ``N`` fused with R4: ``out[s] = sum over the words that move onto s``."""
+    """NaSch form, level ``N`` fused with R4: ``out[s] = sum over the words that move onto s``."""
     for s in prange(out.shape[0]):
         acc = 0.0
         for k in range(offsets[s], offsets[s + 1]):
             acc += _two_parents(a[k], b[k], z, p, q)
+        out[s] = acc
+
+
+@njit(cache=True, parallel=True)
+def _gather_rows(indptr, parent, slot, weight, z, out):
+    """Any rule, level ``j``: ``out[w] = sum over w's parents of weight z[parent]``."""
+    for i in prange(out.shape[0]):
+        s = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            s += weight[slot[e]] * z[parent[e]]
+        out[i] = s
+
+
+@njit(cache=True, parallel=True)
+def _gather_rows_last(indptr, parent, slot, offsets, weight, z, out):
+    """Any rule, level ``N`` fused with R4."""
+    for s in prange(out.shape[0]):
+        acc = 0.0
+        for k in range(offsets[s], offsets[s + 1]):
+            for e in range(indptr[k], indptr[k + 1]):
+                acc += weight[slot[e]] * z[parent[e]]
         out[s] = acc
 
 
@@ -285,7 +593,8 @@ class FactoredOperator(ChainOperator):
     Parameters
     ----------
     ring : Ring
-        The system (parallel update, ``N >= 1``); ``ring.p`` gives the weights.
+        The system (parallel update, ``N >= 1``, any model); its rule table
+        gives the outcomes and weights.
     keys : (n,) int64 array, sorted
         A closed set of (canonical, if ``lump``) state keys, e.g. the
         recurrent class (:func:`markov.statespace.recurrent_keys`).
@@ -298,6 +607,8 @@ class FactoredOperator(ChainOperator):
         Number of states.
     level_sizes : list of int
         Words per level, ``0..N``.
+    rule : LevelRule
+        The rows of the rule table and their weights.
     products, seconds
         Products applied so far and the time spent in them.
 
@@ -305,7 +616,7 @@ class FactoredOperator(ChainOperator):
     -----
     The result equals ``P.T @ x`` for the CSR matrix of
     :func:`markov.transition.transition_matrix` to rounding; the weights
-    enter only the products, so :meth:`with_p` reuses the levels.
+    enter only the products, so :meth:`with_params` reuses the levels.
 
     Examples
     --------
@@ -323,18 +634,17 @@ class FactoredOperator(ChainOperator):
             raise InvalidParameterError("the factored operator needs at least one car")
         super().__init__(ring, keys, lump)
         if _levels is None:
-            _levels = self._build()
-        (self._perm, self._offsets0, self._links, self._offsets_last,
+            _levels = self._build(_model_rule(ring.model))
+        (self.rule, self._perm, self._offsets0, self._links, self._offsets_last,
          self.level_sizes) = _levels
         self._buffers = (np.empty(max(self.level_sizes)), np.empty(max(self.level_sizes)))
 
-    def _build(self):
+    def _build(self, rule: LevelRule):
         ring, w = self.ring, word_bits(self.ring)[0]
         n = self.n
         if n >= 2**31:
             raise InvalidParameterError("the factored operator indexes states with int32")
-        words = np.empty(n, dtype=np.int64)
-        _frame_words(self.keys, ring.length, ring.vmax, w, self.lump, words)
+        words = _level0(ring, self.keys, w, self.lump, rule)
         perm = np.argsort(words, kind="stable").astype(np.int32)
         words = words[perm]
         first = np.flatnonzero(np.concatenate(([True], words[1:] != words[:-1])))
@@ -343,8 +653,10 @@ class FactoredOperator(ChainOperator):
         sizes = [len(words)]
         links = []
         for j in range(ring.cars):
-            words, a, b = _next_level(words, j, w, True)
-            links.append((a, b))
+            words, link = _step(words, j, w, rule, True)
+            if len(words) >= 2**31:
+                raise InvalidParameterError("the factored operator indexes words with int32")
+            links.append(link)
             sizes.append(len(words))
         targets = np.empty_like(words)
         _moved_keys(words, ring.length, ring.cars, w, powers(ring.length, ring.vmax),
@@ -354,24 +666,48 @@ class FactoredOperator(ChainOperator):
         offsets_last = np.empty(n + 1, dtype=np.int64)
         if _segments(targets[order], self.keys, offsets_last):
             raise RuntimeError("a successor lies outside the state set: it is not closed")
-        a, b = links[-1]
-        links[-1] = (a[order], b[order])
-        return perm, offsets0, links, offsets_last, sizes
+        if rule.nasch_form:
+            a, b = links[-1]
+            links[-1] = (a[order], b[order])
+        else:
+            links[-1] = _permute_rows(*links[-1], order)
+        return rule, perm, offsets0, links, offsets_last, sizes
 
     @property
     def edges(self) -> int:
-        """Two-parent gathers per product: the words of levels ``1..N``."""
-        return int(sum(self.level_sizes[1:]))
+        """Parent links per product: the words of levels ``1..N`` (NaSch form,
+        two-parent gathers) or their parents (general)."""
+        if self.rule.nasch_form:
+            return int(sum(self.level_sizes[1:]))
+        return int(sum(link[1].shape[0] for link in self._links))
 
     @property
     def nbytes(self) -> int:
         """Bytes held: the level links, the level-0 permutation and offsets, two buffers."""
-        links = sum(a.nbytes + b.nbytes for a, b in self._links)
+        links = sum(a.nbytes for link in self._links for a in link)
         return (links + self._perm.nbytes + self._offsets0.nbytes + self._offsets_last.nbytes
                 + sum(buf.nbytes for buf in self._buffers))
 
+    def with_params(self, **changes) -> "FactoredOperator":
+        """The same levels with other probability parameters (no rebuild).
+
+        The levels are rebuilt only when the new values change the outcomes
+        (a probability 0 or 1) or split a row (two weights that were equal
+        now differ).
+
+        Parameters
+        ----------
+        **changes
+            Parameter values, e.g. ``p=0.25``.
+
+        Returns
+        -------
+        FactoredOperator
+        """
+        return self._with_ring(self.ring.with_params(**changes))
+
     def with_p(self, p: float) -> "FactoredOperator":
-        """The same levels with another braking probability (no rebuild).
+        """:meth:`with_params` with another braking probability ``p``.
 
         Parameters
         ----------
@@ -381,19 +717,33 @@ class FactoredOperator(ChainOperator):
         -------
         FactoredOperator
         """
-        levels = (self._perm, self._offsets0, self._links, self._offsets_last,
+        return self._with_ring(self.ring.with_p(p))
+
+    def _with_ring(self, ring: Ring) -> "FactoredOperator":
+        rule = _reweigh(self.rule, ring.table())
+        if rule is None:
+            return FactoredOperator(ring, self.keys, self.lump)
+        levels = (rule, self._perm, self._offsets0, self._links, self._offsets_last,
                   self.level_sizes)
-        return FactoredOperator(self.ring.with_p(p), self.keys, self.lump, _levels=levels)
+        return FactoredOperator(ring, self.keys, self.lump, _levels=levels)
 
     def _product(self, x: np.ndarray, out: np.ndarray) -> None:
-        p = float(self.ring.p)
-        q = 1.0 - p
+        rule = self.rule
         which = 0  # ping-pong between the two level buffers
         z = self._buffers[0][:self.level_sizes[0]]
         _gather_states(x, self._perm, self._offsets0, z)
-        for a, b in self._links[:-1]:
+        if rule.nasch_form:
+            p, q = rule.brake_weights
+            for a, b in self._links[:-1]:
+                which ^= 1
+                parents, z = z, self._buffers[which][:a.shape[0]]
+                _gather_level(a, b, parents, p, q, z)
+            a, b = self._links[-1]
+            _gather_last(a, b, self._offsets_last, z, p, q, out)
+            return
+        for indptr, parent, slot in self._links[:-1]:
             which ^= 1
-            parents, z = z, self._buffers[which][:a.shape[0]]
-            _gather_level(a, b, parents, p, q, z)
-        a, b = self._links[-1]
-        _gather_last(a, b, self._offsets_last, z, p, q, out)
+            parents, z = z, self._buffers[which][:indptr.shape[0] - 1]
+            _gather_rows(indptr, parent, slot, rule.weight, parents, z)
+        indptr, parent, slot = self._links[-1]
+        _gather_rows_last(indptr, parent, slot, self._offsets_last, rule.weight, z, out)

@@ -183,7 +183,7 @@ def successor_keys(ring: Ring, keys: np.ndarray, lump: bool) -> tuple[np.ndarray
     Parameters
     ----------
     ring : Ring
-        Any model and update (NaSch's parallel search walks the factored levels
+        Any model and update (the parallel search walks the factored levels
         instead: :func:`markov._factored.frontier_successors`).
     keys : (n,) int64 array
     lump : bool

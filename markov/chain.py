@@ -206,7 +206,7 @@ def representable(ring: Ring) -> bool:
 
 
 class RingChain:
-    """The finite Markov chain of one NaSch ring, built lazily.
+    """The finite Markov chain of one ring (any model), built lazily.
 
     Parameters
     ----------
@@ -285,7 +285,10 @@ class RingChain:
 
     def _matrix_free_bytes_per_state(self, method: str) -> float:
         if self.ring.update == PARALLEL:
-            return memory.factored_bytes_per_state(method)
+            from ._factored import link_bytes_per_word
+
+            return memory.factored_bytes_per_state(
+                method, link_bytes=link_bytes_per_word(self.ring))
         return memory.rows_bytes_per_state(method)
 
     def _guard_bytes_per_state(self) -> float:
@@ -415,8 +418,10 @@ class RingChain:
         (its orthogonalisation outweighs the cheap product) and is kept as
         BiCGSTAB's fallback in ``iterative``; power iteration is the lightest.
         """
+        # a model without a braking probability p takes the ladder of large p
+        small_p = self.ring.p is not None and self.ring.p <= AGGREGATION_MAX_P
         prefer = (("aggregation", "iterative", "bicgstab", "power")
-                  if self.ring.p <= AGGREGATION_MAX_P
+                  if small_p
                   else ("iterative", "bicgstab", "aggregation", "power"))
         for method in prefer:
             if method == "aggregation" and self.ring.update != PARALLEL:
@@ -442,13 +447,11 @@ class RingChain:
         """
         if self.ring.trivial:
             return "matrix"
-        if self.ring.update == ORDERED_SEQUENTIAL or (self.ring.update == PARALLEL
-                                                       and not self.ring.is_nasch):
+        if self.ring.update == ORDERED_SEQUENTIAL:
             if self.operator == "matrix-free":
                 raise InvalidParameterError(
-                    f"no matrix-free operator for {self.ring.model.name} under"
-                    f" {self.ring.update} update yet: it is solved with the matrix"
-                    " (operator='matrix' or 'auto')")
+                    "no matrix-free operator for ordered-sequential update yet: it is"
+                    " solved with the matrix (operator='matrix' or 'auto')")
             memory.check_fits(f"the transition matrix ({self.transitions:,} transitions on"
                               f" {self.n_states:,} states)", self.matrix_bytes(), self.limit)
             return "matrix"

@@ -14,7 +14,8 @@ Paths
     assembling (unsummed int64 successor, column and value lists).
 ``factored``
     :class:`markov._factored.FactoredOperator` (parallel update): the level
-    links (two int32 per word; words summed over the levels are 1.5 to 5.5
+    links (two int32 per word for NaSch, an int64 row pointer per word and an
+    int32 parent and int16 outcome per link for other rules; words summed over the levels are 1.5 to 5.5
     times the states, :data:`LEVEL_WORDS_PER_STATE` is the bound used before
     the levels exist), the level-0 permutation and offsets, two level buffers.
 ``rows``
@@ -128,7 +129,7 @@ def search_bytes_per_state() -> float:
 
 
 def factored_bytes_per_state(method: str, words_per_state: float = LEVEL_WORDS_PER_STATE,
-                             first_level: float = 1.0) -> float:
+                             first_level: float = 1.0, link_bytes: float = 8.0) -> float:
     """Peak bytes per state of the factored operator and a solver.
 
     Parameters
@@ -140,12 +141,16 @@ def factored_bytes_per_state(method: str, words_per_state: float = LEVEL_WORDS_P
         figure, :attr:`markov._factored.FactoredOperator.edges` / n).
     first_level : float
         Level-0 words per state (at most 1).
+    link_bytes : float
+        Bytes of links per word of levels ``1..N``: 8 for the NaSch form (two
+        int32 parents), ``8 + 6 x`` parents per word for the CSR of any other
+        rule (:func:`markov._factored.link_bytes_per_word`).
 
     Returns
     -------
     float
     """
-    links = 8 * words_per_state                # two int32 parents per word
+    links = link_bytes * words_per_state
     level0 = 4 + 8 * first_level               # int32 permutation, int64 offsets
     last = 8                                   # int64 offsets of the states
     buffers = 2 * 8 * 1.05                     # the largest level, twice

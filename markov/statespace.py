@@ -61,8 +61,7 @@ def _successor_set(ring: Ring, frontier: np.ndarray, lump: bool) -> np.ndarray:
     if ring.update == PARALLEL:
         from ._factored import factored_fits, frontier_successors
 
-        # the NaSch levels carry NaSch's support for 0 < p < 1 (both coins possible)
-        if ring.is_nasch and 0 < ring.p < 1 and factored_fits(ring):
+        if factored_fits(ring):
             return frontier_successors(ring, frontier, lump)
         return _row_successors(ring, frontier, lump)
     from ._sequential import successor_keys

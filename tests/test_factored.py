@@ -1,15 +1,19 @@
-"""The factored (per-car levels) operator against the naive chain and the CSR matrix."""
+"""The factored (per-car levels) operator against the naive chains and the CSR matrix, every model."""
+from dataclasses import replace
 from fractions import Fraction
 
 import numpy as np
 import pytest
 
 import naive
+import naive_rule as nr
 from markov import InvalidParameterError, Ring, RingChain, solve
 from markov._aggregates import position_aggregates
-from markov._factored import FactoredOperator, frontier_successors, word_bits
-from markov.statespace import recurrent_keys
-from markov.encoding import decode, encode
+from markov._factored import FactoredOperator, frontier_successors, level_rule, word_bits
+from markov._sequential import successor_keys
+from markov.rule import MODELS, load_model
+from markov.statespace import all_keys, recurrent_keys
+from markov.encoding import decode, encode, unique_keys
 from markov.transition import transition_matrix
 
 # vmax 1, 2, 3, 5; one car, one empty cell, low and high density; B = 3, 4, 5, 7
@@ -159,3 +163,122 @@ def test_p_sweep_reuses_states_and_levels():
     cold = RingChain(Ring(14, 7, 2, 0.3), operator="matrix").solution(method="direct")
     assert warm.flux == pytest.approx(cold.flux, abs=1e-12)
     assert chain.transition_operator.ring.p == 0.5  # the original keeps its p
+
+
+# ------------------------------------------------------------- every shipped model
+
+def _model(name, vmax, values=(0.3, 0.6)):
+    """A shipped model with non-trivial, distinct probabilities."""
+    probs = MODELS[name].probability_parameters()
+    return load_model(name, {"vmax": vmax, **dict(zip(probs, values))})
+
+
+def _other(model, values=(0.55, 0.15)):
+    return dict(zip(model.spec.probability_parameters(), values))
+
+
+# one car, one empty cell, half filling
+MODEL_RINGS = {1: [(8, 3), (6, 1), (6, 5)], 2: [(8, 3), (6, 1), (6, 5)],
+               3: [(7, 2), (6, 1), (6, 5)]}
+
+
+@pytest.mark.parametrize("vmax", [1, 2, 3])
+@pytest.mark.parametrize("name", list(MODELS))
+def test_every_model_operator_equals_csr_entry_by_entry(name, vmax):
+    model = _model(name, vmax)
+    rng = np.random.default_rng(vmax)
+    for L, N in MODEL_RINGS[vmax]:
+        ring = Ring(L, N, model=model)
+        for lump in (True, False):
+            keys = recurrent_keys(ring, lump=lump)
+            op = FactoredOperator(ring, keys, lump)
+            other = op.with_params(**_other(model))        # same levels, other weights
+            assert other._links is op._links
+            for factored in (op, other):
+                P = transition_matrix(factored.ring, keys, lump=lump)
+                if op.n <= 400:
+                    np.testing.assert_allclose(dense(factored), P.toarray(), rtol=0,
+                                               atol=4e-16 * N)
+                for x in rng.random((2, op.n)):
+                    np.testing.assert_allclose(factored.apply(x), P.T @ x, rtol=1e-13)
+            if not lump:     # one word per successor state (from the compact jam, fi
+                # and cc may keep transient states without a predecessor)
+                assert op.level_sizes[-1] == np.unique(P.nonzero()[1]).size
+
+
+def test_nasch_rows_are_the_pre_braking_velocity():
+    for vmax in (1, 2, 3, 5):
+        for p in (0.5, 0.3):        # p = q = 1/2 too: equal weights do not merge rows
+            rule = level_rule(Ring(12, 3, vmax, p).table())
+            assert rule.nasch_form and rule.rows == vmax + 1
+            v, g, a = np.indices(rule.row_id.shape)
+            assert np.array_equal(rule.row_id, np.minimum(np.minimum(v + 1, g), vmax))
+    for name in MODELS:
+        if name != "nasch":     # fi with vmax = 1 is NaSch's rule: the fast form applies
+            assert level_rule(Ring(9, 3, model=_model(name, 2)).table()).nasch_form is False
+    assert level_rule(Ring(9, 3, model=_model("fi", 1)).table()).nasch_form
+
+
+def test_the_general_merge_equals_the_nasch_form_on_nasch():
+    for L, N, vmax, lump in ((12, 6, 2, True), (11, 4, 3, False), (9, 8, 1, True)):
+        ring = Ring(L, N, vmax, 0.3)
+        keys = recurrent_keys(ring, lump=lump)
+        fast = FactoredOperator(ring, keys, lump)
+        general = FactoredOperator(ring, keys, lump,
+                                   _levels=fast._build(replace(fast.rule, nasch_form=False)))
+        assert general.level_sizes == fast.level_sizes and general.edges > fast.n
+        for x in np.random.default_rng(L).random((2, fast.n)):
+            np.testing.assert_allclose(general.apply(x), fast.apply(x), rtol=1e-14)
+
+
+def test_rows_that_coincide_at_one_parameter_point_are_rebuilt_when_they_split():
+    # vdr with p = p0: the slow-to-start rows equal the ordinary ones (fewer words)
+    ring = Ring(9, 4, model=load_model("vdr", {"vmax": 2, "p": 0.3, "p0": 0.3}))
+    keys = recurrent_keys(ring)
+    op = FactoredOperator(ring, keys, lump=True)
+    split = op.with_params(p0=0.6)
+    assert split._links is not op._links and split.rule.rows == op.rule.rows + 1
+    merged = FactoredOperator(split.ring, keys, lump=True).with_params(p0=0.3)
+    assert merged.rule.rows == split.rule.rows       # finer rows still hold: reused
+    for f in (op, split, merged):
+        x = np.random.default_rng(1).random(f.n)
+        np.testing.assert_allclose(f.apply(x), transition_matrix(f.ring, keys, lump=True).T @ x,
+                                   rtol=1e-13)
+    assert op.with_p(0.0)._links is not op._links    # p = 0 changes the outcomes
+
+
+@pytest.mark.parametrize("vmax", [1, 2, 3])
+@pytest.mark.parametrize("name", list(MODELS))
+def test_every_model_factored_flux_equals_the_naive_chain(name, vmax):
+    model = _model(name, vmax)
+    for L, N in ((6, 3) if vmax <= 2 else (6, 2), (5, 1), (5, 4)):
+        chain = nr.Chain(L, N, model.spec.function, dict(model.params))
+        classes = chain.closed_classes()
+        assert len(classes) == 1
+        pi = chain.stationary(classes[0])
+        ring = Ring(L, N, model=model)
+        for method in ("bicgstab", "aggregation"):
+            sol = solve(ring, operator="matrix-free", method=method, tol=1e-13)
+            assert sol.level_sizes is not None
+            assert sol.flux == pytest.approx(chain.flux(pi), abs=1e-12)
+            np.testing.assert_allclose(sol.c_v, chain.velocity_densities(pi), atol=1e-12)
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_every_model_frontier_successors_are_the_row_generators(name):
+    rng = np.random.default_rng(7)
+    for vmax, (L, N) in ((1, (8, 3)), (2, (8, 4)), (3, (7, 6)), (2, (7, 1))):
+        ring = Ring(L, N, model=_model(name, vmax))
+        for lump in (True, False):
+            keys = all_keys(ring, lump=lump)     # any states, not only recurrent ones
+            for size in sorted({1, min(9, len(keys)), len(keys)}):
+                some = np.sort(rng.choice(keys, size, replace=False))
+                expected = unique_keys(successor_keys(ring, some, lump)[1])
+                assert np.array_equal(frontier_successors(ring, some, lump), expected)
+
+
+def test_word_bits_hold_the_largest_row_id():
+    ring = Ring(22, 11, model=_model("kkw", 2))
+    rows = level_rule(ring.table()).rows
+    assert rows - 1 > ring.vmax
+    assert word_bits(ring) == ((rows - 1).bit_length(), 22 + 11 * (rows - 1).bit_length())
