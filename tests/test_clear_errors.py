@@ -117,7 +117,7 @@ def test_many_cars_raise_the_floor_to_where_p_to_the_n_stays_normal():
     assert smallest ** 23 >= np.finfo(float).tiny > (0.99 * smallest) ** 23
     p = 1.01 * smallest
     assert solve(ring.with_p(p)).flux == pytest.approx((1 - p) / 24, rel=1e-13)
-    with pytest.raises(InvalidParameterError, match="supports 4.2e-14 <= p"):
+    with pytest.raises(InvalidParameterError, match="supports p = 0, 1 or 4.2e-14 <= p"):
         solve(ring.with_p(0.99 * smallest))
 
 
