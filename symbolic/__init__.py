@@ -11,6 +11,12 @@ Methods (see ``docs/symbolic.md``):
 * ``"comf"``     car-oriented mean field (independent (velocity, gap) of cars), vmax <= 10
   and densities c >= 0.005 (a banded system that grows like vmax^4 and 1 / c).
 
+Every method reads the update rule: NaSch by default, any
+:class:`markov.rule.Model` with ``model=`` (MF, the n-cluster approximation
+and COMF; pMF and pMF2 need the model's Garden of Eden patterns and are
+NaSch only; COMF refuses rules that read the car ahead).  See
+``docs/symbolic.md``, "Approximations of the other models".
+
 Quick start
 -----------
 >>> from symbolic import approximate
@@ -160,17 +166,20 @@ class Approximation:
         Densities of cars with velocity ``v = 0..vmax``; they sum to ``density``.
     flux : float or (k,) ndarray
         ``sum_v v c_v``.
+    model : markov.rule.Model or None
+        The rule when it is not NaSch (``p`` is then the model's ``p``, or None).
     """
 
     method: str
     vmax: int
-    p: float
+    p: float | None
     density: float | np.ndarray
     c_v: np.ndarray = field(repr=False)
     flux: float | np.ndarray
+    model: object = field(default=None, repr=False)
 
     def to_dict(self) -> dict:
-        """JSON-ready dict with keys ``method, vmax, p, density, c_v, flux``.
+        """JSON-ready dict with keys ``method, vmax, p, density, c_v, flux`` (and ``model``).
 
         Returns
         -------
@@ -178,8 +187,11 @@ class Approximation:
         """
         dens = self.density.tolist() if isinstance(self.density, np.ndarray) else self.density
         flux = self.flux.tolist() if isinstance(self.flux, np.ndarray) else self.flux
-        return {"method": self.method, "vmax": self.vmax, "p": self.p, "density": dens,
-                "c_v": np.asarray(self.c_v).tolist(), "flux": flux}
+        out = {"method": self.method, "vmax": self.vmax, "p": self.p, "density": dens,
+               "c_v": np.asarray(self.c_v).tolist(), "flux": flux}
+        if self.model is not None:
+            out["model"] = self.model.describe()
+        return out
 
 
 def _ensure_size(base: str, vmax: int) -> None:
@@ -207,8 +219,48 @@ def _ensure_method(method, vmax, order) -> tuple[str, int | None, int]:
     return base, order, int(vmax)
 
 
-def approximate(method: str, vmax: int, p: float, density, order: int | None = None
-                ) -> Approximation:
+def _resolve_model(model, vmax, p):
+    """``(model or None, vmax, p)``: a non-NaSch model checked against ``vmax``/``p``.
+
+    A NaSch model is returned as None (the default path, with its vmax and p).
+    """
+    from markov.rule import Model
+
+    from .ruleview import is_nasch
+
+    if model is None:
+        return None, vmax, p
+    if not isinstance(model, Model):
+        raise InvalidParameterError(
+            f"model must be a markov.rule.Model (see load_model), got {type(model).__name__}")
+    params = model.params
+    for name, given in (("vmax", vmax), ("p", p)):
+        if given is not None and (name not in params or given != params[name]):
+            raise InvalidParameterError(
+                f"{name} = {given} disagrees with the model {model.name}"
+                f" ({name} = {params.get(name, 'not a parameter')})")
+    if is_nasch(model):
+        return None, model.vmax, params["p"]
+    return model, model.vmax, params.get("p")
+
+
+def _ensure_model_method(base: str, model) -> None:
+    """Refuse, before any work, a method that the model's rule does not allow."""
+    if model is None:
+        return
+    if base in ("pmf", "pmf2"):
+        raise InvalidParameterError(
+            f"{label(base)} needs the Garden of Eden patterns of the rule; they are derived"
+            f" for NaSch only, not for the model {model.name}")
+    from .ruleview import structure
+    structure(model)                 # refuses a rule reading the car ahead beyond its horizon
+    if base == "comf":
+        from .comf import ensure_comf_rule
+        ensure_comf_rule(model)
+
+
+def approximate(method: str, vmax: int | None, p: float | None, density,
+                order: int | None = None, model=None) -> Approximation:
     """Stationary ``c_v`` and flux of an analytic approximation.
 
     Parameters
@@ -222,6 +274,9 @@ def approximate(method: str, vmax: int, p: float, density, order: int | None = N
         Car density ``0 < c < 1``; an array gives ``c_v`` of shape ``(vmax + 1, k)``.
     order : int, optional
         Cluster size ``N`` for ``method="cluster"``.
+    model : markov.rule.Model, optional
+        The update rule (default NaSch with ``vmax`` and ``p``).  With a model,
+        ``vmax`` and ``p`` may be None (taken from it) or must agree with it.
 
     Returns
     -------
@@ -232,7 +287,8 @@ def approximate(method: str, vmax: int, p: float, density, order: int | None = N
     InvalidParameterError
         Unknown method, unsupported ``vmax`` (MF: above 100, COMF: above 10),
         a cluster too large to enumerate, ``p`` or ``density`` outside
-        ``(0, 1)``, COMF below ``c = 0.005``; all before any work.
+        ``(0, 1)``, COMF below ``c = 0.005``, pMF for a model other than
+        NaSch, COMF for a rule that reads the car ahead; all before any work.
 
     Examples
     --------
@@ -244,30 +300,33 @@ def approximate(method: str, vmax: int, p: float, density, order: int | None = N
 
     from .solve import flux_of, solve_mf, solve_pmf
 
+    model, vmax, p = _resolve_model(model, vmax, p)
     base, order, vmax = _ensure_method(method, vmax, order)
-    p_val = ensure_open_probability(p)
+    _ensure_model_method(base, model)
+    p_val = ensure_open_probability(p) if model is None else p
+    p_arg = p_val if model is None else None
     c_arr = np.asarray(ensure_open_unit("density", density), dtype=float)
     if c_arr.ndim > 1:
         raise InvalidParameterError("density must be a number or a 1-d array of numbers")
     if base == "mf":
-        c_v = solve_mf(vmax, p_val, c_arr)
+        c_v = solve_mf(vmax, p_arg, c_arr, model=model)
     elif base in ("pmf", "pmf2"):
         c_v = solve_pmf(vmax, p_val, c_arr, second_order=(base == "pmf2"))
     elif base == "comf":
         from .comf import solve_comf
-        c_v = solve_comf(vmax, p_val, c_arr)
+        c_v = solve_comf(vmax, p_arg, c_arr, model=model)
     else:
         from .cluster import solve_cluster
-        c_v = solve_cluster(vmax, order, p_val, c_arr)
+        c_v = solve_cluster(vmax, order, p_arg, c_arr, model=model)
     c_v = np.asarray(c_v, dtype=float)
     flux = flux_of(c_v)
     name = method_name(base, order)
     if c_arr.ndim == 0:
-        return Approximation(name, vmax, p_val, float(c_arr), c_v, float(flux))
-    return Approximation(name, vmax, p_val, c_arr.copy(), c_v, flux)
+        return Approximation(name, vmax, p_val, float(c_arr), c_v, float(flux), model)
+    return Approximation(name, vmax, p_val, c_arr.copy(), c_v, flux, model)
 
 
-def equations(method: str, vmax: int, order: int | None = None) -> list:
+def equations(method: str, vmax: int | None, order: int | None = None, model=None) -> list:
     """The equations a method solves, derived from the rules (sympy ``Eq``).
 
     ``mf``: ``c_w = F_w``; ``pmf``/``pmf2``: ``c_w = N F_w`` with ``N`` written
@@ -283,6 +342,9 @@ def equations(method: str, vmax: int, order: int | None = None) -> list:
     vmax : int
     order : int, optional
         Cluster size of ``method="cluster"``.
+    model : markov.rule.Model, optional
+        The rule (default NaSch); its probability parameters become symbols
+        (``1 - p`` is written ``q``); ``vmax`` may be None or must agree.
 
     Returns
     -------
@@ -299,38 +361,44 @@ def equations(method: str, vmax: int, order: int | None = None) -> list:
     >>> equations("mf", 1)[1]
     Eq(c_1, c_0*d*q + c_1*d*q)
     """
+    model, vmax, _ = _resolve_model(model, vmax, None)
     name = method_name(method, order)
     if not supported(name, vmax):
         raise InvalidParameterError(
             f"method {name!r} is not available for vmax = {vmax!r} (mf: 1..100, comf: 1..10,"
             f" cluster: any vmax >= 1 up to its window limit; pmf, pmf2: 1..6)")
     _ensure_size(name, int(vmax))
+    if model is not None and name in ("pmf", "pmf2"):
+        _ensure_model_method(name, model)
+    elif model is not None:
+        from .ruleview import structure
+        structure(model)
     if name == "mf":
         if vmax > _MAX_MF_EQUATION_VMAX:
             raise InvalidParameterError(
                 f"the MF equations are printed for vmax <= {_MAX_MF_EQUATION_VMAX} (sympy"
                 f" takes 11 s at vmax 30), got vmax = {vmax}")
         from .meanfield import mf_equations
-        return mf_equations(vmax)
+        return mf_equations(vmax, model)
     if name in ("pmf", "pmf2"):
         from .paradisical import pmf_equations
         return pmf_equations(vmax, second_order=(name == "pmf2"))
     if name == "comf":
         from .comf import comf_equation_terms, comf_equations
-        terms = comf_equation_terms(vmax)
+        terms = comf_equation_terms(vmax, model)
         if terms > _MAX_EQUATION_TERMS:
             raise InvalidParameterError(
                 f"the COMF equations for vmax = {vmax} have about {terms:,} terms; at most"
                 f" {_MAX_EQUATION_TERMS:,} are built (use a smaller vmax)")
-        return comf_equations(vmax)
+        return comf_equations(vmax, model)
     from .cluster import cluster_equations, transfer
     n = int(name[len("cluster"):])
-    rows = len(transfer(vmax, n).src)
+    rows = len(transfer(vmax, n, model).src)
     if rows > _MAX_EQUATION_TERMS:
         raise InvalidParameterError(
             f"the {n}-cluster equations for vmax = {vmax} have {rows:,} terms; at most"
             f" {_MAX_EQUATION_TERMS:,} are built (use a smaller order)")
-    return cluster_equations(vmax, n)
+    return cluster_equations(vmax, n, model)
 
 
 def __getattr__(name: str):

@@ -71,9 +71,6 @@ import numpy as np
 import scipy.sparse as sp_sparse
 
 from markov.errors import ConvergenceError, InvalidParameterError
-from markov.rules import velocity_outcomes
-
-from .meanfield import gap_horizons, reach
 from .solve import solve_fixed_point
 
 __all__ = ["Transfer", "transfer", "window_count", "push",
@@ -99,37 +96,11 @@ def _ensure_sizes(vmax, n) -> tuple[int, int]:
 # --- the rules, tabulated ----------------------------------------------------------
 
 
-@lru_cache(maxsize=None)
-def _outcome_table(vmax: int):
-    """Per (v, gap <= H): number of outcomes, moves ``w`` and coin exponents ``(a, b)``.
+def _structure(vmax: int, model):
+    """The rule the transfer reads: ``model``, or NaSch (any ``0 < p < 1``: one structure)."""
+    from .ruleview import nasch, structure
 
-    Read off :func:`markov.rules.velocity_outcomes` with a sympy ``p``; a
-    weight must be ``1``, ``1 - p`` or ``p`` and the weights of one car must
-    add to one (what lets cars that cannot reach the cluster sum out).
-    """
-    import sympy as sp
-
-    from .meanfield import p as p_sym
-
-    horizon = max(gap_horizons(vmax))
-    count = np.zeros((vmax + 1, horizon + 1), dtype=np.int8)
-    move = np.zeros((vmax + 1, horizon + 1, 2), dtype=np.int8)
-    expo = np.zeros((vmax + 1, horizon + 1, 2, 2), dtype=np.int8)
-    forms = {(0, 0): sp.Integer(1), (1, 0): 1 - p_sym, (0, 1): p_sym}
-    for v in range(vmax + 1):
-        for g in range(horizon + 1):
-            outcomes = velocity_outcomes(v, g, vmax, p_sym)
-            if len(outcomes) > 2 or sp.expand(sum(wt for _, wt in outcomes) - 1) != 0:
-                raise RuntimeError(f"velocity_outcomes({v}, {g}) is not one R3 coin: the"
-                                   " cluster derivation assumes two outcomes adding to one")
-            count[v, g] = len(outcomes)
-            for k, (w, wt) in enumerate(outcomes):
-                match = [e for e, form in forms.items() if sp.expand(wt - form) == 0]
-                if not match:
-                    raise RuntimeError(f"unexpected R3 weight {wt} from velocity_outcomes")
-                move[v, g, k] = int(w)
-                expo[v, g, k] = match[0]
-    return count, move, expo
+    return structure(nasch(vmax) if model is None else model)
 
 
 # --- words, supports, windows ----------------------------------------------------
@@ -205,7 +176,7 @@ def _count_extensions(member: np.ndarray, base: int, n: int, length: int) -> flo
     return float(counts.sum())
 
 
-def _windows(words: np.ndarray, member: np.ndarray, vmax: int, n: int,
+def _windows(words: np.ndarray, member: np.ndarray, rs, n: int,
              limit: int) -> np.ndarray:
     """Windows starting with a row of ``words``, each only as long as its cars need.
 
@@ -221,8 +192,9 @@ def _windows(words: np.ndarray, member: np.ndarray, vmax: int, n: int,
     InvalidParameterError
         As soon as more than ``limit`` windows would be needed.
     """
+    vmax = rs.vmax
     b = vmax + 2
-    region, horizon = reach(vmax) + n, max(gap_horizons(vmax))
+    region, horizon = rs.reach + n, rs.horizon
 
     def refuse():
         _refuse(vmax, n, limit)
@@ -252,20 +224,30 @@ def _windows(words: np.ndarray, member: np.ndarray, vmax: int, n: int,
     return np.vstack(done)
 
 
-def _transfer_rows(vmax: int, n: int, windows: np.ndarray) -> dict:
-    """Vectorised transfer of ``windows`` (shape ``(W, m)``): one row per branch."""
-    count, move, expo = _outcome_table(vmax)
-    behind, horizon = reach(vmax), max(gap_horizons(vmax))
+def _transfer_rows(rs, n: int, windows: np.ndarray) -> dict:
+    """Vectorised transfer of ``windows`` (shape ``(W, m)``): one row per branch.
+
+    Each car of the ``R + n`` cells that can land in the cluster reads its gap
+    (up to ``H``) and, when the gap is below ``H``, the velocity of the car
+    ahead, which then lies inside the window; at gaps ``>= H`` the rule does
+    not read it (:func:`symbolic.ruleview.ensure_far_independent`).  A car with
+    several outcomes branches if one of them lands inside the cluster; if none
+    does, its outcomes sum out (their weights add to one).  Rows record the
+    exponent of each weight of ``rs.exprs``.
+    """
+    count, move, wid = rs.count, rs.move, rs.wid
+    vmax, behind, horizon = rs.vmax, rs.reach, rs.horizon
     n_win, m = windows.shape
     b = vmax + 2
+    n_k, n_e = move.shape[-1], len(rs.exprs)
     span = behind + n                               # cars here can land in the cluster
     base = np.zeros((n_win, n), dtype=np.uint8)     # landings of cars with one outcome
-    base_a = np.zeros(n_win, dtype=np.int16)
-    base_b = np.zeros(n_win, dtype=np.int16)
-    branches = np.zeros((n_win, span), dtype=bool)
-    moves = np.zeros((n_win, span, 2), dtype=np.int8)
-    expos = np.zeros((n_win, span, 2, 2), dtype=np.int8)
+    base_e = np.zeros((n_win, n_e), dtype=np.int16)
+    radix = np.ones((n_win, span), dtype=np.int64)  # outcomes branched per car
+    moves = np.zeros((n_win, span, n_k), dtype=np.int8)
+    wids = np.full((n_win, span, n_k), -1, dtype=np.int16)
     alive = np.empty(n_win, dtype=bool)
+    rows_all = np.arange(n_win)
     for i in range(span):
         car = windows[:, i] > 0
         gap = np.zeros(n_win, dtype=np.int64)
@@ -273,45 +255,57 @@ def _transfer_rows(vmax: int, n: int, windows: np.ndarray) -> dict:
         for k in range(1, horizon + 1):
             alive &= windows[:, i + k] == 0
             gap += alive
+        ahead = windows[rows_all, np.minimum(i + gap + 1, m - 1)].astype(np.int64)
+        near = car & (gap < horizon)
+        if np.any(near & (ahead == PAD)):
+            raise RuntimeError("a window ends before the car ahead of one of its cars")
+        v_ahead = np.where(near & (ahead > 0) & (ahead != PAD), ahead - 1, 0)
         v = np.where(car, windows[:, i].astype(np.int64) - 1, 0)
-        cnt, mv, ex = count[v, gap], move[v, gap], expo[v, gap]
-        lands = (i - behind + mv >= 0) & (i - behind + mv < n)
-        lands[:, 1] &= cnt == 2
+        cnt, mv, wi = count[v, gap, v_ahead], move[v, gap, v_ahead], wid[v, gap, v_ahead]
+        x = i - behind + mv.astype(np.int64)
+        lands = (np.arange(n_k)[None] < cnt[:, None]) & (x >= 0) & (x < n)
         one = car & (cnt == 1)
         rows = np.flatnonzero(one & lands[:, 0])
-        base[rows, i - behind + mv[rows, 0]] = mv[rows, 0] + 1
-        base_a += np.where(one, ex[:, 0, 0], 0)
-        base_b += np.where(one, ex[:, 0, 1], 0)
-        # two outcomes, neither landing inside: the coin sums out (weights add to one)
-        branches[:, i] = car & (cnt == 2) & lands.any(axis=1)
-        moves[:, i], expos[:, i] = mv, ex
-    k = branches.sum(axis=1)
-    reps = np.left_shift(1, k)
+        base[rows, x[rows, 0]] = mv[rows, 0] + 1
+        rows = np.flatnonzero(one & (wi[:, 0] >= 0))
+        np.add.at(base_e, (rows, wi[rows, 0]), 1)
+        # several outcomes, none landing inside: they sum out (weights add to one)
+        branch = car & (cnt > 1) & lands.any(axis=1)
+        radix[:, i] = np.where(branch, cnt, 1)
+        moves[:, i], wids[:, i] = mv, wi
+    reps = radix.prod(axis=1)
+    stride = np.cumprod(radix, axis=1) // radix
     src = np.repeat(np.arange(n_win, dtype=np.int64), reps)
     combo = np.arange(len(src), dtype=np.int64) - np.repeat(np.cumsum(reps) - reps, reps)
-    rank = np.cumsum(branches, axis=1) - 1
     cells = base[src]
-    na = base_a[src].astype(np.int64)
-    nb = base_b[src].astype(np.int64)
+    expo = base_e[src].astype(np.int64)
     for i in range(span):
-        rows = np.flatnonzero(branches[src, i])
+        rows = np.flatnonzero(radix[src, i] > 1)
         w_i = src[rows]
-        pick = (combo[rows] >> rank[w_i, i]) & 1
+        pick = (combo[rows] // stride[w_i, i]) % radix[w_i, i]
         w = moves[w_i, i, pick].astype(np.int64)
         x = i - behind + w
         inside = (x >= 0) & (x < n)
         cells[rows[inside], x[inside]] = w[inside] + 1
-        na[rows] += expos[w_i, i, pick, 0]
-        nb[rows] += expos[w_i, i, pick, 1]
+        e = wids[w_i, i, pick].astype(np.int64)
+        ok = e >= 0
+        np.add.at(expo, (rows[ok], e[ok]), 1)
     tgt = _codes(cells, b)
     # merge equal (window, word, exponents) rows into a multiplicity
-    top = int(max(na.max(initial=0), nb.max(initial=0))) + 1
-    key = ((src * b**n + tgt) * top + na) * top + nb
-    key, mult = np.unique(key, return_counts=True)
-    nb, key = key % top, key // top
-    na, key = key % top, key // top
-    return {"src": (key // b**n).astype(np.int32), "tgt": key % b**n,
-            "nq": na.astype(np.int8), "np": nb.astype(np.int8), "mult": mult.astype(np.int32)}
+    top = int(expo.max(initial=0)) + 1
+    ekey = np.zeros(len(src), dtype=np.int64)
+    for j in range(n_e):
+        ekey = ekey * top + expo[:, j]
+    wkey = src * b**n + tgt
+    order = np.lexsort((ekey, wkey))
+    wkey, ekey, expo = wkey[order], ekey[order], expo[order]
+    first = np.ones(len(wkey), dtype=bool)
+    first[1:] = (wkey[1:] != wkey[:-1]) | (ekey[1:] != ekey[:-1])
+    starts = np.flatnonzero(first)
+    mult = np.diff(np.append(starts, len(wkey)))
+    return {"src": (wkey[starts] // b**n).astype(np.int32), "tgt": wkey[starts] % b**n,
+            "expo": expo[starts].astype(np.int8).reshape(len(starts), n_e),
+            "mult": mult.astype(np.int32)}
 
 
 def _perron(a: sp_sparse.csr_array, start: np.ndarray | None) -> np.ndarray:
@@ -362,7 +356,7 @@ def _markov_family(vmax: int, n: int, support: np.ndarray,
     return np.array(densities), np.array(family)
 
 
-def window_count(vmax: int, n: int, limit: int | None = None) -> int:
+def window_count(vmax: int, n: int, limit: int | None = None, model=None) -> int:
     """Windows the first support iteration of the ``n``-cluster enumerates.
 
     An upper bound of the final count (the support only shrinks).
@@ -371,6 +365,8 @@ def window_count(vmax: int, n: int, limit: int | None = None) -> int:
     ----------
     vmax, n : int
     limit : int, optional
+    model : markov.rule.Model, optional
+        The rule (default NaSch); its ``vmax`` must be ``vmax``.
 
     Returns
     -------
@@ -392,18 +388,19 @@ def window_count(vmax: int, n: int, limit: int | None = None) -> int:
     words = _predecessor_words(vmax, n, limit)
     member = np.zeros(b**n, dtype=bool)
     member[_codes(words, b)] = True
-    return len(_windows(words, member, vmax, n, limit))
+    return len(_windows(words, member, _structure(vmax, model), n, limit))
 
 
-def _derive(vmax: int, n: int) -> dict:
+def _derive(rs, n: int) -> dict:
     """The support iteration and the transfer of its final windows (see the module doc)."""
+    vmax = rs.vmax
     b = vmax + 2
     words = _predecessor_words(vmax, n)
     member = np.zeros(b**n, dtype=bool)
     member[_codes(words, b)] = True
     for iterations in itertools.count(1):
-        windows = _windows(words, member, vmax, n, MAX_WINDOWS)
-        rows = _transfer_rows(vmax, n, windows)
+        windows = _windows(words, member, rs, n, MAX_WINDOWS)
+        rows = _transfer_rows(rs, n, windows)
         image = np.zeros(b**n, dtype=bool)
         image[rows["tgt"]] = True
         if np.any(image & ~member):   # impossible by construction: the image only shrinks
@@ -426,7 +423,8 @@ class Transfer:
     """One update from window words (``m`` cells) to words of the cluster support.
 
     Entry ``j`` says: window ``windows[src[j]]`` becomes the cluster word with
-    code ``tgt[j]`` with weight ``mult[j] * q**nq[j] * p**np_[j]``.  Only
+    code ``tgt[j]`` with weight ``mult[j] * prod_k w_k**expo[j, k]``, ``w_k`` the
+    rule's weights ``rule.exprs`` (NaSch: ``1 - p`` and ``p``).  Only
     windows all of whose ``n``-cell sub-words lie in ``support`` are listed
     (every fixed point is supported there; see the module doc); a window ends
     where its cars stop looking (:data:`PAD` after that).  ``family`` holds
@@ -442,12 +440,28 @@ class Transfer:
     windows: np.ndarray = field(repr=False)
     src: np.ndarray = field(repr=False)
     tgt: np.ndarray = field(repr=False)
-    nq: np.ndarray = field(repr=False)
-    np_: np.ndarray = field(repr=False)
+    expo: np.ndarray = field(repr=False)
     mult: np.ndarray = field(repr=False)
     family_density: np.ndarray = field(repr=False)
     family: np.ndarray = field(repr=False)
+    rule: object = field(default=None, repr=False)
     _matrices: dict = field(default_factory=dict, repr=False)
+
+    def _coin(self, form: str) -> np.ndarray:
+        names = [str(e) for e in self.rule.exprs]
+        if form not in names:
+            return np.zeros(len(self.src), dtype=np.int8)
+        return self.expo[:, names.index(form)]
+
+    @property
+    def nq(self) -> np.ndarray:
+        """NaSch: exponent of ``q = 1 - p`` per entry."""
+        return self._coin("1 - p")
+
+    @property
+    def np_(self) -> np.ndarray:
+        """NaSch: exponent of ``p`` per entry."""
+        return self._coin("p")
 
     @property
     def m(self) -> int:
@@ -457,32 +471,39 @@ class Transfer:
     def base(self) -> int:
         return self.vmax + 2
 
-    def weights(self, p_val) -> np.ndarray:
-        """Entry weights, shape ``(k, nnz)`` for ``k`` values of ``p``.
+    def weights(self, theta) -> np.ndarray:
+        """Entry weights, shape ``(k, nnz)`` for ``k`` parameter points.
 
         Parameters
         ----------
-        p_val : float or (k,) array
+        theta : float, (k,) or (k, P) array
+            Values of the rule's probability parameters ``rule.names`` (NaSch: ``p``).
 
         Returns
         -------
         (k, nnz) float array
         """
-        p_val = np.atleast_1d(np.asarray(p_val, float))[:, None]
-        return self.mult * (1 - p_val) ** self.nq * p_val ** self.np_
+        theta = np.asarray(theta, float)
+        theta = theta.reshape(-1, len(self.rule.names)) if theta.ndim < 2 else theta
+        vals = self.rule.values(theta)
+        out = np.broadcast_to(self.mult.astype(float), (len(theta), len(self.mult))).copy()
+        for k in range(vals.shape[1]):
+            out *= vals[:, k:k + 1] ** self.expo[:, k]
+        return out
 
-    def matrix(self, p_val: float) -> sp_sparse.csr_array:
-        """Sparse ``(|S|, W)`` update at one ``p``: support word <- window.
+    def matrix(self, theta) -> sp_sparse.csr_array:
+        """Sparse ``(|S|, W)`` update at one parameter point: support word <- window.
 
         Parameters
         ----------
-        p_val : float
+        theta : float or (P,) array
+            NaSch: ``p``.
 
         Returns
         -------
         scipy.sparse.csr_array
         """
-        key = float(p_val)
+        key = tuple(float(x) for x in np.atleast_1d(np.asarray(theta, float)))
         if key not in self._matrices:
             if len(self._matrices) > 64:
                 self._matrices.clear()
@@ -547,10 +568,18 @@ class Transfer:
 
 
 @lru_cache(maxsize=None)
-def transfer(vmax: int, n: int) -> Transfer:
+def transfer(vmax: int, n: int, model=None) -> Transfer:
     """The support and the one-step transfer of the ``n``-cluster, from the rules.
 
-    Built once per process and cached on disk (:mod:`symbolic.cache`).
+    Built once per process and cached on disk (:mod:`symbolic.cache`, keyed by
+    the model's key: its source, file content, integer parameters and which of
+    its weights vanish; the probability values enter only at solve time).
+
+    Parameters
+    ----------
+    vmax, n : int
+    model : markov.rule.Model, optional
+        The rule (default NaSch, any ``0 < p < 1``); its vmax must be ``vmax``.
 
     Raises
     ------
@@ -567,15 +596,23 @@ def transfer(vmax: int, n: int) -> Transfer:
     63
     """
     vmax, n = _ensure_sizes(vmax, n)
+    _check_model_vmax(vmax, model)
     from .cache import cache_key, cached_arrays
 
-    names = ("support", "windows", "src", "tgt", "nq", "np", "mult", "family_density",
-             "family")
-    arrays = cached_arrays(f"cluster-v{vmax}-n{n}",
-                           cache_key(__name__, method="cluster", order=n, vmax=vmax),
-                           lambda: _derive(vmax, n), required=names)
-    return Transfer(vmax, n, reach(vmax), max(gap_horizons(vmax)),
-                    *(arrays[name] for name in names))
+    rs = _structure(vmax, model)
+    names = ("support", "windows", "src", "tgt", "expo", "mult", "family_density", "family")
+    prefix = "cluster" if model is None else f"cluster-{model.name}"
+    arrays = cached_arrays(f"{prefix}-v{vmax}-n{n}",
+                           cache_key(__name__, method="cluster", order=n, vmax=vmax,
+                                     model=rs.key()),
+                           lambda: _derive(rs, n), required=names)
+    return Transfer(vmax, n, rs.reach, rs.horizon, *(arrays[name] for name in names), rule=rs)
+
+
+def _check_model_vmax(vmax: int, model) -> None:
+    if model is not None and model.vmax != vmax:
+        raise InvalidParameterError(
+            f"vmax = {vmax} disagrees with the model {model.name} (vmax = {model.vmax})")
 
 
 # --- the update on measures -------------------------------------------------------
@@ -604,14 +641,24 @@ def _reduced_chain_weights(t: Transfer, x: np.ndarray) -> np.ndarray:
     return out
 
 
-def _reduced_push(t: Transfer, x: np.ndarray, p_rows: np.ndarray) -> np.ndarray:
-    """One update of support probabilities, row ``i`` at braking probability ``p_rows[i]``."""
+def _reduced_push(t: Transfer, x: np.ndarray, thetas: np.ndarray) -> np.ndarray:
+    """One update of support probabilities, row ``i`` at the parameters ``thetas[i]``."""
     weights = _reduced_chain_weights(t, x)
     out = np.empty_like(x)
-    for pv in np.unique(p_rows):
-        rows = np.flatnonzero(p_rows == pv)
-        out[rows] = (t.matrix(pv) @ weights[:, rows]).T
+    points, which = np.unique(thetas, axis=0, return_inverse=True)
+    for j, theta in enumerate(points):
+        rows = np.flatnonzero(which.ravel() == j)
+        out[rows] = (t.matrix(theta) @ weights[:, rows]).T
     return out
+
+
+def _thetas(t: Transfer, p_val, k: int, model) -> np.ndarray:
+    """``(k, P)`` parameter rows: NaSch's ``p`` broadcast, or the model's values."""
+    if model is None:
+        return np.broadcast_to(np.asarray(p_val, float), (k,)).reshape(k, 1)
+    if p_val is not None:
+        raise InvalidParameterError("give p through the model, not beside it")
+    return np.tile(np.asarray(t.rule.theta, float), (k, 1))
 
 
 def _full(t: Transfer, x: np.ndarray) -> np.ndarray:
@@ -620,7 +667,7 @@ def _full(t: Transfer, x: np.ndarray) -> np.ndarray:
     return out
 
 
-def push(vmax: int, n: int, probs: np.ndarray, p_val) -> np.ndarray:
+def push(vmax: int, n: int, probs: np.ndarray, p_val, model=None) -> np.ndarray:
     """One update of n-cluster probabilities, shape ``(k, B**n)`` -> ``(k, B**n)``.
 
     Exact for measures supported on ``transfer(vmax, n).support`` (every fixed
@@ -632,15 +679,16 @@ def push(vmax: int, n: int, probs: np.ndarray, p_val) -> np.ndarray:
     vmax, n : int
     probs : (k, B**n) float array
     p_val : float or (k,) array
+        NaSch's ``p``; None with a model.
+    model : markov.rule.Model, optional
 
     Returns
     -------
     (k, B**n) float array
     """
-    t = transfer(vmax, n)
+    t = transfer(vmax, n, model)
     probs = np.atleast_2d(np.asarray(probs, float))
-    p_rows = np.broadcast_to(np.asarray(p_val, float), (probs.shape[0],))
-    return _full(t, _reduced_push(t, probs[:, t.support], p_rows))
+    return _full(t, _reduced_push(t, probs[:, t.support], _thetas(t, p_val, len(probs), model)))
 
 
 # --- the fixed point -----------------------------------------------------------------
@@ -657,7 +705,7 @@ def _rescale(t: Transfer, x: np.ndarray, c_val: np.ndarray) -> np.ndarray:
     return out
 
 
-def _jacobian(t: Transfer, x: np.ndarray, pv: float) -> np.ndarray:
+def _jacobian(t: Transfer, x: np.ndarray, pv) -> np.ndarray:
     """Dense ``d push(x) / d x`` for one row ``x`` of support probabilities.
 
     A window's weight is ``prod_j x[a_j] / prod_j M[b_j]`` (``M`` the
@@ -687,7 +735,7 @@ def _jacobian(t: Transfer, x: np.ndarray, pv: float) -> np.ndarray:
             - (tp @ d_den[:, :t.n_prefixes] @ t.prefix_matrix.T).toarray())
 
 
-def _newton(t: Transfer, x: np.ndarray, pv: float, cv: float, tol: float,
+def _newton(t: Transfer, x: np.ndarray, pv, cv: float, tol: float,
             steps: int = 60) -> np.ndarray:
     """Damped Newton steps on ``push(x) - x`` for one row; mass and density held fixed.
 
@@ -701,7 +749,7 @@ def _newton(t: Transfer, x: np.ndarray, pv: float, cv: float, tol: float,
     ~1e5 and the rounding floor of the residual rises to ~1e-11).
     """
     cons = np.vstack([np.ones(len(x)), t.first_car.astype(float)])
-    p_row, c_row = np.array([pv]), np.array([cv])
+    p_row, c_row = np.atleast_1d(np.asarray(pv, float))[None], np.array([cv])
 
     def residual(y):
         gy = _reduced_push(t, y[None], p_row)[0]
@@ -726,7 +774,7 @@ def _newton(t: Transfer, x: np.ndarray, pv: float, cv: float, tol: float,
             break
         x, gx, err = y, gy, new
     raise ConvergenceError(f"Newton steps of the {t.n}-cluster did not reach {tol:g}"
-                           f" (p = {pv:g}, c = {cv:g})", steps, err, x)
+                           f" ({_where(t, pv)}, c = {cv:g})", steps, err, x)
 
 
 def _consistent_start(t: Transfer, c_val: np.ndarray) -> np.ndarray:
@@ -752,20 +800,31 @@ _EASY_P = (0.05, 0.95)
 _FLOOR = 1e-10
 
 
-def _toward(p_from: float, p_to: float) -> float:
-    """Geometric midpoint in ``p`` (toward 0) or in ``q = 1 - p`` (toward 1)."""
-    if p_to < 0.5:
-        return float(np.sqrt(p_from * p_to))
-    return 1 - float(np.sqrt((1 - p_from) * (1 - p_to)))
+def _where(t: Transfer, theta) -> str:
+    theta = np.atleast_1d(np.asarray(theta, float))
+    return ", ".join(f"{n} = {v:g}" for n, v in zip(t.rule.names, theta))
 
 
-def _continue(t: Transfer, x: np.ndarray, p_from: float, p_to: float, cv: float,
+def _toward(p_from, p_to) -> np.ndarray:
+    """Geometric midpoint in each ``p`` (toward 0) or in ``q = 1 - p`` (toward 1)."""
+    p_from, p_to = np.asarray(p_from, float), np.asarray(p_to, float)
+    return np.where(p_to < 0.5, np.sqrt(p_from * p_to),
+                    1 - np.sqrt((1 - p_from) * (1 - p_to)))
+
+
+def _continue(t: Transfer, x: np.ndarray, p_from, p_to, cv: float,
               tol: float) -> np.ndarray:
     """Fixed point at ``p_to`` from the one at ``p_from``: Newton in steps of a factor 2
-    in ``p`` (toward 0) or ``q`` (toward 1), a failed step split in two (up to 10 times)."""
-    path = [p_from]
-    while (p_to < path[-1] / 2) if p_to < 0.5 else (1 - p_to < (1 - path[-1]) / 2):
-        path.append(path[-1] / 2 if p_to < 0.5 else 1 - (1 - path[-1]) / 2)
+    in each ``p`` (toward 0) or ``q`` (toward 1), a failed step split in two (up to 10 times)."""
+    p_to = np.asarray(p_to, float)
+    path = [np.asarray(p_from, float)]
+    while True:
+        cur = path[-1]
+        low = p_to < 0.5
+        need = np.where(low, p_to < cur / 2, 1 - p_to < (1 - cur) / 2)
+        if not need.any():
+            break
+        path.append(np.where(need, np.where(low, cur / 2, 1 - (1 - cur) / 2), cur))
     path.append(p_to)
     for a, b in zip(path, path[1:]):
         x = _step(t, x, a, b, cv, tol, 0)
@@ -773,7 +832,7 @@ def _continue(t: Transfer, x: np.ndarray, p_from: float, p_to: float, cv: float,
 
 
 def _step(t, x, p_from, p_to, cv, tol, depth):
-    if p_from == p_to:
+    if np.array_equal(p_from, p_to):
         return x
     try:
         return _newton(t, x, p_to, cv, tol)
@@ -785,23 +844,47 @@ def _step(t, x, p_from, p_to, cv, tol, depth):
                      depth + 1)
 
 
+def _easy_start(t: Transfer, thetas: np.ndarray) -> np.ndarray:
+    """Parameter rows clipped to :data:`_EASY_P`, where the rule keeps its outcomes.
+
+    A row whose clipped point would give weight to an outcome the transfer
+    dropped (a weight vanishing at the target, e.g. ``a = 0``) is not clipped.
+    """
+    start = np.clip(thetas, *_EASY_P)
+    rs = t.rule
+    moved = np.any(start != thetas, axis=1)
+    if not moved.any() or not len(rs.exprs):
+        return start
+    vals = rs.values(start)                                          # (k, E)
+    wid = rs.wid
+    valid = np.arange(wid.shape[-1]) < rs.count[..., None]
+    idx = np.where(valid & (wid >= 0), wid, 0)
+    entry = np.where(valid & (wid >= 0), vals[:, idx], np.where(valid, 1.0, 0.0)[None])
+    sums = entry.sum(axis=-1).reshape(len(thetas), -1)
+    keep = np.all(np.abs(sums - 1) < 1e-12, axis=1)
+    return np.where(keep[:, None], start, thetas)
+
+
 def _reduced_fixed_point(t: Transfer, p_val: np.ndarray, c_val: np.ndarray,
                          tol: float = 1e-14, anderson_steps: int = 150) -> np.ndarray:
-    """Fixed points in support coordinates ``(k, |S|)``: Anderson, Newton, continuation."""
-    p_start = np.clip(p_val, *_EASY_P)
+    """Fixed points in support coordinates ``(k, |S|)``: Anderson, Newton, continuation.
+
+    ``p_val``: ``(k, P)`` values of the rule's probability parameters.
+    """
+    p_start = _easy_start(t, p_val)
     x0 = _consistent_start(t, c_val)
     x, _ = solve_fixed_point(lambda y: _reduced_push(t, y, p_start), x0, tol, anderson_steps,
                              project=lambda y: _rescale(t, y, c_val), raise_on_fail=False)
     res = np.abs(_reduced_push(t, x, p_start) - x).max(axis=1)
     for r in range(len(x)):
         if res[r] > tol:
-            x[r] = _newton(t, x[r], float(p_start[r]), float(c_val[r]), tol)
-        x[r] = _continue(t, x[r], float(p_start[r]), float(p_val[r]), float(c_val[r]), tol)
+            x[r] = _newton(t, x[r], p_start[r], float(c_val[r]), tol)
+        x[r] = _continue(t, x[r], p_start[r], p_val[r], float(c_val[r]), tol)
     return x
 
 
 def cluster_fixed_point(vmax: int, n: int, p_val, c_val, tol: float = 1e-14,
-                        anderson_steps: int = 150) -> np.ndarray:
+                        anderson_steps: int = 150, model=None) -> np.ndarray:
     """Stationary n-cluster probabilities, shape ``(k, B**n)`` (index C-order).
 
     Anderson-accelerated iteration of the update from the MF product measure
@@ -814,30 +897,38 @@ def cluster_fixed_point(vmax: int, n: int, p_val, c_val, tol: float = 1e-14,
     ----------
     vmax, n : int
     p_val, c_val : float or array_like
-        Braking probabilities and densities, broadcast together.
+        Braking probabilities and densities, broadcast together (with a
+        model, ``p_val`` is None: its parameters are the model's).
     tol : float
         Largest change of a probability at convergence.
     anderson_steps : int
         Accelerated steps before Newton takes over.
+    model : markov.rule.Model, optional
+        The rule (default NaSch).
 
     Returns
     -------
     (k, B**n) float array
         One row per ``(p, c)`` point, ``B = vmax + 2``.
     """
-    t = transfer(vmax, n)
-    p_val, c_val = (np.ravel(a) for a in np.broadcast_arrays(np.asarray(p_val, float),
-                                                             np.asarray(c_val, float)))
-    return _full(t, _reduced_fixed_point(t, p_val, c_val, tol, anderson_steps))
+    t = transfer(vmax, n, model)
+    p_b, c_b = np.broadcast_arrays(np.asarray(0.0 if p_val is None else p_val, float),
+                                   np.asarray(c_val, float))
+    c_val = c_b.ravel()
+    thetas = _thetas(t, None if model is not None else p_b.ravel(), len(c_val), model)
+    return _full(t, _reduced_fixed_point(t, thetas, c_val, tol, anderson_steps))
 
 
-def solve_cluster(vmax: int, n: int, p_val, c_val) -> np.ndarray:
+def solve_cluster(vmax: int, n: int, p_val, c_val, model=None) -> np.ndarray:
     """``c_v`` (axis 0) of the n-cluster approximation, broadcast over ``p`` and ``c``.
 
     Parameters
     ----------
     vmax, n : int
     p_val, c_val : float or array_like
+        NaSch's ``p`` (None with a model) and the densities.
+    model : markov.rule.Model, optional
+        The rule (default NaSch); its vmax must be ``vmax``.
 
     Returns
     -------
@@ -851,9 +942,11 @@ def solve_cluster(vmax: int, n: int, p_val, c_val) -> np.ndarray:
     (0.146446609407, 0.146446609407)
     """
     vmax, n = _ensure_sizes(vmax, n)
-    t = transfer(vmax, n)
-    p_b, c_b = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
-    x = _reduced_fixed_point(t, p_b.ravel(), c_b.ravel())
+    t = transfer(vmax, n, model)
+    p_b, c_b = np.broadcast_arrays(np.asarray(0.0 if p_val is None else p_val, float),
+                                   np.asarray(c_val, float))
+    thetas = _thetas(t, None if model is not None else p_b.ravel(), c_b.size, model)
+    x = _reduced_fixed_point(t, thetas, c_b.ravel())
     c_v = np.stack([x[:, t.first_cell == v + 1].sum(axis=1) for v in range(vmax + 1)])
     return c_v.reshape((vmax + 1,) + c_b.shape)
 
@@ -933,7 +1026,7 @@ def cluster_symbols(vmax: int, n: int = 2) -> dict:
             for cells in itertools.product(range(b), repeat=n)}
 
 
-def cluster_equations(vmax: int, n: int = 2) -> list:
+def cluster_equations(vmax: int, n: int = 2, model=None) -> list:
     """Symbolic fixed-point equations ``P(s) = sum_windows Q(window) T(window -> s)``.
 
     One equation per n-cell word: ``P_s = 0`` for words outside the support
@@ -957,16 +1050,17 @@ def cluster_equations(vmax: int, n: int = 2) -> list:
 
     from .meanfield import p
 
-    t = transfer(vmax, n)
+    t = transfer(vmax, n, model)
     b = t.base
     sym = cluster_symbols(vmax, n)
     qs = sp.Symbol("q", positive=True)
+    forms = [sp.sympify(e).subs(1 - p, qs) for e in t.rule.exprs]
     marg = cluster_symbols(vmax, n - 1) if n > 1 else {(): sp.Integer(1)}
     targets = list(itertools.product(range(b), repeat=n))
     terms: dict[int, list] = {j: [] for j in range(len(targets))}
-    for src, tgt, a, bb, mult in zip(t.src, t.tgt, t.nq, t.np_, t.mult):
+    for src, tgt, expo, mult in zip(t.src, t.tgt, t.expo, t.mult):
         w = tuple(int(x) for x in t.windows[src] if x != PAD)
-        factors = [int(mult), qs**int(a), p**int(bb), sym[w[:n]]]
+        factors = [int(mult), *(f**int(e) for f, e in zip(forms, expo)), sym[w[:n]]]
         for j in range(1, len(w) - n + 1):
             factors += [sym[w[j:j + n]], 1 / marg[w[j:j + n - 1]]]
         terms[int(tgt)].append(sp.Mul(*factors))

@@ -49,13 +49,10 @@ import scipy.sparse as sp_sparse
 
 from markov.encoding import EMPTY, from_text
 from markov.errors import ConvergenceError, InvalidParameterError
-from markov.rules import velocity_outcomes
 from markov.validate import ensure_open_unit
 
-from .meanfield import gap_horizons
-
 __all__ = ["ComfState", "comf_state", "solve_comf", "comf_word_probability",
-           "comf_equations", "comf_equation_terms", "ensure_comf_size", "MIN_COMF_DENSITY",
+           "comf_equations", "comf_equation_terms", "ensure_comf_size", "ensure_comf_rule", "MIN_COMF_DENSITY",
            "MAX_COMF_VMAX"]
 
 _TAIL = 1e-15          # probability allowed beyond the gap cut
@@ -76,33 +73,57 @@ MIN_COMF_DENSITY = 0.005
 MAX_COMF_VMAX = 10
 
 
-@lru_cache(maxsize=None)
-def _moves(vmax: int, p: float) -> np.ndarray:
-    """``T[v, g, w]``: probability that a car of velocity ``v`` and gap ``g <= H`` moves ``w``.
+def ensure_comf_rule(model) -> None:
+    """Refuse a rule whose move depends on the velocity of the car ahead (at its values).
 
-    Read off :func:`markov.rules.velocity_outcomes` (gaps beyond the horizon
-    ``H`` act as ``H``).
+    Raises
+    ------
+    InvalidParameterError
+        Naming the model.
     """
-    horizon = max(gap_horizons(vmax))
-    out = np.zeros((vmax + 1, horizon + 1, vmax + 1))
-    for v in range(vmax + 1):
-        for g in range(horizon + 1):
-            for w, weight in velocity_outcomes(v, g, vmax, p):
-                out[v, g, int(w)] += float(weight)
-    return out
+    from .ruleview import reads_ahead
+
+    if reads_ahead(model):
+        raise InvalidParameterError(
+            f"COMF assumes a car's update depends on its own velocity and gap; {model.name}"
+            " also reads the velocity of the car ahead")
 
 
 @lru_cache(maxsize=64)
-def _operators(vmax: int, p: float, cut: int):
+def _moves(model) -> np.ndarray:
+    """``T[v, g, w]``: probability that a car of velocity ``v`` and gap ``g <= H`` moves ``w``.
+
+    Read off the model (:func:`symbolic.ruleview.numeric_moves`; gaps beyond
+    the horizon ``H`` act as ``H``); the model must not read the car ahead.
+    """
+    from .ruleview import numeric_moves
+
+    ensure_comf_rule(model)
+    return np.ascontiguousarray(numeric_moves(model)[0][:, :, 0])
+
+
+def _free(model) -> float:
+    """Largest mean move of one car (NaSch: ``vmax - p``, in free flow)."""
+    from .ruleview import is_nasch
+
+    if is_nasch(model):
+        return model.vmax - model.params["p"]
+    table = _moves(model)
+    return float((table @ np.arange(model.vmax + 1)).max())
+
+
+@lru_cache(maxsize=64)
+def _operators(model, cut: int):
     """Sparse pieces of the update on states ``i = d (vmax + 1) + v``, ``d = 0..cut``.
 
     ``own``: state -> (move ``w``, gap left ``d - w``), as a state index;
     ``shift[a]``: gap + ``a`` (the car ahead's move), beyond ``cut`` kept at
     ``cut``; ``moved``: ``(vmax + 1, N)``, probability of each move per state.
     """
+    vmax = model.vmax
     nv = vmax + 1
-    horizon = max(gap_horizons(vmax))
-    table = _moves(vmax, p)
+    table = _moves(model)
+    horizon = table.shape[1] - 1
     n = nv * (cut + 1)
     d = np.repeat(np.arange(cut + 1), nv)
     v = np.tile(np.arange(nv), cut + 1)
@@ -147,7 +168,7 @@ def _pinned_solve(k: sp_sparse.coo_array, pin: int) -> np.ndarray | None:
     return x / x.sum() if np.all(np.isfinite(x)) and x.sum() > 0 else None
 
 
-def _stationary(vmax: int, p: float, cut: int, g: np.ndarray, pin: int) -> np.ndarray | None:
+def _stationary(model, cut: int, g: np.ndarray, pin: int) -> np.ndarray | None:
     """Stationary ``P_g`` of the linear chain with the car ahead moving ``a`` w.p. ``g_a``.
 
     Banded LU (a gap changes by at most ``vmax`` per step) with the balance
@@ -159,7 +180,8 @@ def _stationary(vmax: int, p: float, cut: int, g: np.ndarray, pin: int) -> np.nd
     fast car.  None when no pin gives a stationary vector (``g`` outside the
     physical range).
     """
-    shift, _, _ = _operators(vmax, p, cut)
+    shift, _, _ = _operators(model, cut)
+    vmax = model.vmax
     k = sum(ga * s for ga, s in zip(g, shift)).tocsr()
     coo = k.tocoo()
     tried = set()
@@ -202,7 +224,7 @@ def _tilted(logw: np.ndarray, mean: float) -> np.ndarray | None:
     return dist(0.5 * (lo + hi))
 
 
-def _gap_root(vmax, p, cut, shape, target, u, pin):
+def _gap_root(model, cut, shape, target, u, pin):
     """The logit ``u`` of the mean move ``m / (vmax - p)`` giving the target mean gap.
 
     ``g`` is ``shape`` tilted to mean ``m`` (:func:`_tilted`).  Far from the car
@@ -213,14 +235,14 @@ def _gap_root(vmax, p, cut, shape, target, u, pin):
     """
     from scipy.optimize import brentq
 
-    free = vmax - p
-    _, _, d = _operators(vmax, p, cut)
+    free = _free(model)
+    _, _, d = _operators(model, cut)
     logw = np.log(np.maximum(shape, 1e-300))
     found = {}
 
     def f(uu):
         g = _tilted(logw, free / (1.0 + np.exp(-uu)))
-        x = None if g is None else _stationary(vmax, p, cut, g, pin)
+        x = None if g is None else _stationary(model, cut, g, pin)
         if x is None:         # outside the physical range: treat as too fast
             return np.inf
         found[uu] = (g, x)
@@ -230,21 +252,21 @@ def _gap_root(vmax, p, cut, shape, target, u, pin):
     while f(lo) > 0:
         lo, step = lo - step, 2 * step
         if lo < -800:
-            raise ConvergenceError(f"COMF: no mean move gives the mean gap (p = {p:g})", 0,
-                                   np.inf)
+            raise ConvergenceError(f"COMF: no mean move gives the mean gap ({_label(model)})",
+                                   0, np.inf)
     step = 1.0
     while f(hi) < 0:
         hi, step = hi + step, 2 * step
         if hi > 800:
-            raise ConvergenceError(f"COMF: no mean move gives the mean gap (p = {p:g})", 0,
-                                   np.inf)
+            raise ConvergenceError(f"COMF: no mean move gives the mean gap ({_label(model)})",
+                                   0, np.inf)
     u = brentq(f, lo, hi, xtol=1e-13, rtol=1e-15, maxiter=200)
     if u not in found:
         f(u)
     return (u,) + found[u]
 
 
-def _solve_cut(vmax: int, p: float, c: float, cut: int, shape: np.ndarray):
+def _solve_cut(model, c: float, cut: int, shape: np.ndarray):
     """Self-consistent ``g`` at one gap cut: ``g <- moves of P_g``, density kept exact.
 
     Each step tilts the current velocity distribution to the mean move that
@@ -258,13 +280,13 @@ def _solve_cut(vmax: int, p: float, c: float, cut: int, shape: np.ndarray):
     from .solve import solve_fixed_point
 
     target = (1 - c) / c
-    _, moved, _ = _operators(vmax, p, cut)
+    _, moved, _ = _operators(model, cut)
     warm = {"u": 0.0, "pin": 0}
 
     def update(rows):
         out = np.empty_like(rows)
         for i, row in enumerate(rows):
-            u, g, x = _gap_root(vmax, p, cut, row, target, warm["u"], warm["pin"])
+            u, g, x = _gap_root(model, cut, row, target, warm["u"], warm["pin"])
             warm.update(u=u, pin=int(np.argmax(x)), x=x)
             out[i] = moved @ x
         return out
@@ -279,8 +301,8 @@ def _solve_cut(vmax: int, p: float, c: float, cut: int, shape: np.ndarray):
     new = update(shape)[0]
     err = float(np.abs(new - shape[0]).max())
     if err > _FLOOR:
-        raise ConvergenceError(f"COMF did not converge (p = {p:g}, c = {c:g})", _MAX_STEPS,
-                               err)
+        raise ConvergenceError(f"COMF did not converge ({_label(model)}, c = {c:g})",
+                               _MAX_STEPS, err)
     return new, warm["x"]
 
 
@@ -300,15 +322,18 @@ class ComfState:
         ``g_a``, the move distribution of the car ahead (= of every car).
     residual : float
         ``max |P - update(P)|``.
+    model : markov.rule.Model
+        The rule (NaSch with ``p`` unless given).
     """
 
     vmax: int
-    p: float
+    p: float | None
     density: float
     gap_cut: int
     probs: np.ndarray = field(repr=False)
     ahead: np.ndarray = field(repr=False)
     residual: float
+    model: object = field(default=None, repr=False)
 
     @property
     def c_v(self) -> np.ndarray:
@@ -319,19 +344,28 @@ class ComfState:
         return float(self.density * np.arange(self.vmax + 1) @ self.ahead)
 
 
-def _update(vmax: int, p: float, cut: int, x: np.ndarray) -> np.ndarray:
-    shift, moved, _ = _operators(vmax, p, cut)
+def _label(model) -> str:
+    return ", ".join(f"{k} = {v:g}" for k, v in model.params.items() if k != "vmax") \
+        or model.name
+
+
+def _update(model, cut: int, x: np.ndarray) -> np.ndarray:
+    shift, moved, _ = _operators(model, cut)
     g = moved @ x
     return sum(ga * (s @ x) for ga, s in zip(g, shift))
 
 
-def comf_state(vmax: int, p: float, c: float) -> ComfState:
+def comf_state(vmax: int, p: float | None, c: float, model=None) -> ComfState:
     """The COMF fixed point at braking probability ``p`` and density ``c``.
 
     Parameters
     ----------
     vmax : int
     p, c : float
+        NaSch's ``p`` (None with a model) and the density.
+    model : markov.rule.Model, optional
+        The rule, with this vmax; it must not read the car ahead
+        (:func:`ensure_comf_rule`).
 
     Returns
     -------
@@ -346,25 +380,37 @@ def comf_state(vmax: int, p: float, c: float) -> ComfState:
     if isinstance(vmax, bool) or not isinstance(vmax, (int, np.integer)) or vmax < 1:
         raise InvalidParameterError(f"vmax must be an integer >= 1, got {vmax!r}")
     vmax = int(vmax)
-    p, c = ensure_open_unit("p", p), ensure_open_unit("density", c)
+    if model is None:
+        from .ruleview import nasch
+
+        p = ensure_open_unit("p", p)
+        model = nasch(vmax, p)
+    elif model.vmax != vmax:
+        raise InvalidParameterError(
+            f"vmax = {vmax} disagrees with the model {model.name} (vmax = {model.vmax})")
+    else:
+        p = model.params.get("p")
+    c = ensure_open_unit("density", c)
     ensure_comf_size(vmax, c)
+    ensure_comf_rule(model)
+    span = vmax + _moves(model).shape[1] - 1     # gaps the clamp at the cut can reach
     # start: all moves equally likely (converged from several starts to the same point;
     # the MF solution would cost a sympy solve, 5 s for vmax 5)
     shape = np.full(vmax + 1, 1.0 / (vmax + 1))
     cut = max(16 * vmax, int(np.ceil(40 * (1 - c) / c)))
     while True:
-        shape, x = _solve_cut(vmax, p, c, cut, shape)
-        tail = x[(cut + 1 - 2 * vmax) * (vmax + 1):].sum()
+        shape, x = _solve_cut(model, c, cut, shape)
+        tail = x[(cut + 1 - span) * (vmax + 1):].sum()
         if tail < _TAIL:
             break
         if cut > _MAX_GAP:
             raise ConvergenceError(f"COMF gap distribution does not fit {_MAX_GAP} cells"
                                    f" (c = {c:g})", 0, float(tail))
         cut *= 2
-    residual = float(np.abs(_update(vmax, p, cut, x) - x).max())
+    residual = float(np.abs(_update(model, cut, x) - x).max())
     probs = x.reshape(cut + 1, vmax + 1)
-    _, moved, _ = _operators(vmax, p, cut)
-    return ComfState(vmax, p, c, cut, probs, moved @ x, residual)
+    _, moved, _ = _operators(model, cut)
+    return ComfState(vmax, p, c, cut, probs, moved @ x, residual, model)
 
 
 def ensure_comf_size(vmax: int, density=None) -> None:
@@ -390,13 +436,15 @@ def ensure_comf_size(vmax: int, density=None) -> None:
             f" 40 / c: c = 0.002 takes 40 s), got c = {float(np.min(density)):g}")
 
 
-def solve_comf(vmax: int, p_val, c_val) -> np.ndarray:
+def solve_comf(vmax: int, p_val, c_val, model=None) -> np.ndarray:
     """``c_v`` (axis 0) of COMF, broadcast over ``p`` and ``c``.
 
     Parameters
     ----------
     vmax : int
     p_val, c_val : float or array_like
+        NaSch's ``p`` (None with a model) and the densities.
+    model : markov.rule.Model, optional
 
     Returns
     -------
@@ -408,6 +456,12 @@ def solve_comf(vmax: int, p_val, c_val) -> np.ndarray:
     >>> solve_comf(2, 0.5, [0.25, 0.5]).shape
     (3, 2)
     """
+    if model is not None:
+        ensure_comf_rule(model)
+        c_b = np.asarray(c_val, float)
+        ensure_comf_size(int(vmax), c_b)
+        out = np.array([comf_state(vmax, None, cv, model).c_v for cv in c_b.ravel()])
+        return out.T.reshape((vmax + 1,) + c_b.shape)
     p_b, c_b = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
     ensure_comf_size(int(vmax), c_b)    # every point before the first solve
     out = np.array([comf_state(vmax, pv, cv).c_v for pv, cv in zip(p_b.ravel(), c_b.ravel())])
@@ -447,7 +501,7 @@ def comf_word_probability(state: ComfState, word: str, after_update: bool = Fals
         raise InvalidParameterError(f"word must start and end with a car, got {word!r}")
     cars = [(v, x) for x, v in enumerate(cells) if v != EMPTY]
     probs = state.probs
-    table = _moves(state.vmax, state.p)
+    table = _moves(state.model)
     horizon = table.shape[1] - 1
     out = state.density
     for (v, x), (v_next, x_next) in zip(cars, cars[1:]):
@@ -463,7 +517,7 @@ def comf_word_probability(state: ComfState, word: str, after_update: bool = Fals
     return float(out * (state.ahead[v_last] if after_update else probs[:, v_last].sum()))
 
 
-def comf_equation_terms(vmax: int) -> int:
+def comf_equation_terms(vmax: int, model=None) -> int:
     """Upper bound of the sympy products :func:`comf_equations` builds (counted, not built).
 
     ``(vmax + 1)^2`` per balance equation, ``(2 vmax + 1)(vmax + 1)`` of them, and
@@ -477,23 +531,30 @@ def comf_equation_terms(vmax: int) -> int:
     -------
     int
     """
+    from .ruleview import nasch, structure
+
+    horizon = structure(nasch(vmax) if model is None else model).horizon
     nv = vmax + 1
-    return nv ** 3 * (2 * vmax + 1) + nv ** 2 * (max(gap_horizons(vmax)) + 1)
+    return nv ** 3 * (vmax + horizon + 1) + nv ** 2 * (horizon + 1)
 
 
-def comf_equations(vmax: int) -> list:
+def comf_equations(vmax: int, model=None) -> list:
     """The COMF equations as derived from the rules (sympy).
 
     Symbols: ``P[v, d]`` (probability of a car with velocity ``v`` and gap
-    ``d``), ``g_a`` (the car ahead moves ``a``), ``p``, ``q = 1 - p``, ``c``;
-    ``n`` a gap ``>= 2 vmax``, where the update no longer depends on it.
-    Returned: the ``g_a`` (tail sums from the horizon ``H`` on), the equations
-    for the gaps ``0 .. 2 vmax - 1``, the general one for ``n``, and the two
-    conditions (normalisation, mean gap).
+    ``d``), ``g_a`` (the car ahead moves ``a``), ``p``, ``q = 1 - p``, ``c``
+    (and a model's other probability parameters);
+    ``n`` a gap ``>= vmax + H`` (NaSch: ``2 vmax``), where the update no longer
+    depends on it.  Returned: the ``g_a`` (tail sums from the horizon ``H``
+    on), the equations for the gaps ``0 .. vmax + H - 1``, the general one for
+    ``n``, and the two conditions (normalisation, mean gap).
 
     Parameters
     ----------
     vmax : int
+    model : markov.rule.Model, optional
+        The rule (default NaSch); refused if it reads the car ahead for some
+        parameter values.
 
     Returns
     -------
@@ -508,15 +569,24 @@ def comf_equations(vmax: int) -> list:
     import sympy as sp
 
     from .meanfield import c, p, q
+    from .ruleview import nasch, structure
 
-    horizon = max(gap_horizons(vmax))
+    rs = structure(nasch(vmax) if model is None else model)
+    if rs.reads_ahead_symbolically():
+        raise InvalidParameterError(
+            f"COMF assumes a car's update depends on its own velocity and gap; {rs.model.name}"
+            " also reads the velocity of the car ahead")
+    horizon = rs.horizon
+    forms = [sp.sympify(e).subs(1 - p, q) for e in rs.exprs]
     P = sp.IndexedBase("P")
     dd, nn = sp.symbols("d n", integer=True, nonnegative=True)
     g = sp.symbols(f"g_0:{vmax + 1}", nonnegative=True)
 
     def t(v, gap, w):
-        return sum((sp.sympify(wt).subs(1 - p, q) for u, wt in
-                    velocity_outcomes(v, min(gap, horizon), vmax, p) if u == w), sp.Integer(0))
+        g = min(gap, horizon)
+        return sum((forms[rs.wid[v, g, 0, k]] if rs.wid[v, g, 0, k] >= 0 else sp.Integer(1)
+                    for k in range(int(rs.count[v, g, 0])) if rs.move[v, g, 0, k] == w),
+                   sp.Integer(0))
 
     eqs = []
     for a in range(vmax + 1):
@@ -536,7 +606,7 @@ def comf_equations(vmax: int) -> list:
                              * g[a])
         return sp.Eq(P[w, gap], sp.Add(*terms))
 
-    eqs += [balance(w, k) for k in range(2 * vmax) for w in range(vmax + 1)]
+    eqs += [balance(w, k) for k in range(vmax + horizon) for w in range(vmax + 1)]
     eqs += [balance(w, nn) for w in range(vmax + 1)]
     eqs.append(sp.Eq(sp.Sum(sum(P[v, dd] for v in range(vmax + 1)), (dd, 0, sp.oo)), 1))
     eqs.append(sp.Eq(sp.Sum(dd * sum(P[v, dd] for v in range(vmax + 1)), (dd, 0, sp.oo)),

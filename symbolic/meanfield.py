@@ -34,7 +34,7 @@ import sympy as sp
 
 from markov.encoding import EMPTY
 from markov.errors import InvalidParameterError
-from markov.rules import deterministic_velocity, velocity_outcomes
+from markov.rules import deterministic_velocity
 
 __all__ = [
     "p", "q", "c", "d", "ANY_CAR",
@@ -128,21 +128,42 @@ class CarEvent:
 
 
 @lru_cache(maxsize=None)
-def car_events(vmax: int) -> tuple[CarEvent, ...]:
+def car_events(vmax: int, model=None) -> tuple[CarEvent, ...]:
     """Every (velocity, decisive word ahead, outcome) of one car, from the rules.
+
+    ``model`` (a :class:`markov.rule.Model` with this vmax; default NaSch)
+    gives the rule: its weights in one symbol per probability parameter
+    (``1 - p`` written ``q``).  Where the rule reads the velocity of the car
+    ahead, the word ahead ends in that car's velocity (weight ``c_u``), one
+    event per ``u``; elsewhere in a car of any velocity (weight ``c``).
 
     Examples
     --------
     >>> [(e.v, e.ahead, e.w, e.weight) for e in car_events(1) if e.v == 0]
     [(0, (None,), 0, 1), (0, (-1,), 1, q), (0, (-1,), 0, p)]
     """
+    from .ruleview import nasch, structure
+
+    rs = structure(nasch(vmax) if model is None else model)
+    if rs.vmax != vmax:
+        raise InvalidParameterError(
+            f"vmax = {vmax} disagrees with the model {rs.model.name} (vmax = {rs.vmax})")
+    forms = [sp.sympify(e).subs(1 - p, q) for e in rs.exprs]
+
+    def outcomes(v, g, a):
+        return [(int(rs.move[v, g, a, k]),
+                 forms[rs.wid[v, g, a, k]] if rs.wid[v, g, a, k] >= 0 else sp.Integer(1))
+                for k in range(int(rs.count[v, g, a]))]
+
     events = []
-    for v, h in enumerate(gap_horizons(vmax)):
+    for v, h in enumerate(rs.horizons):
         for g in range(h + 1):
-            ahead = (EMPTY,) * g + ((ANY_CAR,) if g < h else ())
-            for w, weight in velocity_outcomes(v, g, vmax, p):
-                weight = sp.sympify(weight).subs(1 - p, q)
-                events.append(CarEvent(v, ahead, int(w), weight))
+            reads = g < h and any(outcomes(v, g, a) != outcomes(v, g, 0)
+                                  for a in range(vmax + 1))
+            for u in (range(vmax + 1) if reads else (ANY_CAR,)):
+                ahead = (EMPTY,) * g + ((u,) if g < h else ())
+                for w, weight in outcomes(v, g, 0 if u is ANY_CAR else u):
+                    events.append(CarEvent(v, ahead, w, weight))
     return tuple(events)
 
 
@@ -155,21 +176,23 @@ def word_weight(word, cv) -> sp.Expr:
 
 
 @lru_cache(maxsize=None)
-def mf_rhs(vmax: int) -> tuple[sp.Expr, ...]:
+def mf_rhs(vmax: int, model=None) -> tuple[sp.Expr, ...]:
     """Right-hand sides ``F_w``, ``w = 0..vmax``, of the MF equations ``c_w = F_w``."""
     cv = velocity_symbols(vmax)
     rhs = [sp.Integer(0)] * (vmax + 1)
-    for e in car_events(vmax):
+    for e in car_events(vmax, model):
         rhs[e.w] += cv[e.v] * word_weight(e.ahead, cv) * e.weight
     return tuple(sp.collect(sp.expand(r), cv) for r in rhs)
 
 
-def mf_equations(vmax: int) -> list[sp.Eq]:
+def mf_equations(vmax: int, model=None) -> list[sp.Eq]:
     """MF stationarity equations ``c_w = F_w(c_0..c_vmax; c, d, p, q)``.
 
     Parameters
     ----------
     vmax : int
+    model : markov.rule.Model, optional
+        The rule (default NaSch): its probability parameters are the symbols.
 
     Returns
     -------
@@ -181,7 +204,7 @@ def mf_equations(vmax: int) -> list[sp.Eq]:
     Eq(c_1, c_0*d*q + c_1*d*q)
     """
     cv = velocity_symbols(vmax)
-    return [sp.Eq(cv[w], r) for w, r in enumerate(mf_rhs(vmax))]
+    return [sp.Eq(cv[w], r) for w, r in enumerate(mf_rhs(vmax, model))]
 
 
 def on_constraint(expr, vmax: int) -> sp.Expr:

@@ -59,23 +59,7 @@ def _subs_pq(expr):
 MAX_MF_VMAX = 100
 
 
-@lru_cache(maxsize=16)
-def _mf_moves(vmax: int, p_val: float) -> tuple[np.ndarray, tuple[int, ...]]:
-    """``T[v, g, w]``: a car of velocity ``v`` and gap ``g <= h_v`` moves ``w`` (from the rules)."""
-    from markov.rules import velocity_outcomes
-
-    from .meanfield import gap_horizons
-
-    horizons = gap_horizons(vmax)
-    table = np.zeros((vmax + 1, max(horizons) + 1, vmax + 1))
-    for v, h in enumerate(horizons):
-        for g in range(h + 1):
-            for w, weight in velocity_outcomes(v, g, vmax, p_val):
-                table[v, g, int(w)] += float(weight)
-    return table, horizons
-
-
-def solve_mf(vmax: int, p_val, c_val) -> np.ndarray:
+def solve_mf(vmax: int, p_val, c_val, model=None) -> np.ndarray:
     """MF ``c_v`` (axis 0: ``v = 0..vmax``), broadcast over ``p`` and ``c``.
 
     The MF equations ``c_w = sum_v A_wv c_v`` are linear in ``c_v`` once ``c``
@@ -86,10 +70,18 @@ def solve_mf(vmax: int, p_val, c_val) -> np.ndarray:
     (tested against it), without the symbolic solve that grows with vmax
     (sympy: 6 s at vmax 4, 32 s at vmax 6).
 
+    With a ``model`` (``p_val`` None) the moves are the model's
+    (:func:`symbolic.ruleview.numeric_moves`).  A rule that reads the velocity
+    of the car ahead makes the MF equations quadratic (the car ahead of a car
+    is a ``c_u`` of the product measure); they are then solved as the
+    1-cluster fixed point, which is the same product measure
+    (:func:`symbolic.cluster.solve_cluster` with ``n = 1``).
+
     Parameters
     ----------
     vmax : int
     p_val, c_val : float or array_like
+    model : markov.rule.Model, optional
 
     Returns
     -------
@@ -101,8 +93,15 @@ def solve_mf(vmax: int, p_val, c_val) -> np.ndarray:
     >>> solve_mf(1, 0.5, 0.5)      # c_1 = q c d
     array([0.375, 0.125])
     """
+    from .ruleview import nasch, numeric_moves, reads_ahead
+
     if vmax > MAX_MF_VMAX:   # symbolic.approximate refuses first, with the same words
         raise InvalidParameterError(f"MF is solved for vmax <= {MAX_MF_VMAX}, got {vmax}")
+    if model is not None:
+        if reads_ahead(model):
+            from .cluster import solve_cluster
+            return solve_cluster(vmax, 1, None, c_val, model)
+        p_val = 0.0          # a placeholder: the model carries its parameters
     p_val, c_val = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
     shape = c_val.shape
     p_flat, c_flat = p_val.ravel(), c_val.ravel()
@@ -111,7 +110,8 @@ def solve_mf(vmax: int, p_val, c_val) -> np.ndarray:
     for p_one in np.unique(p_flat):
         pick = np.flatnonzero(p_flat == p_one)
         cs = c_flat[pick]
-        table, horizons = _mf_moves(vmax, float(p_one))
+        moves, horizons = numeric_moves(nasch(vmax, float(p_one)) if model is None else model)
+        table = moves[:, :, 0]
         d_pow = (1 - cs)[:, None] ** np.arange(table.shape[1])[None]     # (k, H + 1)
         A = np.zeros((cs.size, n, n))                                      # A[k, w, v]
         for v, h in enumerate(horizons):

@@ -9,6 +9,7 @@ import click
 from symbolic import approximate, equations, method_name
 
 from ..cli_common import emit_json, handle_errors
+from ..model_options import build_model, model_options
 
 __all__ = ["approx", "derive"]
 
@@ -23,26 +24,46 @@ _METHOD_HELP = ("Approximation: mf, pmf, pmf2, cluster (with --order N; cluster2
               help=_METHOD_HELP)
 @click.option("--order", type=int, default=None,
               help="Cluster size N of --method cluster (vmax 2: up to 11).")
-@click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity >= 1.")
-@click.option("--p", "p", type=float, required=True, help="Braking probability, 0 < p < 1.")
+@click.option("--vmax", type=int, default=None,
+              help="Maximal velocity >= 1 [default: 2, or the model's].")
+@click.option("--p", "p", type=float, default=None,
+              help="Braking probability, 0 < p < 1 (NaSch: required; a model: its p).")
 @click.option("--density", "-c", type=float, required=True, help="Car density, 0 < c < 1.")
+@model_options
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @handle_errors
-def approx(method, order, vmax, p, density, as_json):
+def approx(method, order, vmax, p, density, model, params, as_json):
     """Stationary c_v and flux of an analytic approximation.
+
+    The update rule is NaSch unless --model is given (MF, cluster and COMF
+    for any model; pMF/pMF2 for NaSch only; COMF not for rules that read the
+    velocity of the car ahead; docs/symbolic.md).
 
     \b
     Example:
       nasch approx --method pmf --vmax 2 --p 0.5 --density 0.25
       nasch approx --method cluster --order 4 --vmax 2 --p 0.5 -c 0.25
       nasch approx --method comf --vmax 2 --p 0.5 -c 0.25 --json
+      nasch approx --method cluster4 --model vdr --param p0=0.5 -c 0.25
     """
     name = method_name(method, order)      # validates method and order before any work
-    result = approximate(name, vmax, p, density)
+    if model == "nasch" and not params:
+        if p is None:
+            raise click.UsageError("--p is required for the NaSch model")
+        result = approximate(name, 2 if vmax is None else vmax, p, density)
+        rule = None
+    else:
+        rule = build_model(model, params, vmax=vmax, p=p)
+        result = approximate(name, None, None, density, model=rule)
     if as_json:
         emit_json(result.to_dict())
         return
-    click.echo(f"{name} approximation, vmax={vmax} p={p:g} density={density:g}")
+    if rule is None or rule.name == "nasch":
+        click.echo(f"{name} approximation, vmax={result.vmax} p={result.p:g}"
+                   f" density={density:g}")
+    else:
+        values = " ".join(f"{k}={v:g}" for k, v in rule.params.items())
+        click.echo(f"{name} approximation, model {rule.name} {values} density={density:g}")
     click.echo(f"  flux           {result.flux:.15g}")
     for v, cv in enumerate(result.c_v):
         click.echo(f"  c_{v}            {cv:.15g}")
@@ -52,24 +73,32 @@ def approx(method, order, vmax, p, density, as_json):
 @click.option("--method", type=str, required=True, metavar=_METHOD_METAVAR,
               help=_METHOD_HELP)
 @click.option("--order", type=int, default=None, help="Cluster size N of --method cluster.")
-@click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity >= 1.")
+@click.option("--vmax", type=int, default=None,
+              help="Maximal velocity >= 1 [default: 2, or the model's].")
+@model_options
 @click.option("--latex", is_flag=True, help="Print LaTeX instead of sympy syntax.")
 @handle_errors
-def derive(method, order, vmax, latex):
+def derive(method, order, vmax, model, params, latex):
     """Print the equations of an approximation, derived from the update rules.
 
     Symbols: c_v (density of cars with velocity v), c (density), d = 1 - c,
-    p (braking probability), q = 1 - p; cluster equations use P_<cells> with
-    'e' an empty cell; COMF uses P[v, d] (a car of velocity v with gap d) and
-    g_a (the car ahead moves a cells).
+    p (braking probability), q = 1 - p, a model's other probability
+    parameters by name; cluster equations use P_<cells> with 'e' an empty
+    cell; COMF uses P[v, d] (a car of velocity v with gap d) and g_a (the car
+    ahead moves a cells).
 
     \b
     Example:
       nasch derive --method mf --vmax 2
       nasch derive --method pmf --vmax 1 --latex
       nasch derive --method comf --vmax 2
+      nasch derive --method mf --model tt --param vmax=1
     """
     import sympy as sp
 
-    for eq in equations(method, vmax, order):
+    if model == "nasch" and not params:
+        eqs = equations(method, 2 if vmax is None else vmax, order)
+    else:
+        eqs = equations(method, None, order, model=build_model(model, params, vmax=vmax))
+    for eq in eqs:
         click.echo(sp.latex(eq) if latex else f"{eq.lhs} = {eq.rhs}")
