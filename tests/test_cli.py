@@ -47,9 +47,9 @@ def test_solve_text_and_options():
 
 @pytest.mark.parametrize("args, words", [
     (["-L", "5", "-N", "6", "--p", "0.5"], "0 <= N <= L = 5"),
-    (["-L", "5", "-N", "2", "--p", "1.5"], "p must be in [0, 1]"),
+    (["-L", "5", "-N", "2", "--p", "1.5"], "p must be a probability in [0, 1], got 1.5"),
     (["-L", "5", "-N", "2", "--p", "0.5", "--vmax", "0"], "vmax must be an integer >= 1"),
-    (["-L", "5", "-N", "2", "--p", "nan"], "p must be a number"),
+    (["-L", "5", "-N", "2", "--p", "nan"], "p must be a probability in [0, 1], got nan"),
     (["-L", "5", "-N", "x", "--p", "0.5"], "is not a valid integer"),
     (["-L", "16", "-N", "8", "--p", "0.5", "--no-lump", "--max-memory", "0.001"],
      "exceeds the memory limit"),
@@ -88,3 +88,39 @@ def test_deterministic_limits_answer_the_class_of_the_compact_jam():
         out = CliRunner().invoke(main, ["solve", "-L", "5", "-N", "2", "--p", p, "--json"])
         assert out.exit_code == 0, out.output
         assert abs(json.loads(out.output)["flux"] - flux) < 1e-14
+
+
+def test_solve_any_model_records_it_and_matches_the_api():
+    from markov.rule import load_model
+
+    out = CliRunner().invoke(main, ["solve", "-L", "9", "-N", "4", "--model", "vdr",
+                                    "--param", "p0=0.75", "--p", "0.1", "--json"])
+    assert out.exit_code == 0, out.output
+    data = json.loads(out.output)
+    assert data["model"] == {"name": "vdr", "params": {"vmax": 2, "p": 0.1, "p0": 0.75},
+                             "source": "vdr"}
+    ring = Ring(9, 4, model=load_model("vdr", {"p": 0.1, "p0": 0.75}))
+    assert data["flux"] == solve(ring).flux
+    kkw = CliRunner().invoke(main, ["solve", "-L", "8", "-N", "3", "--model", "kkw", "--json"])
+    assert kkw.exit_code == 0 and json.loads(kkw.output)["p"] is None
+
+
+def test_solve_classes_and_start_configuration():
+    args = ["solve", "-L", "12", "-N", "3", "--model", "cc", "--p", "0.2"]
+    refused = CliRunner().invoke(main, args)
+    assert refused.exit_code == 2 and "4 closed classes" in refused.output
+    out = CliRunner().invoke(main, args + ["--classes", "--json"])
+    classes = json.loads(out.output)["classes"]
+    assert [c["states"] for c in classes] == [1, 1, 1, 1]
+    assert all(c["flux"] == 0.5 and c["from_start"] for c in classes)
+    one = CliRunner().invoke(main, args + ["--start", "2...2...2...", "--json"])
+    assert json.loads(one.output)["flux"] == 0.5
+    bad = CliRunner().invoke(main, args + ["--start", "2...2..."])
+    assert bad.exit_code == 2 and "has 8 cells" in bad.output
+
+
+def test_solve_ordered_sequential_update():
+    out = CliRunner().invoke(main, ["solve", "-L", "8", "-N", "3", "--p", "0.5", "--update",
+                                    "ordered-sequential", "--json"])
+    assert out.exit_code == 0, out.output
+    assert json.loads(out.output)["flux"] == solve(Ring(8, 3, 2, 0.5, "ordered-sequential")).flux

@@ -6,6 +6,7 @@ import click
 from markov.choices import DEFAULT_TOL, METHODS, OPERATORS
 
 from ..cli_common import emit_json, handle_errors, quiet_option
+from ..model_options import build_model, model_options
 
 __all__ = ["solve"]
 
@@ -13,10 +14,21 @@ __all__ = ["solve"]
 @click.command()
 @click.option("--length", "-L", type=int, required=True, help="Ring length L (cells).")
 @click.option("--cars", "-N", type=int, required=True, help="Number of cars N, 0 <= N <= L.")
-@click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity >= 1.")
-@click.option("--p", "p", type=float, required=True, help="Braking probability, 0 < p < 1.")
-@click.option("--update", type=click.Choice(["parallel", "random-sequential"]),
-              default="parallel", show_default=True, help="Update order.")
+@model_options
+@click.option("--vmax", type=int, default=None,
+              help="Maximal velocity >= 1 (default: the model's, 2 for nasch).")
+@click.option("--p", "p", type=float, default=None,
+              help="Braking probability in [0, 1] (NaSch: required; a model: its p).")
+@click.option("--update", type=click.Choice(["parallel", "random-sequential",
+                                             "ordered-sequential"]),
+              default="parallel", show_default=True,
+              help="Update order (ordered-sequential: backward from a random car).")
+@click.option("--start", default=None, metavar="CONFIG",
+              help="Start configuration ('.' empty, digit = velocity) instead of the"
+                   " compact jam: the closed class it falls into is solved.")
+@click.option("--classes", "every_class", is_flag=True,
+              help="Every closed class over all configurations, each solved (small rings;"
+                   " reducible chains, p = 0 or 1).")
 @click.option("--method", type=click.Choice(METHODS), default="auto", show_default=True,
               help="Stationary solver; direct and eigs need the matrix, aggregation"
                    " parallel update.")
@@ -36,8 +48,8 @@ __all__ = ["solve"]
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @quiet_option
 @handle_errors
-def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_memory, top,
-          save, as_json):
+def solve(length, cars, model, params, vmax, p, update, start, every_class, method, operator,
+          tol, no_lump, max_memory, top, save, as_json):
     """Exact stationary state of one ring: flux, c_v; --json adds the gap distribution.
 
     By default a state is a rotation class of the ring and its probability is
@@ -45,11 +57,18 @@ def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_mem
     canonical configuration.  --no-lump keeps one state per configuration.
     --json adds the gap distribution P(g), g = 0..L-N, and solver details.
 
+    Any shipped model (nasch models) or a rule of your own
+    (--model FILE.py:FUNCTION, docs/models.md).  A chain with several closed
+    classes is refused with their sizes; --start solves the class a start
+    configuration falls into, --classes every class.
+
     \b
     Example:
       nasch solve --length 12 --cars 6 --vmax 2 --p 0.5
       nasch solve -L 10 -N 5 --p 0.25 --top 5 --save pi.npz
       nasch solve -L 22 -N 11 --p 0.5 --operator matrix-free --tol 1e-10
+      nasch solve -L 12 -N 4 --model vdr --param p0=0.75 --p 0.1
+      nasch solve -L 12 -N 3 --model cc --p 0.2 --classes
     """
     # every check before the work: the solver's own up-front checks, then the options
     from markov.chain import solve as solve_ring
@@ -58,15 +77,30 @@ def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_mem
     from markov.ring import Ring
     from markov.validate import ensure_int, ensure_max_memory
 
-    ring = Ring(length, cars, vmax, p, update)
+    if model == "nasch" and p is None and not any(
+            item.partition("=")[0].strip() == "p" for item in params):
+        raise click.UsageError("--p is required for the NaSch model")
+    ring = Ring(length, cars, update=update, model=build_model(model, params, vmax=vmax, p=p))
     max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
+    if every_class and (top is not None or save is not None):
+        raise click.UsageError("--classes reports every class; --top and --save need one")
     if top is not None:
         top = ensure_int("--top", top, 1)
     if save is not None:
         save = check_output_path(save, suffixes=(".npz",))
     limit = None if max_memory is None else max_memory * 2**30
-    sol = solve_ring(ring, method=method, lump=not no_lump, tol=tol, max_memory=limit,
-                     operator=operator, state_bound=recurrent_class_bound)
+    if every_class or start is not None:
+        from markov.chain import solve_classes
+
+        classes = solve_classes(ring, every=every_class, start=start, lump=not no_lump, tol=tol,
+                                max_memory=limit)
+        if len(classes) > 1 or every_class:
+            _echo_classes(ring, classes, as_json, start)
+            return
+        sol = classes[0].solution
+    else:
+        sol = solve_ring(ring, method=method, lump=not no_lump, tol=tol, max_memory=limit,
+                         operator=operator, state_bound=recurrent_class_bound)
     data = sol.to_dict()
     rows = sol.top_configurations(top) if top else None
     if save is not None:
@@ -78,7 +112,7 @@ def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_mem
             data["saved"] = str(save)
         emit_json(data)
         return
-    click.echo(f"NaSch ring L={length} N={cars} (c={ring.density:.4g}) vmax={vmax} p={p:g}"
+    click.echo(f"{_title(ring)} L={length} N={cars} (c={ring.density:.4g}) {_params(ring)}"
                f" update={update}")
     click.echo(f"  states {data['states']:,}{' (rotation classes)' if sol.lumped else ''},"
                + (f" nonzeros {data['nonzeros']:,}," if data["nonzeros"] is not None
@@ -97,6 +131,30 @@ def solve(length, cars, vmax, p, update, method, operator, tol, no_lump, max_mem
         _echo_top(rows, sol.lumped, len(sol.keys))
     if save is not None:
         click.echo(f"wrote {save} ({data['states']:,} states)", err=True)
+
+
+def _title(ring) -> str:
+    return "NaSch ring" if ring.is_nasch else f"{ring.model.name} ring"
+
+
+def _params(ring) -> str:
+    return " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
+                    for k, v in ring.model.params.items())
+
+
+def _echo_classes(ring, classes, as_json: bool, start) -> None:
+    origin = "the start" if start is not None else "the compact jam"
+    if as_json:
+        emit_json({"classes": [c.to_dict() for c in classes], "start": start})
+        return
+    click.echo(f"{_title(ring)} L={ring.length} N={ring.cars} (c={ring.density:.4g})"
+               f" {_params(ring)} update={ring.update}: {len(classes)} closed"
+               f" class{'es' if len(classes) > 1 else ''}")
+    for i, c in enumerate(classes, 1):
+        sol = c.solution
+        cv = " ".join(f"{x:.6g}" for x in sol.c_v)
+        click.echo(f"  {i}. {c.representative}  states {sol.n_states:,}  flux {sol.flux:.15g}"
+                   f"  c_v {cv}{'  (reached from ' + origin + ')' if c.from_start else ''}")
 
 
 def _echo_top(rows: list[dict], lumped: bool, n_states: int) -> None:
