@@ -124,11 +124,39 @@ class RuleSupport:
         return isinstance(other, RuleSupport) and self._key() == other._key()
 
     def allows(self, w: int, u: int, g: int, a: int) -> bool:
-        """Whether ``(u, g, a)`` can give the new velocity ``w`` (any ``g >= 0``)."""
+        """Whether ``(u, g, a)`` can give the new velocity ``w`` (any ``g >= 0``).
+
+        Parameters
+        ----------
+        w : int
+            A new velocity.
+        u : int
+            The car's old velocity.
+        g : int
+            Its gap (any ``g >= 0``).
+        a : int
+            The old velocity of the car ahead.
+
+        Returns
+        -------
+        bool
+        """
         return bool(self.ok[w, u, min(g, self.horizon), a])
 
     def far(self, w: int, u: int) -> bool:
-        """Whether a car with no car ahead in reach (gap beyond the horizon) can give ``w``."""
+        """Whether a car with no car ahead in reach (gap beyond the horizon) can give ``w``.
+
+        Parameters
+        ----------
+        w : int
+            A new velocity.
+        u : int
+            The car's old velocity.
+
+        Returns
+        -------
+        bool
+        """
         return bool(self.ok[w, u, self.horizon, 0])
 
 

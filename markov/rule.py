@@ -128,11 +128,21 @@ class ModelSpec:
         object.__setattr__(self, "descriptions", MappingProxyType(dict(self.descriptions)))
 
     def integer_parameters(self) -> tuple[str, ...]:
-        """Names of the integer parameters (int defaults), ``vmax`` first."""
+        """Names of the integer parameters (int defaults), ``vmax`` first.
+
+        Returns
+        -------
+        tuple of str
+        """
         return tuple(n for n, d in self.parameters.items() if isinstance(d, int))
 
     def probability_parameters(self) -> tuple[str, ...]:
-        """Names of the probability parameters (float defaults)."""
+        """Names of the probability parameters (float defaults).
+
+        Returns
+        -------
+        tuple of str
+        """
         return tuple(n for n, d in self.parameters.items() if isinstance(d, float))
 
 
@@ -142,6 +152,15 @@ def rule(**parameters) -> Callable[[Callable], Callable]:
     Keyword arguments ``name``, ``reference``, ``convention``, ``descriptions``
     (a dict), ``horizon`` (a callable) and ``constraint`` (a callable) go to
     the :class:`ModelSpec`; all others are parameters with their defaults.
+
+    Parameters
+    ----------
+    **parameters
+        The rule's parameters with their defaults (``vmax`` required); also ``name``, ``reference``, ``convention``, ``descriptions``, ``horizon``, ``constraint`` of :class:`ModelSpec`.
+
+    Returns
+    -------
+    callable
 
     Examples
     --------
@@ -224,24 +243,49 @@ class Model:
         return self.params["vmax"]
 
     def horizon(self) -> int:
-        """Largest gap the rule distinguishes (rows above it repeat this one)."""
+        """Largest gap the rule distinguishes (rows above it repeat this one).
+
+        Returns
+        -------
+        int
+        """
         if self.spec.horizon is None:
             return self.vmax
         return ensure_int(f"horizon of rule {self.name}", self.spec.horizon(self.params), 0)
 
     def with_params(self, **changes) -> "Model":
-        """The same rule with some parameters changed (validated again)."""
+        """The same rule with some parameters changed (validated again).
+
+        Parameters
+        ----------
+        **changes
+            Parameter values to change, e.g. ``p=0.25``.
+
+        Returns
+        -------
+        Model
+        """
         return load_model(self.source, {**dict(self.values), **changes})
 
     def describe(self) -> dict:
-        """JSON-ready description: name, parameter values, source."""
+        """JSON-ready description: name, parameter values, source.
+
+        Returns
+        -------
+        dict
+        """
         return {"name": self.name,
                 "params": {k: (str(v) if not isinstance(v, (int, float)) else v)
                            for k, v in self.values},
                 "source": self.source}
 
     def key(self) -> str:
-        """A stable string for caches: source, the file's content hash, the values."""
+        """A stable string for caches: source, the file's content hash, the values.
+
+        Returns
+        -------
+        str
+        """
         head = self.source
         path = _file_part(self.source)
         if path is not None:
@@ -518,13 +562,41 @@ class RuleTable:
         return min(g, self.horizon, self.max_gap)
 
     def support(self, v: int, gap: int, v_ahead: int) -> tuple[int, ...]:
-        """New velocities of positive weight for ``(v, gap, v_ahead)`` (any ``gap >= 0``)."""
+        """New velocities of positive weight for ``(v, gap, v_ahead)`` (any ``gap >= 0``).
+
+        Parameters
+        ----------
+        v : int
+            The car's velocity (cells moved in its last update).
+        gap : int
+            Empty cells in front of it.
+        v_ahead : int
+            Velocity of the car ahead.
+
+        Returns
+        -------
+        tuple of int
+        """
         g = self._row(gap)
         n = int(self.count[v, g, v_ahead])
         return tuple(int(u) for u in self.new_velocity[v, g, v_ahead, :n])
 
     def outcomes(self, v: int, gap: int, v_ahead: int) -> tuple[tuple[int, float], ...]:
-        """``(new_velocity, weight)`` pairs for ``(v, gap, v_ahead)`` (any ``gap >= 0``)."""
+        """``(new_velocity, weight)`` pairs for ``(v, gap, v_ahead)`` (any ``gap >= 0``).
+
+        Parameters
+        ----------
+        v : int
+            The car's velocity (cells moved in its last update).
+        gap : int
+            Empty cells in front of it.
+        v_ahead : int
+            Velocity of the car ahead.
+
+        Returns
+        -------
+        tuple of (int, float)
+        """
         g = self._row(gap)
         n = int(self.count[v, g, v_ahead])
         return tuple((int(self.new_velocity[v, g, v_ahead, k]), float(self.weight[v, g, v_ahead, k]))
@@ -628,6 +700,17 @@ def symbolic_outcomes(model: Model, v: int, gap: int, v_ahead: int) -> tuple:
     Returns
     -------
     tuple of (int, sympy.Expr)
+
+    Parameters
+    ----------
+    model : markov.rule.Model
+        The model.
+    v : int
+        The car's velocity (cells moved in its last update).
+    gap : int
+        Empty cells in front of it.
+    v_ahead : int
+        Velocity of the car ahead.
 
     Examples
     --------

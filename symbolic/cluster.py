@@ -71,7 +71,7 @@ import numpy as np
 import scipy.sparse as sp_sparse
 
 from markov.errors import ConvergenceError, InvalidParameterError
-from .solve import solve_fixed_point
+from .fixedpoint import solve_fixed_point
 
 __all__ = ["Transfer", "transfer", "window_count", "push",
            "cluster_fixed_point", "solve_cluster", "word_probability", "cluster_symbols",

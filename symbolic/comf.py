@@ -80,6 +80,11 @@ def ensure_comf_rule(model) -> None:
     ------
     InvalidParameterError
         Naming the model.
+
+    Parameters
+    ----------
+    model : markov.rule.Model
+        The model.
     """
     from .ruleview import reads_ahead
 
@@ -274,10 +279,10 @@ def _solve_cut(model, c: float, cut: int, shape: np.ndarray):
     ``P_g`` and takes the distribution of the next moves; the fixed point of
     this map is the COMF solution.  Plain steps converge linearly (rate 0.97
     at ``p = 0.001``), so they are Anderson-accelerated
-    (:func:`symbolic.solve.solve_fixed_point`).  Newton on the same unknowns
+    (:func:`symbolic.fixedpoint.solve_fixed_point`).  Newton on the same unknowns
     needs a start close to the answer.  Returns ``(g, P)``.
     """
-    from .solve import solve_fixed_point
+    from .fixedpoint import solve_fixed_point
 
     target = (1 - c) / c
     _, moved, _ = _operators(model, cut)

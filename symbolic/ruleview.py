@@ -36,17 +36,49 @@ NASCH = "nasch"
 
 
 def nasch(vmax: int, p: float = 0.5) -> Model:
-    """The shipped NaSch model with ``vmax`` and ``p``."""
+    """The shipped NaSch model with ``vmax`` and ``p``.
+
+    Parameters
+    ----------
+    vmax : int
+        Maximal velocity.
+    p : float
+        Braking probability.
+
+    Returns
+    -------
+    Model
+    """
     return load_model(NASCH, {"vmax": int(vmax), "p": p})
 
 
 def is_nasch(model: Model) -> bool:
-    """Whether ``model`` is the shipped NaSch rule (any parameters)."""
+    """Whether ``model`` is the shipped NaSch rule (any parameters).
+
+    Parameters
+    ----------
+    model : markov.rule.Model
+        The model.
+
+    Returns
+    -------
+    bool
+    """
     return model.source == NASCH
 
 
 def probability_symbols(model: Model) -> dict:
-    """``name -> sympy.Symbol(name, positive=True)`` for each probability parameter."""
+    """``name -> sympy.Symbol(name, positive=True)`` for each probability parameter.
+
+    Parameters
+    ----------
+    model : markov.rule.Model
+        The model.
+
+    Returns
+    -------
+    dict
+    """
     import sympy as sp
 
     return {name: sp.Symbol(name, positive=True) for name in model.spec.probability_parameters()}
@@ -57,6 +89,19 @@ def horizons_of(rows_equal, vmax: int, horizon: int) -> tuple[int, ...]:
 
     ``rows_equal(v, g)`` says whether row ``(v, g)`` (all ``v_ahead``) equals row
     ``(v, horizon)``.
+
+    Parameters
+    ----------
+    rows_equal : callable
+        ``rows_equal(v, g, h)``: whether the rows of gaps ``g`` and ``h`` agree.
+    vmax : int
+        Maximal velocity.
+    horizon : int
+        The rule's horizon.
+
+    Returns
+    -------
+    tuple of int
     """
     out = []
     for v in range(vmax + 1):
@@ -110,7 +155,17 @@ def numeric_moves(model: Model) -> tuple[np.ndarray, tuple[int, ...]]:
 
 
 def reads_ahead(model: Model) -> bool:
-    """Whether a car's move at the model's values depends on the car ahead's velocity."""
+    """Whether a car's move at the model's values depends on the car ahead's velocity.
+
+    Parameters
+    ----------
+    model : markov.rule.Model
+        The model.
+
+    Returns
+    -------
+    bool
+    """
     t, _ = numeric_moves(model)
     return bool(np.any(np.abs(t - t[:, :, :1]) > 0))
 
@@ -160,7 +215,17 @@ class RuleStructure:
         return tuple(float(self.model.params[n]) for n in self.names)
 
     def values(self, theta) -> np.ndarray:
-        """The weights :attr:`exprs` at ``theta`` (``(k, P)`` -> ``(k, len(exprs))``)."""
+        """The weights :attr:`exprs` at ``theta`` (``(k, P)`` -> ``(k, len(exprs))``).
+
+        Parameters
+        ----------
+        theta : (k, P) ndarray
+            Values of the probability parameters, one row per point.
+
+        Returns
+        -------
+        ndarray
+        """
         theta = np.atleast_2d(np.asarray(theta, float))
         return np.stack([np.broadcast_to(np.asarray(f(*theta.T), float), (len(theta),))
                          for f in self._functions], axis=1) if self.exprs else \
@@ -178,7 +243,12 @@ class RuleStructure:
         return cached
 
     def reads_ahead_symbolically(self) -> bool:
-        """Whether the symbolic rule reads ``v_ahead`` anywhere (for any parameter values)."""
+        """Whether the symbolic rule reads ``v_ahead`` anywhere (for any parameter values).
+
+        Returns
+        -------
+        bool
+        """
         c, m, w = self.count, self.move, self.wid
         return bool(np.any(c != c[:, :, :1]) or np.any(m != m[:, :, :1])
                     or np.any(w != w[:, :, :1]))
@@ -188,6 +258,10 @@ class RuleStructure:
 
         The transfer depends on the probability values only through which
         weights vanish (those outcomes are dropped), so that is all it keeps of them.
+
+        Returns
+        -------
+        str
         """
         head = self.model.key().rpartition("|")[0]
         ints = ",".join(f"{n}={self.model.params[n]}"
@@ -276,7 +350,13 @@ def structure(model: Model) -> RuleStructure:
 
 
 def ensure_far_independent(s: RuleStructure) -> None:
-    """Refuse a rule whose move at gaps ``>= H`` still depends on the car ahead's velocity."""
+    """Refuse a rule whose move at gaps ``>= H`` still depends on the car ahead's velocity.
+
+    Parameters
+    ----------
+    s : RuleStructure
+        The rule's structure.
+    """
     h = s.horizon
     if np.any(s.count[:, h] != s.count[:, h, :1]) or np.any(s.move[:, h] != s.move[:, h, :1]) \
             or np.any(s.wid[:, h] != s.wid[:, h, :1]):

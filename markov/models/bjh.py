@@ -23,7 +23,24 @@ __all__ = ["rule", "SPEC"]
 
 
 def rule(v: int, gap: int, v_ahead: int, params):
-    """Slow-to-start ``ps`` for ``v = 0, gap = v_ahead > 0``, then NaSch R2-R4."""
+    """Slow-to-start ``ps`` for ``v = 0, gap = v_ahead > 0``, then NaSch R2-R4.
+
+    Parameters
+    ----------
+    v : int
+        The car's velocity (cells moved in its last update).
+    gap : int
+        Empty cells in front of it.
+    v_ahead : int
+        Velocity of the car ahead.
+    params : mapping
+        The parameter values, e.g. ``{"vmax": 2, "p": 0.5}``.
+
+    Returns
+    -------
+    tuple of (int, weight)
+        The new velocities and their probabilities (numbers or sympy expressions).
+    """
     p = params["p"]
     if v == 0 and 0 < gap == v_ahead:
         stay = params["ps"]

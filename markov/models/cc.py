@@ -15,7 +15,24 @@ __all__ = ["rule", "SPEC"]
 
 
 def rule(v: int, gap: int, v_ahead: int, params):
-    """``((vmax, 1),)`` for a car cruising at ``vmax`` with ``gap >= vmax``; NaSch otherwise."""
+    """``((vmax, 1),)`` for a car cruising at ``vmax`` with ``gap >= vmax``; NaSch otherwise.
+
+    Parameters
+    ----------
+    v : int
+        The car's velocity (cells moved in its last update).
+    gap : int
+        Empty cells in front of it.
+    v_ahead : int
+        Velocity of the car ahead.
+    params : mapping
+        The parameter values, e.g. ``{"vmax": 2, "p": 0.5}``.
+
+    Returns
+    -------
+    tuple of (int, weight)
+        The new velocities and their probabilities (numbers or sympy expressions).
+    """
     vmax = params["vmax"]
     if v == vmax and gap >= vmax:
         return ((vmax, 1),)

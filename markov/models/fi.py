@@ -17,7 +17,24 @@ __all__ = ["rule", "SPEC"]
 
 
 def rule(v: int, gap: int, v_ahead: int, params):
-    """``min(vmax, gap)``; at ``vmax`` delayed by one with ``p``."""
+    """``min(vmax, gap)``; at ``vmax`` delayed by one with ``p``.
+
+    Parameters
+    ----------
+    v : int
+        The car's velocity (cells moved in its last update).
+    gap : int
+        Empty cells in front of it.
+    v_ahead : int
+        Velocity of the car ahead.
+    params : mapping
+        The parameter values, e.g. ``{"vmax": 2, "p": 0.5}``.
+
+    Returns
+    -------
+    tuple of (int, weight)
+        The new velocities and their probabilities (numbers or sympy expressions).
+    """
     vmax = params["vmax"]
     u = min(vmax, gap)
     if u < vmax:

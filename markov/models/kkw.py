@@ -33,7 +33,24 @@ __all__ = ["rule", "SPEC"]
 
 
 def rule(v: int, gap: int, v_ahead: int, params):
-    """Synchronisation-distance step, then ``-1 / 0 / +1`` with ``b / 1 - a - b / a``."""
+    """Synchronisation-distance step, then ``-1 / 0 / +1`` with ``b / 1 - a - b / a``.
+
+    Parameters
+    ----------
+    v : int
+        The car's velocity (cells moved in its last update).
+    gap : int
+        Empty cells in front of it.
+    v_ahead : int
+        Velocity of the car ahead.
+    params : mapping
+        The parameter values, e.g. ``{"vmax": 2, "p": 0.5}``.
+
+    Returns
+    -------
+    tuple of (int, weight)
+        The new velocities and their probabilities (numbers or sympy expressions).
+    """
     vmax, a, b = params["vmax"], params["a"], params["b"]
     if gap > params["d"] + params["k"] * v:
         target = v + 1

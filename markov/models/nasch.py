@@ -15,7 +15,24 @@ __all__ = ["rule", "SPEC"]
 
 
 def rule(v: int, gap: int, v_ahead: int, params):
-    """R1-R3: ``((u - 1, p), (u, 1 - p))`` with ``u = min(v + 1, vmax, gap)``, or ``((0, 1),)``."""
+    """R1-R3: ``((u - 1, p), (u, 1 - p))`` with ``u = min(v + 1, vmax, gap)``, or ``((0, 1),)``.
+
+    Parameters
+    ----------
+    v : int
+        The car's velocity (cells moved in its last update).
+    gap : int
+        Empty cells in front of it.
+    v_ahead : int
+        Velocity of the car ahead.
+    params : mapping
+        The parameter values, e.g. ``{"vmax": 2, "p": 0.5}``.
+
+    Returns
+    -------
+    tuple of (int, weight)
+        The new velocities and their probabilities (numbers or sympy expressions).
+    """
     u = min(v + 1, params["vmax"], gap)
     if u == 0:
         return ((0, 1),)

@@ -21,7 +21,24 @@ __all__ = ["rule", "SPEC"]
 
 
 def rule(v: int, gap: int, v_ahead: int, params):
-    """``((0, pt), (1, 1 - pt))`` for ``v = 0, gap = 1``; NaSch with ``p`` otherwise."""
+    """``((0, pt), (1, 1 - pt))`` for ``v = 0, gap = 1``; NaSch with ``p`` otherwise.
+
+    Parameters
+    ----------
+    v : int
+        The car's velocity (cells moved in its last update).
+    gap : int
+        Empty cells in front of it.
+    v_ahead : int
+        Velocity of the car ahead.
+    params : mapping
+        The parameter values, e.g. ``{"vmax": 2, "p": 0.5}``.
+
+    Returns
+    -------
+    tuple of (int, weight)
+        The new velocities and their probabilities (numbers or sympy expressions).
+    """
     if v == 0 and gap == 1:
         return ((0, params["pt"]), (1, 1 - params["pt"]))
     u = min(v + 1, params["vmax"], gap)

@@ -16,7 +16,24 @@ __all__ = ["rule", "SPEC"]
 
 
 def rule(v: int, gap: int, v_ahead: int, params):
-    """NaSch with the braking probability ``p0`` for a standing car, ``p`` for a moving one."""
+    """NaSch with the braking probability ``p0`` for a standing car, ``p`` for a moving one.
+
+    Parameters
+    ----------
+    v : int
+        The car's velocity (cells moved in its last update).
+    gap : int
+        Empty cells in front of it.
+    v_ahead : int
+        Velocity of the car ahead.
+    params : mapping
+        The parameter values, e.g. ``{"vmax": 2, "p": 0.5}``.
+
+    Returns
+    -------
+    tuple of (int, weight)
+        The new velocities and their probabilities (numbers or sympy expressions).
+    """
     pr = params["p0"] if v == 0 else params["p"]
     u = min(v + 1, params["vmax"], gap)
     if u == 0:
