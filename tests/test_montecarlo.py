@@ -565,3 +565,32 @@ def test_a_deterministic_model_is_flagged_with_its_parameters():
     r = simulate(ring, steps=200, warmup=500)
     assert not r.reliable and "vdr rule at vmax = 2, p = 0.0, p0 = 0.0 is deterministic" \
         in r.warning
+
+
+def test_cli_simulate_any_model_and_update_records_them():
+    runner = CliRunner()
+    args = ["simulate", "-L", "12", "-N", "4", "--model", "kkw", "--param", "vmax=2",
+            "--param", "a=0.2", "--param", "b=0.35", "--update", "ordered-sequential",
+            "--steps", "200000", "--seed", "7", "--json"]
+    out = runner.invoke(main, args)
+    assert out.exit_code == 0, out.output
+    d = json.loads(out.stdout)
+    ring = model_ring("kkw", "ordered-sequential")
+    assert d["model"] == ring.model.describe() and d["update"] == "ordered-sequential"
+    assert d["p"] is None and d["vmax"] == 2
+    assert d["reliable"] and abs(d["flux"] - exact_solution(ring).flux) < 5 * d["flux_error"]
+    text = runner.invoke(main, args[:-1])
+    assert text.stdout.startswith("Monte Carlo of kkw (vmax=2 d=1 k=1 a=0.2 b=0.35) L=12 N=4")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--model", "kkw", "--p", "0.3"], "rule kkw has no parameter p"),
+    (["--vmax", "3", "--param", "vmax=2"], "--vmax 3 disagrees with --param vmax=2"),
+    (["--model", "vdr", "--param", "p0=2"], "vdr parameter p0 must be a probability"),
+    (["--param", "p"], "--param expects NAME=VALUE"),
+    (["--model", "nope"], "unknown model 'nope'"),
+])
+def test_cli_simulate_refuses_bad_models_in_one_line(args, message):
+    out = CliRunner().invoke(main, ["simulate", "-L", "100", "-c", "0.3"] + args)
+    assert out.exit_code == 2 and out.output.count("\n") == 1
+    assert out.output.startswith("error: ") and message in out.output
