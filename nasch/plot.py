@@ -1,6 +1,6 @@
-"""The paper's Fig. 2, regenerated: fundamental diagrams with every route to the flux.
+"""Figures: the paper's Fig. 2 with every route to the flux, and Monte Carlo figures of any model.
 
-For each braking probability ``p`` one panel shows, against the density ``c``:
+Fig. 2: for each braking probability ``p`` one panel shows, against the density ``c``:
 
 * pMF (solid line), MF (dotted), 2-cluster (dash-dotted) from :mod:`symbolic`
   (other approximations, e.g. the 4-cluster and COMF, on request);
@@ -15,6 +15,12 @@ For each braking probability ``p`` one panel shows, against the density ``c``:
 :func:`fundamental_data` computes the numbers (testable without drawing);
 :func:`fundamental_figure` draws them; :func:`save_figure` writes PNG or PDF
 by the file's extension, atomically.
+
+Any model (issue 18): :func:`spacetime_figure` draws the space-time diagram
+of one Monte Carlo trajectory (:func:`markov.montecarlo.trajectory`; cells
+across, time downwards, a pixel or more per cell); :func:`models_data` and
+:func:`models_figure` the Monte Carlo fundamental diagrams of several models
+on one large ring (runs without an honest error bar drawn hollow).
 
 References
 ----------

@@ -594,3 +594,20 @@ def test_cli_simulate_refuses_bad_models_in_one_line(args, message):
     out = CliRunner().invoke(main, ["simulate", "-L", "100", "-c", "0.3"] + args)
     assert out.exit_code == 2 and out.output.count("\n") == 1
     assert out.output.startswith("error: ") and message in out.output
+
+
+@pytest.mark.parametrize("update,c,p", [("ordered-sequential", 0.5, 0.5),
+                                        ("ordered-sequential", 0.25, 0.25),
+                                        ("random-sequential", 0.3, 0.5)])
+def test_vmax1_sequential_updates_on_a_large_ring_match_the_tasep_closed_forms(update, c, p):
+    # vmax = 1 NaSch is the TASEP with hopping probability q = 1 - p: random-
+    # sequential f = q c (1 - c) (one hop attempt per cell and step); backward
+    # ordered f = q c (1 - c) / (1 - q c) (Rajewsky et al., J. Stat. Phys. 92,
+    # 151 (1998); docs/models.md).  L = 3000 is the infinite ring within the bars.
+    L = 3000
+    N = round(c * L)
+    c, q = N / L, 1 - p
+    want = q * c * (1 - c) / (1 - q * c) if update == "ordered-sequential" else q * c * (1 - c)
+    r = simulate(Ring(L, N, 1, p, update), steps=10_000, seed=1, replicas=2)
+    assert r.reliable, r.warning
+    assert abs(r.flux - want) < 5 * r.flux_error < 0.005
