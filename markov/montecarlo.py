@@ -1,12 +1,29 @@
-"""Fast Monte Carlo of the NaSch model on large rings, from the same rules.
+"""Fast Monte Carlo of traffic cellular automata on large rings, from the rule table.
 
-The kernels keep a car-oriented state (positions in ``[0, L)`` and velocities,
-cars in driving order) and call :func:`markov.rules.deterministic_velocity`
-(R1+R2) and :func:`markov.rules.randomize` (R3) for every car; nothing of the
-rules is written again here.  The random numbers come from a private
-xoshiro256** generator seeded through splitmix64, so a seed gives the same
-trajectory on every machine and numba version (numba's own ``np.random``
-stream is an implementation detail we do not want results to hang on).
+Any model (:mod:`markov.rule`; NaSch by default) under any of the three
+updates (parallel, random-sequential, backward ordered-sequential, as in
+:mod:`markov.ring` and ``docs/models.md``).  The kernels keep a car-oriented
+state (positions in ``[0, L)`` and velocities, cars in driving order) and read
+the ring's rule table (:meth:`markov.ring.Ring.table`, the same table as the
+exact chain): for each car ``(v, min(gap, horizon), v_ahead)`` selects a row,
+one uniform number picks its outcome by the cumulative weights (any number
+of outcomes; one comparison for a two-outcome rule such as NaSch), and the
+car moves that many cells.  Nothing of a rule is written again here.  The
+outcomes are in ascending new velocity, so for NaSch ``u < p`` brakes, as in
+the NaSch-only kernel before issue 18: the same seed gives the same NaSch
+trajectory as then (``tests/test_montecarlo.py`` pins a flux).  The random
+numbers come from a private xoshiro256** generator seeded through
+splitmix64, so a seed gives the same trajectory on every machine and numba
+version (numba's own ``np.random`` stream is an implementation detail we do
+not want results to hang on).
+
+Updates: *parallel* moves every car at once from the old configuration (the
+car ahead's old place and velocity); *random-sequential* draws ``L`` cells
+per time step and updates the car in a drawn cell alone; *ordered-sequential*
+draws a start car per step, which updates first (seeing the car ahead's old
+place and velocity), then the car behind it and so on upstream, each seeing
+the car ahead already moved.  A lone car is its own car ahead (``gap = L -
+1``).
 
 Measurement (issue 17: error bars that cover the truth).  Each replica
 records the flux of every block of its run (up to 1024 blocks, at most one
@@ -54,11 +71,11 @@ import numpy as np
 from numba import njit
 
 from .errors import InvalidParameterError
-from .ring import PARALLEL, Ring
+from .ring import PARALLEL, RANDOM_SEQUENTIAL, Ring
 from .progress import progress_bar
-from .rules import deterministic_velocity, randomize
 
-__all__ = ["SimulationResult", "simulate", "evolve", "initial_configuration", "blocking_error",
+__all__ = ["SimulationResult", "simulate", "evolve", "trajectory", "initial_configuration",
+           "blocking_error", "MAX_TRAJECTORY_CELLS",
            "mser_truncation", "integrated_autocorrelation_time", "analyse_series",
            "simulation_bytes", "ensure_simulation_fits", "DEFAULT_BATCHES", "MIN_STEPS",
            "STARTS", "DEFAULT_START"]
@@ -126,30 +143,47 @@ def _next_uniform(s):
 # --- kernels --------------------------------------------------------------------
 
 
+@njit(cache=True, inline="always")
+def _draw(cum, new_velocity, v, gap, v_ahead, x):
+    """The outcome of uniform ``x`` at ``(v, gap, v_ahead)``: the first ``k`` with ``x < cum[k]``.
+
+    ``cum`` is non-decreasing along ``k`` with the last outcome's entry and
+    the padding at infinity (:func:`_cumulative`), so that ``k`` is the number
+    of entries ``x`` reaches.  Counting them over the fixed row width, instead
+    of stopping at the first, leaves no data-dependent branch: a two-outcome
+    row (NaSch) costs one comparison, as the NaSch-only kernel did.
+    """
+    k = 0
+    for j in range(cum.shape[3] - 1):
+        k += x >= cum[v, gap, v_ahead, j]
+    return new_velocity[v, gap, v_ahead, k]
+
+
 @njit(cache=True)
-def _parallel_steps(pos, vel, length, vmax, p, steps, rng, counts):
+def _parallel_steps(pos, vel, length, horizon, cum, new_velocity, steps, rng, counts):
     """``steps`` parallel updates in place; ``counts[v]`` += cars ending at velocity v.
 
     Cars are stored in driving order (car ``i + 1`` is ahead of car ``i``,
     car 0 ahead of the last), so the gap needs only the next car's position.
-    Updating in index order reads ``pos[i + 1]`` before it moves; only car 0
-    has moved when the last car looks at it, hence ``first`` (its old place).
-    A random number is drawn for every car, moving or not, so the stream
-    consumed per step is fixed and the update is branch-free.
+    Updating in index order reads car ``i + 1`` before it moves; only car 0
+    has moved when the last car looks at it, hence ``first_x``, ``first_v``
+    (its old place and velocity).  One uniform is drawn for every car, moving
+    or not, so the stream consumed per step is fixed.
     """
     n = pos.shape[0]
     for _ in range(steps):
-        first = pos[0]
+        first_x, first_v = pos[0], vel[0]
         for i in range(n):
-            ahead = pos[i + 1] if i + 1 < n else first
-            gap = ahead - pos[i] - 1
+            if i + 1 < n:
+                ahead_x, ahead_v = pos[i + 1], vel[i + 1]
+            else:
+                ahead_x, ahead_v = first_x, first_v
+            gap = ahead_x - pos[i] - 1
             if gap < 0:
                 gap += length
-            u = deterministic_velocity(vel[i], gap, vmax)          # R1 + R2
-            if _next_uniform(rng) < p:                              # R3
-                u = randomize(u)
+            u = _draw(cum, new_velocity, vel[i], min(gap, horizon), ahead_v, _next_uniform(rng))
             vel[i] = u
-            x = pos[i] + u                                          # R4
+            x = pos[i] + u
             if x >= length:
                 x -= length
             pos[i] = x
@@ -157,15 +191,16 @@ def _parallel_steps(pos, vel, length, vmax, p, steps, rng, counts):
 
 
 @njit(cache=True)
-def _random_sequential_steps(pos, vel, length, vmax, p, steps, rng, counts, moved):
+def _random_sequential_steps(pos, vel, length, horizon, cum, new_velocity, steps, rng, counts,
+                             moved):
     """``steps`` time steps of ``L`` random-sequential sub-steps each, in place.
 
     A sub-step draws a cell uniformly; it holds a car with probability
     ``N / L``, each car equally likely, which is what drawing an index in
     ``[0, L)`` and using it as a car index when it is below ``N`` gives (which
     car sits in which cell does not matter for a uniform choice).  The chosen
-    car updates alone with the current gap.  ``counts`` records the velocity
-    histogram once per time step; ``moved[0]`` the total distance moved.
+    car updates alone with the current gap and car ahead.  ``counts`` records
+    the velocity histogram once per time step; ``moved[0]`` the total distance.
     """
     n = pos.shape[0]
     for _ in range(steps):
@@ -173,13 +208,11 @@ def _random_sequential_steps(pos, vel, length, vmax, p, steps, rng, counts, move
             i = int(_next_uniform(rng) * length)
             if i >= n:
                 continue
-            ahead = pos[i + 1] if i + 1 < n else pos[0]
-            gap = ahead - pos[i] - 1
+            j = i + 1 if i + 1 < n else 0
+            gap = pos[j] - pos[i] - 1
             if gap < 0:
                 gap += length
-            u = deterministic_velocity(vel[i], gap, vmax)
-            if _next_uniform(rng) < p:
-                u = randomize(u)
+            u = _draw(cum, new_velocity, vel[i], min(gap, horizon), vel[j], _next_uniform(rng))
             vel[i] = u
             x = pos[i] + u
             if x >= length:
@@ -188,6 +221,53 @@ def _random_sequential_steps(pos, vel, length, vmax, p, steps, rng, counts, move
             moved[0] += u
         for i in range(n):
             counts[vel[i]] += 1
+
+
+@njit(cache=True)
+def _ordered_sequential_steps(pos, vel, length, horizon, cum, new_velocity, steps, rng, counts):
+    """``steps`` backward ordered-sequential updates in place; ``counts`` as for parallel.
+
+    Each step draws a start car uniformly; it updates first, seeing the car
+    ahead at its old place and velocity (that car updates last), then the car
+    behind it and so on upstream, each seeing the car ahead already moved
+    (docs/models.md).  Updating in place in that order gives exactly this.
+    One uniform for the start car, then one per car.
+    """
+    n = pos.shape[0]
+    for _ in range(steps):
+        s = int(_next_uniform(rng) * n)
+        for d in range(n):
+            i = s - d
+            if i < 0:
+                i += n
+            j = i + 1 if i + 1 < n else 0
+            gap = pos[j] - pos[i] - 1
+            if gap < 0:
+                gap += length
+            u = _draw(cum, new_velocity, vel[i], min(gap, horizon), vel[j], _next_uniform(rng))
+            vel[i] = u
+            x = pos[i] + u
+            if x >= length:
+                x -= length
+            pos[i] = x
+            counts[u] += 1
+
+
+def _cumulative(ring: Ring) -> tuple[np.ndarray, np.ndarray]:
+    """``(cum, new_velocity)`` of the ring's rule table for :func:`_draw`.
+
+    ``cum[v, g, a, k]`` is the probability of the first ``k + 1`` outcomes
+    (ascending new velocity, as :func:`markov.rule.tabulate` sorts them); the
+    last outcome's entry and the padding are infinity, so rounding never lets
+    a draw fall off the end of a row.  For NaSch the row is ``(u - 1, p), (u,
+    1 - p)``: ``x < p`` brakes, the comparison of the NaSch-only kernel before
+    issue 18, so the stream and the trajectories are unchanged.
+    """
+    t = ring.table()
+    cum = np.cumsum(t.weight, axis=-1)
+    k = np.arange(cum.shape[-1])
+    cum[k >= t.count[..., None] - 1] = np.inf
+    return np.ascontiguousarray(cum), np.ascontiguousarray(t.new_velocity)
 
 
 # --- public API -------------------------------------------------------------------
@@ -407,24 +487,31 @@ def _rng_state(seed: int) -> np.ndarray:
     return state
 
 
-def _advance(ring: Ring, pos, vel, steps: int, rng, counts) -> int:
-    """Run ``steps`` time steps; return the distance all cars moved."""
-    p = float(ring.p)
+def _advance(ring: Ring, rule: tuple, pos, vel, steps: int, rng, counts) -> int:
+    """Run ``steps`` time steps with ``rule = (horizon, cum, new_velocity)``; return the distance moved."""
     if ring.cars == 0 or steps == 0:
         return 0
-    work = ring.cars if ring.update == PARALLEL else ring.length
+    horizon, cum, new_velocity = rule
+    work = ring.length if ring.update == RANDOM_SEQUENTIAL else ring.cars
     chunk = max(1, _CHUNK_UPDATES // work)
-    if ring.update == PARALLEL:
-        before = counts.copy()
+    if ring.update == RANDOM_SEQUENTIAL:
+        moved = np.zeros(1, dtype=np.int64)
         for done in range(0, steps, chunk):
-            _parallel_steps(pos, vel, ring.length, ring.vmax, p, min(chunk, steps - done),
-                            rng, counts)
-        return int(np.dot(np.arange(ring.vmax + 1), counts - before))
-    moved = np.zeros(1, dtype=np.int64)
+            _random_sequential_steps(pos, vel, ring.length, horizon, cum, new_velocity,
+                                     min(chunk, steps - done), rng, counts, moved)
+        return int(moved[0])
+    kernel = _parallel_steps if ring.update == PARALLEL else _ordered_sequential_steps
+    before = counts.copy()
     for done in range(0, steps, chunk):
-        _random_sequential_steps(pos, vel, ring.length, ring.vmax, p, min(chunk, steps - done),
-                                 rng, counts, moved)
-    return int(moved[0])
+        kernel(pos, vel, ring.length, horizon, cum, new_velocity, min(chunk, steps - done),
+               rng, counts)
+    return int(np.dot(np.arange(len(counts)), counts - before))
+
+
+def _kernel_rule(ring: Ring) -> tuple:
+    """``(horizon, cum, new_velocity)``: the rule as the kernels read it (:func:`_cumulative`)."""
+    cum, new_velocity = _cumulative(ring)
+    return int(ring.table().horizon), cum, new_velocity
 
 
 def simulation_bytes(ring: Ring) -> int:
@@ -489,7 +576,8 @@ def evolve(ring: Ring, positions, velocities, steps: int, seed: int = 0):
     steps : int
         Time steps (``L`` sub-steps each for random-sequential update).
     seed : int
-        Seed of the random numbers (R3 and, for random-sequential, the order).
+        Seed of the random numbers (the rule's draws and, for the sequential
+        updates, the order).
 
     Returns
     -------
@@ -505,9 +593,72 @@ def evolve(ring: Ring, positions, velocities, steps: int, seed: int = 0):
     pos, vel = _ensure_configuration(ring, positions, velocities)
     steps = _ensure_steps("steps", steps, 0)
     counts = np.zeros(ring.vmax + 1, dtype=np.int64)
-    _advance(ring, pos, vel, steps, _rng_state(seed), counts)
+    _advance(ring, _kernel_rule(ring), pos, vel, steps, _rng_state(seed), counts)
     order = np.argsort(pos, kind="stable")
     return pos[order], vel[order]
+
+
+#: Most cells (time steps times ring length) :func:`trajectory` records.
+MAX_TRAJECTORY_CELLS = 10**8
+
+
+def trajectory(ring: Ring, steps: int, warmup: int = 0, seed: int = 0,
+               start: str = DEFAULT_START) -> np.ndarray:
+    """The occupancy of every cell at every time step: the data of a space-time diagram.
+
+    Parameters
+    ----------
+    ring : Ring
+    steps : int
+        Time steps recorded after the warm-up (the configuration after the
+        warm-up is row 0, so ``steps + 1`` rows).
+    warmup : int
+        Time steps run first, from :func:`initial_configuration` of ``start``.
+    seed : int
+        Seed of the start and of the random numbers; the same seed gives the
+        same trajectory, and ``trajectory(ring, 0, warmup=t, seed=s)`` is
+        the configuration the ``t``-th row of a run from ``warmup = 0``
+        would show.
+    start : {"random", "uniform"}
+
+    Returns
+    -------
+    (steps + 1, L) int16 array
+        ``-1`` for an empty cell, else the velocity of the car there.
+
+    Raises
+    ------
+    InvalidParameterError
+        Bad arguments, or more than :data:`MAX_TRAJECTORY_CELLS` cells
+        (``(steps + 1) L``), before any work.
+
+    Examples
+    --------
+    A lone car on a ring of 20 cells at ``p = 0``: at rest, then 1, 2, 2 cells a step.
+
+    >>> t = trajectory(Ring(20, 1, 2, 0.0), 3, seed=0)
+    >>> [int(np.flatnonzero(row >= 0)[0] - np.flatnonzero(t[0] >= 0)[0]) % 20 for row in t]
+    [0, 1, 3, 5]
+    """
+    steps = _ensure_steps("steps", steps, 0)
+    warmup = _ensure_steps("warmup", warmup, 0)
+    cells = (steps + 1) * int(ring.length)
+    if cells > MAX_TRAJECTORY_CELLS:
+        raise InvalidParameterError(
+            f"a trajectory of {steps + 1} rows of L = {ring.length} cells has {cells:,} cells,"
+            f" more than {MAX_TRAJECTORY_CELLS:,}: record fewer steps or a smaller ring")
+    rng = _rng_state(seed)
+    ensure_simulation_fits(ring)
+    pos, vel = initial_configuration(ring, seed, start)
+    rule = _kernel_rule(ring)
+    counts = np.zeros(ring.vmax + 1, dtype=np.int64)
+    _advance(ring, rule, pos, vel, warmup, rng, counts)
+    out = np.full((steps + 1, ring.length), -1, dtype=np.int16)
+    out[0, pos] = vel
+    for t in range(1, steps + 1):
+        _advance(ring, rule, pos, vel, 1, rng, counts)
+        out[t, pos] = vel
+    return out
 
 
 class SeriesAnalysis(NamedTuple):
@@ -603,6 +754,7 @@ class SimulationResult:
     Attributes
     ----------
     length, cars, vmax, p, update : the simulated system
+        (``p`` is None for a model without a parameter ``p``).
     steps : int
         Recorded time steps per replica (the MSER cut is taken from them).
     warmup : int
@@ -638,12 +790,15 @@ class SimulationResult:
         below a block).
     start : str
         The start configuration.
+    model : dict
+        The model that moved the cars (:meth:`markov.rule.Model.describe`:
+        name, parameter values, source; :func:`simulate` always sets it).
     """
 
     length: int
     cars: int
     vmax: int
-    p: float
+    p: float | None
     update: str
     steps: int
     warmup: int
@@ -662,6 +817,7 @@ class SimulationResult:
     measured_steps: int = 0
     tau_int: float = 1.0
     start: str = DEFAULT_START
+    model: dict | None = None
 
     @property
     def density(self) -> float:
@@ -681,7 +837,7 @@ class SimulationResult:
         dict
         """
         d = asdict(self)
-        d["p"] = float(self.p)
+        d["p"] = None if self.p is None else float(self.p)
         d["density"] = self.density
         d["c_v"] = self.c_v.tolist()
         d["batch_fluxes"] = self.batch_fluxes.tolist()
@@ -699,12 +855,15 @@ def _replica_seed(seed: int, r: int) -> int:
 def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
              batches: int = DEFAULT_BATCHES, initial=None, replicas: int = 1,
              max_memory: float | None = None, start: str = DEFAULT_START) -> SimulationResult:
-    """Monte Carlo estimate of the stationary flux of a (large) ring.
+    """Monte Carlo estimate of the stationary flux of a (large) ring, any model and update.
 
     Parameters
     ----------
     ring : Ring
-        The system; any size (cost ``O(N)`` per time step).
+        The system: size, model (``ring.model``, recorded in the result by
+        :meth:`markov.rule.Model.describe`) and update (``ring.update``,
+        recorded too).  Cost ``O(N)`` per time step (``O(L)`` for
+        random-sequential update).
     steps : int
         Recorded time steps per replica.
     warmup : int, optional
@@ -755,9 +914,10 @@ def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
     The coverage of this bar (how often the long-run value lies inside it) is
     measured by ``benchmarks/mc_coverage.py`` (``docs/validation.md``).
 
-    For ``p = 0`` or ``p = 1`` the dynamics is deterministic and the result
-    depends on the initial configuration (there is no unique stationary
-    state); it is flagged.
+    A rule with a single outcome everywhere (NaSch at ``p = 0`` or ``p = 1``)
+    is deterministic under parallel update and the result depends on the
+    initial configuration (there is no unique stationary state); it is
+    flagged, under the sequential updates too.
 
     Examples
     --------
@@ -782,6 +942,7 @@ def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
     # Block b covers steps [edges[b], edges[b+1]); sizes differ by at most one.
     edges = np.linspace(0, steps, blocks + 1).astype(np.int64)
     sizes = np.diff(edges)
+    rule = _kernel_rule(ring)
     start_time = time.perf_counter()
     results, all_blocks = [], []
     kept_counts = np.zeros(ring.vmax + 1, dtype=np.int64)
@@ -795,14 +956,14 @@ def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
         else:
             pos, vel = _ensure_configuration(ring, *initial)
         counts = np.zeros(ring.vmax + 1, dtype=np.int64)
-        _advance(ring, pos, vel, warmup, rng, counts)
+        _advance(ring, rule, pos, vel, warmup, rng, counts)
         bar.update(1)
         # cumulative velocity histogram after each block, to count the kept part only
         snaps = np.zeros((blocks + 1, width), dtype=np.int64)
         counts[:] = 0
         bf = np.empty(blocks)
         for b in range(blocks):
-            bf[b] = _advance(ring, pos, vel, int(sizes[b]), rng, counts) / (
+            bf[b] = _advance(ring, rule, pos, vel, int(sizes[b]), rng, counts) / (
                 ring.length * int(sizes[b]))
             snaps[b + 1] = counts[:width]
             bar.update(1)
@@ -826,18 +987,42 @@ def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
     if ring.cars in (0, ring.length):
         reasons = []     # nothing moves (or nobody can): the flux is exactly 0
         flux, error = 0.0, 0.0
-    elif float(ring.p) in (0.0, 1.0):
-        reasons.insert(0, f"p = {float(ring.p):g} is deterministic: the result depends on the"
-                          " start configuration")
+    elif _deterministic(ring):
+        reasons.insert(0, _deterministic(ring))
     c_v = kept_counts / (kept.sum() * ring.length)
     tau_steps = max(a.tau * float(np.mean(sizes[a.cut:])) for a, _ in results)
     warmup_used = warmup + max(int(edges[a.cut]) for a, _ in results)
-    return SimulationResult(ring.length, ring.cars, ring.vmax, float(ring.p), ring.update,
+    return SimulationResult(ring.length, ring.cars, ring.vmax,
+                            None if ring.p is None else float(ring.p), ring.update,
                             steps, warmup, blocks, int(seed), flux, error, c_v,
                             np.concatenate(all_blocks), seconds, replicas,
                             reliable=not reasons, warning="; ".join(reasons[:3]) or None,
                             warmup_used=warmup_used, measured_steps=int(kept.sum()),
-                            tau_int=float(tau_steps), start=start)
+                            tau_int=float(tau_steps), start=start,
+                            model=ring.model.describe())
+
+
+def _deterministic(ring: Ring) -> str:
+    """Why the run has no unique stationary state to measure ("" when the rule is random).
+
+    A rule with one outcome in every row of its table (NaSch at ``p = 0`` or
+    ``p = 1``) is deterministic under parallel update: the result depends on
+    the start configuration.  Under the sequential updates only the order is
+    random, which need not make the stationary state unique either, so those
+    runs are flagged as well (as before issue 18).
+    """
+    if not bool(np.all(ring.table().count == 1)):
+        return ""
+    what = f"p = {float(ring.p):g}" if ring.is_nasch else \
+        f"the {ring.model.name} rule at {_params_text(ring)}"
+    if ring.update == PARALLEL:
+        return f"{what} is deterministic: the result depends on the start configuration"
+    return (f"{what} has one outcome per car: only the {ring.update} order is random and the"
+            " result may depend on the start configuration")
+
+
+def _params_text(ring: Ring) -> str:
+    return ", ".join(f"{k} = {v}" for k, v in ring.model.params.items())
 
 
 def _replica_disagreement(means: np.ndarray, errors: np.ndarray) -> list[str]:

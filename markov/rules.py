@@ -8,9 +8,11 @@ One parallel time step of the Nagel-Schreckenberg model, for each car at once:
 * R4 move:       advance ``v`` cells
 
 R1 and R2 are deterministic; R3 is one independent coin per car.  The
-functions below are compiled with numba so that the exact chain, the Garden of
-Eden search and the simulator call them from their kernels, and plain Python
-(the symbolic derivations, the tests) calls the same objects with ints.
+functions below are compiled with numba so that NaSch's factored operator and
+the Garden of Eden search call them from their kernels, and plain Python
+(the symbolic derivations, the tests) calls the same objects with ints.  The
+simulator and the row generator read the rule table of any model instead
+(:mod:`markov.rule`; :mod:`markov.models.nasch` is these rules as a table).
 
 References
 ----------

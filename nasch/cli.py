@@ -67,7 +67,10 @@ def main():
       nasch goe --census -L 12 -N 6 --vmax 2               GoE census of one ring
       nasch table --vmax 2 --p 0.5 --lengths 8,10,12 --density 0.5 --format md
       nasch simulate --length 100000 --density 0.2 --vmax 2 --p 0.5 --steps 1000
+      nasch simulate -L 10000 -c 0.2 --model kkw --update ordered-sequential   any model
       nasch plot fundamental --vmax 2 --p 0.5 --output fig.png
+      nasch plot spacetime --model vdr -L 400 -c 0.2 --steps 300 -o st.png   space-time
+      nasch plot models --models nasch,vdr,tt --vmax 2 -o fd.png   several models
       nasch study --vmax 2 --p 0.5 --density 0.25,0.5 --figure dev.png   which is best
     """
 

@@ -1,6 +1,6 @@
-"""The paper's Fig. 2, regenerated: fundamental diagrams with every route to the flux.
+"""Figures: the paper's Fig. 2 with every route to the flux, and Monte Carlo figures of any model.
 
-For each braking probability ``p`` one panel shows, against the density ``c``:
+Fig. 2: for each braking probability ``p`` one panel shows, against the density ``c``:
 
 * pMF (solid line), MF (dotted), 2-cluster (dash-dotted) from :mod:`symbolic`
   (other approximations, e.g. the 4-cluster and COMF, on request);
@@ -15,6 +15,12 @@ For each braking probability ``p`` one panel shows, against the density ``c``:
 :func:`fundamental_data` computes the numbers (testable without drawing);
 :func:`fundamental_figure` draws them; :func:`save_figure` writes PNG or PDF
 by the file's extension, atomically.
+
+Any model (issue 18): :func:`spacetime_figure` draws the space-time diagram
+of one Monte Carlo trajectory (:func:`markov.montecarlo.trajectory`; cells
+across, time downwards, a pixel or more per cell); :func:`models_data` and
+:func:`models_figure` the Monte Carlo fundamental diagrams of several models
+on one large ring (runs without an honest error bar drawn hollow).
 
 References
 ----------
@@ -43,7 +49,8 @@ from .rings import commensurate_lengths
 from .sweep import run_jobs
 
 __all__ = ["fundamental_data", "fundamental_figure", "save_figure", "FIGURE_FORMATS",
-           "EXTRAPOLATION_DENSITIES"]
+           "EXTRAPOLATION_DENSITIES", "spacetime_figure", "ensure_spacetime_size",
+           "MAX_SPACETIME", "models_data", "models_figure"]
 
 FIGURE_FORMATS = (".png", ".pdf")
 EXTRAPOLATION_DENSITIES = (Fraction(1, 4), Fraction(1, 3), Fraction(1, 2), Fraction(2, 3),
@@ -328,3 +335,234 @@ def save_figure(fig, path) -> Path:
     fig.savefig(buf, format=ext[1:], dpi=200, metadata=meta, bbox_inches="tight",
                 pad_inches=0.03)  # tight: nothing of the legend is ever clipped
     return write_bytes_atomic(path, buf.getvalue())
+
+
+# ------------------------------------------------------------- any model: Monte Carlo figures
+
+#: Largest space-time diagram, cells by time rows (one pixel or more each).
+MAX_SPACETIME = (4000, 4000)
+#: Pixels across a space-time diagram aimed at (cells get an integer number each).
+_SPACETIME_WIDTH_PX = 1600
+_DPI = 200
+_SPEED_COLOURS = ("#b2182b", "#e08214", "#1b7837", "#2166ac")
+
+
+def ensure_spacetime_size(length: int, steps: int) -> None:
+    """Refuse a space-time diagram larger than :data:`MAX_SPACETIME`, before any work.
+
+    Parameters
+    ----------
+    length, steps : int
+        Cells across and time steps down.
+
+    Raises
+    ------
+    InvalidParameterError
+    """
+    cells, rows = MAX_SPACETIME
+    if length > cells or steps + 1 > rows:
+        raise InvalidParameterError(
+            f"a space-time diagram draws a pixel per cell and step: L = {length} and"
+            f" {steps} steps exceed {cells} cells x {rows - 1} steps; use a smaller ring"
+            " or fewer steps")
+
+
+def spacetime_figure(occupancy: np.ndarray, ring, warmup: int, seed: int,
+                     colour: bool = True):
+    """The space-time diagram of a trajectory: cells across, time downwards.
+
+    Parameters
+    ----------
+    occupancy : (steps + 1, L) int array
+        :func:`markov.montecarlo.trajectory`: ``-1`` empty, else the velocity.
+    ring : markov.ring.Ring
+        The system (for the title and the velocity scale).
+    warmup : int
+        Steps run before row 0 (the time axis starts there).
+    seed : int
+    colour : bool
+        Cars coloured by velocity (red standing, blue at ``vmax``), else black.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Examples
+    --------
+    >>> from markov.ring import Ring
+    >>> from markov.montecarlo import trajectory
+    >>> ring = Ring(50, 10, 2, 0.5)
+    >>> fig = spacetime_figure(trajectory(ring, 20, warmup=10), ring, 10, 0)
+    >>> fig.axes[0].get_xlabel()
+    'cell'
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    from matplotlib.colors import BoundaryNorm, LinearSegmentedColormap, ListedColormap
+    from matplotlib.figure import Figure
+
+    rows, length = occupancy.shape
+    vmax = int(ring.vmax)
+    # an integer number of pixels per cell, the same across and down
+    scale = max(1, _SPACETIME_WIDTH_PX // length)
+    width, height = length * scale / _DPI, rows * scale / _DPI
+    fig = Figure(figsize=(width + (1.6 if colour else 0.9), height + 1.0), dpi=_DPI,
+                 layout="constrained")
+    ax = fig.subplots()
+    if colour:
+        # red (standing) through orange and green to blue (vmax): no pale
+        # colour, so every car shows on the white road
+        cars = LinearSegmentedColormap.from_list("speed", _SPEED_COLOURS)
+        cmap = ListedColormap(["white"] + [cars(v / max(vmax, 1)) for v in range(vmax + 1)])
+    else:
+        cmap = ListedColormap(["white"] + ["black"] * (vmax + 1))
+    norm = BoundaryNorm(np.arange(-1.5, vmax + 1.0), cmap.N)
+    image = ax.imshow(occupancy, cmap=cmap, norm=norm, interpolation="nearest",
+                      aspect="equal", origin="upper",
+                      extent=(-0.5, length - 0.5, warmup + rows - 0.5, warmup - 0.5))
+    ax.set_xlabel("cell")
+    ax.set_ylabel("time step")
+    if colour:
+        bar = fig.colorbar(image, ax=ax, ticks=np.arange(vmax + 1), shrink=0.6,
+                           boundaries=np.arange(-0.5, vmax + 1.0), values=np.arange(vmax + 1))
+        bar.set_label("velocity")
+    ax.set_title(f"{_model_label(ring.model)}, {ring.update}\nL = {length}, N = {ring.cars}"
+                 f" (c = {ring.density:.3g}), steps {warmup}-{warmup + rows - 1}, seed {seed}",
+                 fontsize=8)
+    return fig
+
+
+def _model_label(model) -> str:
+    values = ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else f"{k} = {v}"
+                       for k, v in model.params.items())
+    return f"{model.name} ({values})"
+
+
+def models_data(models: Sequence, *, length: int = 1000, densities: int = 21,
+                steps: int = 2000, update: str = "parallel", seed: int = 0,
+                replicas: int = 1) -> dict:
+    """Monte Carlo fundamental diagrams of several models on one large ring.
+
+    Parameters
+    ----------
+    models : sequence of markov.rule.Model
+        The models, parameters bound (their ``vmax`` may differ).
+    length : int
+        Ring length ``L``.
+    densities : int
+        Densities ``k / (densities + 1)``, ``k = 1..densities``; ``N =
+        round(c L)`` cars, and the density drawn is ``N / L``.
+    steps : int
+        Recorded steps per run (at least :data:`markov.montecarlo.MIN_STEPS`);
+        the warm-up is cut from the data (MSER).
+    update : str
+    seed : int
+        Each point has its own seed, derived from ``(seed, model, density)``.
+    replicas : int
+
+    Returns
+    -------
+    dict
+        ``{"length", "steps", "update", "replicas", "seed", "models": [{"model":
+        describe(), "label", "c", "flux", "error", "reliable", "warnings"}]}``,
+        arrays per model.
+
+    Raises
+    ------
+    InvalidParameterError
+        Before any run: a bad count, ring or update.
+
+    Examples
+    --------
+    >>> from markov.rule import load_model
+    >>> d = models_data([load_model("nasch", {"vmax": 1, "p": 0.5})], length=100,
+    ...                 densities=3, steps=200)
+    >>> d["models"][0]["c"].tolist()
+    [0.25, 0.5, 0.75]
+    """
+    from markov.montecarlo import MIN_STEPS, simulate
+    from markov.ring import Ring
+    from markov.validate import ensure_int
+
+    length = ensure_int("length L", length, 2)
+    densities = ensure_int("densities", densities, 1, length - 1)
+    steps = ensure_int("steps", steps, MIN_STEPS)
+    replicas = ensure_int("replicas", replicas, 1)
+    seed = ensure_int("seed", seed, 0)
+    cars = sorted({min(length - 1, max(1, round(k * length / (densities + 1))))
+                   for k in range(1, densities + 1)})
+    rings = [[Ring(length, n, update=update, model=m) for n in cars] for m in models]
+    out = []
+    for i, (model, row) in enumerate(zip(models, rings)):
+        runs = [simulate(ring, steps=steps, seed=int(np.random.SeedSequence(
+                    [seed, i, j]).generate_state(1, np.uint64)[0]), replicas=replicas)
+                for j, ring in enumerate(row)]
+        out.append({"model": model.describe(), "label": _model_label(model),
+                    "c": np.array([n / length for n in cars]),
+                    "flux": np.array([r.flux for r in runs]),
+                    "error": np.array([r.flux_error for r in runs]),
+                    "reliable": np.array([r.reliable for r in runs]),
+                    "warnings": [r.warning for r in runs]})
+    return {"length": length, "steps": steps, "update": update, "replicas": replicas,
+            "seed": seed, "models": out}
+
+
+_MODEL_MARKERS = ("o", "s", "^", "v", "D", "<", ">", "p", "h", "*")
+
+
+def models_figure(data: dict, width: float = 6.4, height: float = 5.2):
+    """Draw :func:`models_data`: flux against density, one colour per model.
+
+    Filled markers carry an honest 1-sigma bar; hollow ones are runs the
+    simulator flagged (no honest bar: too short, drifting, deterministic).
+
+    Parameters
+    ----------
+    data : dict
+    width, height : float
+        Inches.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Examples
+    --------
+    >>> from markov.rule import load_model
+    >>> d = models_data([load_model("nasch", {"vmax": 1, "p": 0.5})], length=100,
+    ...                 densities=3, steps=200)
+    >>> models_figure(d).axes[0].get_ylabel()
+    'flux $f$ (cars per cell and step)'
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, height), layout="constrained")
+    ax = fig.subplots()
+    top = 0.0
+    flagged = False
+    for k, m in enumerate(data["models"]):
+        color, marker = f"C{k % 10}", _MODEL_MARKERS[k % len(_MODEL_MARKERS)]
+        c, f, e, ok = m["c"], m["flux"], m["error"], m["reliable"]
+        ax.plot(np.r_[0.0, c, 1.0], np.r_[0.0, f, 0.0], color=color, lw=0.8, alpha=0.6,
+                zorder=2)
+        ax.errorbar(c[ok], f[ok], yerr=e[ok], fmt=marker, ms=4, color=color, elinewidth=0.8,
+                    capsize=1.5, label=m["label"], zorder=3)
+        if np.any(~ok):
+            flagged = True
+            ax.errorbar(c[~ok], f[~ok], yerr=e[~ok], fmt=marker, ms=4, color=color, mfc="white",
+                        elinewidth=0.8, capsize=1.5, zorder=3,
+                        label=None if np.any(ok) else m["label"])
+        top = max(top, float(np.max(f + e)))
+    ax.set_xlim(0.0, 1.0)
+    ax.set_ylim(0.0, 1.1 * top if top > 0 else 1.0)
+    ax.set_xlabel("density $c$ (cars per cell)")
+    ax.set_ylabel("flux $f$ (cars per cell and step)")
+    note = "; hollow: no honest error bar" if flagged else ""
+    ax.set_title(f"Monte Carlo, {data['update']} update, L = {data['length']},"
+                 f" {data['steps']} steps x {data['replicas']} (1 sigma){note}", fontsize=9)
+    ax.grid(alpha=0.25, lw=0.5)
+    # below the axes: it never hides a point
+    fig.legend(loc="outside lower center", ncol=2, fontsize=7, frameon=False)
+    return fig

@@ -315,3 +315,299 @@ def test_table_marks_a_monte_carlo_value_without_an_honest_bar():
     csv_text = runner.invoke(main, base + ["--mc-steps", "40", "--format", "csv"]).stdout
     assert csv_text.splitlines()[0].endswith("mc_reliable")
     assert csv_text.splitlines()[1].endswith("false")
+
+
+# --- every model, every update (issue 18) ------------------------------------------------
+
+import naive_rule  # noqa: E402  (a sibling module: tests/conftest.py puts tests/ on the path)
+from markov.errors import NoUniqueStationaryStateError  # noqa: E402
+from markov.rule import MODELS, load_model  # noqa: E402
+from markov.montecarlo import trajectory  # noqa: E402
+
+UPDATES = ("parallel", "random-sequential", "ordered-sequential")
+#: probabilities strictly inside (0, 1), different from each other (as tests/test_model_chain.py)
+PROBS = {"p": 0.3, "p0": 0.65, "pt": 0.55, "ps": 0.7, "a": 0.2, "b": 0.35}
+
+
+def shipped(name, vmax=2):
+    params = {k: v for k, v in PROBS.items() if k in MODELS[name].parameters}
+    return load_model(name, {**params, "vmax": vmax})
+
+
+def model_ring(name, update):
+    """A small ring with one closed class of more than one configuration.
+
+    L = 12, N = 4, except cruise control under parallel and ordered-sequential
+    update, where four cars on 12 cells end in one free-flowing configuration
+    (a zero-variance flux that says nothing about the draws): N = 6 there.
+    """
+    cars = 6 if name == "cc" and update != "random-sequential" else 4
+    return Ring(12, cars, update=update, model=shipped(name))
+
+
+def exact_solution(ring):
+    # "direct" without p: markov.chain's automatic method compares ring.p, which a
+    # model without p (kkw) lacks, for the larger random-sequential chains
+    return solve(ring, method="direct" if ring.p is None else "auto")
+
+
+@pytest.mark.parametrize("update", UPDATES)
+@pytest.mark.parametrize("name", list(MODELS))
+def test_every_model_and_update_agrees_with_the_exact_flux(name, update):
+    ring = model_ring(name, update)
+    try:
+        exact = exact_solution(ring)
+    except NoUniqueStationaryStateError:
+        pytest.fail(f"{ring!r} has no unique stationary state: choose another ring")
+    assert exact.n_states > 1
+    r = simulate(ring, steps=200_000, seed=7, replicas=2)
+    assert r.reliable, r.warning
+    assert abs(r.flux - exact.flux) < 5 * r.flux_error, (r.flux, r.flux_error, exact.flux)
+    assert np.allclose(r.c_v, exact.c_v, atol=10 * r.flux_error + 1e-3)
+    assert r.model == ring.model.describe() and r.update == update
+
+
+@pytest.mark.parametrize("update", UPDATES)
+def test_a_wrong_parameter_is_detected_for_a_three_outcome_rule(update):
+    # the bound above can fail: kkw with its acceleration noise 0.1 too large
+    ring = model_ring("kkw", update)
+    exact = exact_solution(ring)
+    r = simulate(ring.with_params(a=PROBS["a"] + 0.1), steps=200_000, seed=7, replicas=2)
+    assert abs(r.flux - exact.flux) > 5 * r.flux_error
+
+
+def frozen_ring(v_even, v_odd, gap, cars=2000):
+    """Cars evenly spaced with ``gap`` empty cells, velocities alternating ``v_even, v_odd``."""
+    length = cars * (gap + 1)
+    pos = np.arange(cars) * (gap + 1)
+    vel = np.where(np.arange(cars) % 2 == 0, v_even, v_odd)
+    return length, pos, vel
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_one_step_outcomes_follow_the_rule_on_a_frozen_configuration(name):
+    # One parallel step: every car draws once from its row, seeing the frozen
+    # configuration; even cars see (v_even, gap, v_odd), odd ones (v_odd, gap,
+    # v_even).  The counts of the new velocities must fit the rule function's
+    # own weights (not the table): chi-square per row, every row of the table
+    # and one gap beyond the horizon.
+    from scipy.stats import chisquare
+
+    model = shipped(name)
+    rule, params = model.spec.function, dict(model.params)
+    worst = 1.0
+    for gap in range(model.horizon() + 2):
+        for v_even in range(model.vmax + 1):
+            for v_odd in range(model.vmax + 1):
+                length, pos, vel = frozen_ring(v_even, v_odd, gap)
+                ring = Ring(length, len(pos), update="parallel", model=model)
+                new_pos, new_vel = evolve(ring, pos, vel, steps=1, seed=gap * 100 + v_even * 10
+                                          + v_odd)
+                # which car moved where: sorted positions keep the order (no overtaking)
+                assert np.array_equal((new_pos - pos) % length, new_vel)
+                for parity, (v, a) in enumerate(((v_even, v_odd), (v_odd, v_even))):
+                    got = new_vel[parity::2]
+                    options = naive_rule.options(rule, params, v, gap, a)
+                    outcomes = [u for u, _ in options]
+                    assert set(got.tolist()) <= set(outcomes), (v, gap, a)
+                    if len(options) == 1:
+                        continue
+                    observed = [int(np.sum(got == u)) for u in outcomes]
+                    expected = [float(w) * len(got) for _, w in options]
+                    worst = min(worst, chisquare(observed, expected).pvalue)
+    # about 300 rows in all: a family-wise false alarm below 1e-3
+    assert worst > 3e-6
+
+
+def successor_frequencies(ring, pos, vel, seeds):
+    """How often each configuration (tuple of cells as naive_rule writes them) follows."""
+    seen = {}
+    for seed in range(seeds):
+        p2, v2 = evolve(ring, pos, vel, steps=1, seed=seed)
+        cells = [None] * ring.length
+        for x, v in zip(p2.tolist(), v2.tolist()):
+            cells[x] = v
+        seen[tuple(cells)] = seen.get(tuple(cells), 0) + 1
+    return seen
+
+
+@pytest.mark.parametrize("update", ["parallel", "ordered-sequential"])
+@pytest.mark.parametrize("name", ["kkw", "vdr", "bjh"])
+def test_one_step_distribution_equals_the_naive_chain(name, update):
+    # A whole step from one configuration, over 3000 seeds, against the
+    # successors naive_rule enumerates from the rule text: the same support
+    # and chi-square-compatible frequencies (ordered-sequential: the random
+    # start car and each car seeing the moved car ahead).
+    from scipy.stats import chisquare
+
+    model = shipped(name)
+    L, pos, vel = 9, [0, 2, 3, 6], [2, 1, 0, 1]
+    cells = [None] * L
+    for x, v in zip(pos, vel):
+        cells[x] = v
+    exact, _ = naive_rule.STEPS[update](tuple(cells), model.spec.function, dict(model.params))
+    seeds = 3000
+    seen = successor_frequencies(Ring(L, len(pos), update=update, model=model), pos, vel, seeds)
+    assert set(seen) <= set(exact)
+    keys = sorted(exact, key=lambda c: tuple(-1 if x is None else x for x in c))
+    observed = [seen.get(k, 0) for k in keys]
+    expected = [float(exact[k]) * seeds for k in keys]
+    assert chisquare(observed, expected).pvalue > 1e-4
+
+
+# --- NaSch: the random stream of the NaSch-only kernel is kept ----------------------------
+
+_M64 = 2**64 - 1
+
+
+class PyXoshiro:
+    """xoshiro256** seeded by splitmix64, in plain Python (Blackman and Vigna's reference)."""
+
+    def __init__(self, seed):
+        z, self.s = seed, []
+        for _ in range(4):
+            z = (z + 0x9E3779B97F4A7C15) & _M64
+            x = z
+            x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & _M64
+            x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & _M64
+            self.s.append(x ^ (x >> 31))
+
+    @staticmethod
+    def _rotl(x, k):
+        return ((x << k) | (x >> (64 - k))) & _M64
+
+    def uniform(self):
+        s = self.s
+        result = (self._rotl((s[1] * 5) & _M64, 7) * 9) & _M64
+        t = (s[1] << 17) & _M64
+        s[2] ^= s[0]
+        s[3] ^= s[1]
+        s[1] ^= s[2]
+        s[0] ^= s[3]
+        s[2] ^= t
+        s[3] = self._rotl(s[3], 45)
+        return (result >> 11) * 2.0**-53
+
+
+def old_nasch_steps(L, pos, vel, vmax, p, steps, seed, update):
+    """The NaSch-only kernels before issue 18, in Python: R1-R2, then ``u < p`` brakes.
+
+    Parallel: one uniform per car in index order, the gap from the old places;
+    random-sequential: a uniform for the cell, one more for a car found there.
+    """
+    rng, pos, vel, n = PyXoshiro(seed), list(pos), list(vel), len(pos)
+    for _ in range(steps):
+        if update == "parallel":
+            old = list(pos)
+            for i in range(n):
+                u = min(vel[i] + 1, vmax, (old[(i + 1) % n] - old[i] - 1) % L)
+                if rng.uniform() < p:
+                    u = max(u - 1, 0)
+                vel[i], pos[i] = u, (pos[i] + u) % L
+            continue
+        for _ in range(L):
+            i = int(rng.uniform() * L)
+            if i >= n:
+                continue
+            u = min(vel[i] + 1, vmax, (pos[(i + 1) % n] - pos[i] - 1) % L)
+            if rng.uniform() < p:
+                u = max(u - 1, 0)
+            vel[i], pos[i] = u, (pos[i] + u) % L
+    order = np.argsort(pos, kind="stable")
+    return np.array(pos)[order], np.array(vel)[order]
+
+
+@pytest.mark.parametrize("update", ["parallel", "random-sequential"])
+@pytest.mark.parametrize("L,N,vmax,p", [(40, 12, 2, 0.5), (31, 1, 3, 0.25), (25, 20, 5, 0.1)])
+def test_nasch_trajectory_is_the_old_kernels_for_the_same_seed(L, N, vmax, p, update):
+    pos, vel = initial_configuration(Ring(L, N, vmax, p), seed=3)
+    got = evolve(Ring(L, N, vmax, p, update), pos, vel, steps=60, seed=12345)
+    want = old_nasch_steps(L, pos.tolist(), vel.tolist(), vmax, p, 60, 12345, update)
+    assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+
+
+def test_nasch_is_the_same_model_by_name_and_by_vmax_p():
+    a = simulate(Ring(300, 90, 2, 0.5), steps=300, seed=4)
+    b = simulate(Ring(300, 90, update="parallel", model=load_model("nasch", {"vmax": 2, "p": 0.5})),
+                 steps=300, seed=4)
+    assert np.array_equal(a.batch_fluxes, b.batch_fluxes)
+    assert a.model == {"name": "nasch", "params": {"vmax": 2, "p": 0.5}, "source": "nasch"}
+
+
+# --- trajectories ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("update", UPDATES)
+def test_trajectory_rows_are_evolve_from_the_same_start(update):
+    ring = Ring(40, 11, update=update, model=shipped("kkw"))
+    t = trajectory(ring, steps=6, warmup=5, seed=8)
+    pos, vel = initial_configuration(ring, seed=8)
+    assert t.shape == (7, 40)
+    for row in range(7):
+        p2, v2 = evolve(ring, pos, vel, steps=5 + row, seed=8)
+        want = np.full(40, -1)
+        want[p2] = v2
+        assert np.array_equal(t[row], want), row
+    assert np.all((t >= 0).sum(axis=1) == 11)
+
+
+def test_trajectory_refuses_too_many_cells_before_work():
+    from markov.montecarlo import MAX_TRAJECTORY_CELLS
+    with pytest.raises(InvalidParameterError, match="record fewer steps"):
+        trajectory(Ring(MAX_TRAJECTORY_CELLS, 10, 2, 0.5), steps=1)
+    with pytest.raises(InvalidParameterError):
+        trajectory(Ring(10, 3, 2, 0.5), steps=-1)
+
+
+def test_a_deterministic_model_is_flagged_with_its_parameters():
+    ring = Ring(100, 20, update="parallel", model=load_model("vdr", {"vmax": 2, "p": 0.0,
+                                                                     "p0": 0.0}))
+    r = simulate(ring, steps=200, warmup=500)
+    assert not r.reliable and "vdr rule at vmax = 2, p = 0.0, p0 = 0.0 is deterministic" \
+        in r.warning
+
+
+def test_cli_simulate_any_model_and_update_records_them():
+    runner = CliRunner()
+    args = ["simulate", "-L", "12", "-N", "4", "--model", "kkw", "--param", "vmax=2",
+            "--param", "a=0.2", "--param", "b=0.35", "--update", "ordered-sequential",
+            "--steps", "200000", "--seed", "7", "--json"]
+    out = runner.invoke(main, args)
+    assert out.exit_code == 0, out.output
+    d = json.loads(out.stdout)
+    ring = model_ring("kkw", "ordered-sequential")
+    assert d["model"] == ring.model.describe() and d["update"] == "ordered-sequential"
+    assert d["p"] is None and d["vmax"] == 2
+    assert d["reliable"] and abs(d["flux"] - exact_solution(ring).flux) < 5 * d["flux_error"]
+    text = runner.invoke(main, args[:-1])
+    assert text.stdout.startswith("Monte Carlo of kkw (vmax=2 d=1 k=1 a=0.2 b=0.35) L=12 N=4")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--model", "kkw", "--p", "0.3"], "rule kkw has no parameter p"),
+    (["--vmax", "3", "--param", "vmax=2"], "--vmax 3 disagrees with --param vmax=2"),
+    (["--model", "vdr", "--param", "p0=2"], "vdr parameter p0 must be a probability"),
+    (["--param", "p"], "--param expects NAME=VALUE"),
+    (["--model", "nope"], "unknown model 'nope'"),
+])
+def test_cli_simulate_refuses_bad_models_in_one_line(args, message):
+    out = CliRunner().invoke(main, ["simulate", "-L", "100", "-c", "0.3"] + args)
+    assert out.exit_code == 2 and out.output.count("\n") == 1
+    assert out.output.startswith("error: ") and message in out.output
+
+
+@pytest.mark.parametrize("update,c,p", [("ordered-sequential", 0.5, 0.5),
+                                        ("ordered-sequential", 0.25, 0.25),
+                                        ("random-sequential", 0.3, 0.5)])
+def test_vmax1_sequential_updates_on_a_large_ring_match_the_tasep_closed_forms(update, c, p):
+    # vmax = 1 NaSch is the TASEP with hopping probability q = 1 - p: random-
+    # sequential f = q c (1 - c) (one hop attempt per cell and step); backward
+    # ordered f = q c (1 - c) / (1 - q c) (Rajewsky et al., J. Stat. Phys. 92,
+    # 151 (1998); docs/models.md).  L = 3000 is the infinite ring within the bars.
+    L = 3000
+    N = round(c * L)
+    c, q = N / L, 1 - p
+    want = q * c * (1 - c) / (1 - q * c) if update == "ordered-sequential" else q * c * (1 - c)
+    r = simulate(Ring(L, N, 1, p, update), steps=10_000, seed=1, replicas=2)
+    assert r.reliable, r.warning
+    assert abs(r.flux - want) < 5 * r.flux_error < 0.005

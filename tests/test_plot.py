@@ -130,3 +130,94 @@ def test_a_table_and_a_figure_simulate_the_same_point_alike():
     other = flux_table(1, 0.5, [6, 8, 10], densities=[0.5], mc_steps=200, mc_warmup=100,
                        mc_length=500, mc_replicas=1, seed=4, methods=(), serial=True)
     assert other.rows[0].mc_flux != f[0]     # the base seed does enter
+
+
+# --- any model: space-time diagram and the models' fundamental diagrams (issue 18) -------
+
+from markov.montecarlo import trajectory  # noqa: E402
+from markov.ring import Ring  # noqa: E402
+from markov.rule import load_model  # noqa: E402
+from nasch.plot import models_data, models_figure, spacetime_figure  # noqa: E402
+
+
+def test_cli_spacetime_writes_the_trajectory(tmp_path):
+    out = tmp_path / "st.png"
+    args = ["plot", "spacetime", "--model", "vdr", "--param", "p0=0.75", "-L", "120",
+            "-c", "0.25", "--steps", "60", "--warmup", "50", "--seed", "2", "--output", str(out)]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0, r.output
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # the same figure from the library: same bytes (the CLI draws this trajectory)
+    ring = Ring(120, 30, model=load_model("vdr", {"p0": 0.75}))
+    again = tmp_path / "again.png"
+    save_figure(spacetime_figure(trajectory(ring, 60, warmup=50, seed=2), ring, 50, 2), again)
+    assert again.read_bytes() == out.read_bytes()
+
+
+def test_spacetime_image_shows_every_car_in_its_velocity_colour():
+    ring = Ring(50, 12, update="ordered-sequential", model=load_model("kkw", {"vmax": 2}))
+    occ = trajectory(ring, 30, warmup=20, seed=1)
+    fig = spacetime_figure(occ, ring, 20, 1)
+    image = fig.axes[0].get_images()[0]
+    assert np.array_equal(image.get_array(), occ)
+    rgba = image.to_rgba(image.get_array())
+    white = np.all(rgba[..., :3] == 1.0, axis=-1)
+    assert np.array_equal(~white, occ >= 0)            # a coloured pixel per car, nothing else
+    for v in range(3):                                 # one colour per velocity
+        assert len({tuple(c) for c in rgba[occ == v]}) <= 1
+    assert fig.axes[0].get_ylim() == (20 + 30 + 0.5, 20 - 0.5)   # time downwards from the warm-up
+    bw = spacetime_figure(occ, ring, 20, 1, colour=False).axes[0].get_images()[0]
+    black = bw.to_rgba(bw.get_array())
+    assert np.all(black[occ >= 0][:, :3] == 0.0)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["-L", "5000"], "exceed 4000 cells x 3999 steps"),
+    (["--steps", "4000"], "exceed 4000 cells x 3999 steps"),
+    (["--model", "kkw", "--p", "0.2"], "rule kkw has no parameter p"),
+    (["--density", "1.5"], "--density"),
+    (["--output", "NODIR/st.png"], "NODIR"),
+    (["--output", "st.gif"], ".png"),
+])
+def test_cli_spacetime_refuses_in_one_line(args, message, tmp_path):
+    base = ["plot", "spacetime", "--output", str(tmp_path / "st.png")]
+    r = CliRunner().invoke(main, base + args)
+    assert r.exit_code == 2 and r.output.startswith("error: ") and r.output.count("\n") == 1
+    assert message in r.output
+    assert not (tmp_path / "st.png").exists()
+
+
+def test_models_data_matches_the_vmax1_closed_form_and_is_reproducible():
+    # NaSch vmax = 1 has an exact flux on the infinite ring; L = 2000 is close to it
+    m = load_model("nasch", {"vmax": 1, "p": 0.5})
+    d = models_data([m, load_model("vdr", {"vmax": 1})], length=2000, densities=5, steps=3000)
+    row = d["models"][0]
+    assert row["c"].tolist() == pytest.approx([k / 6 for k in range(1, 6)], abs=1 / 2000)
+    ok = row["reliable"]
+    assert ok.sum() >= 3
+    z = (row["flux"] - vmax1_infinite_flux(0.5, row["c"])) / row["error"]
+    assert np.all(np.abs(z[ok]) < 5)
+    again = models_data([m], length=2000, densities=5, steps=3000)
+    assert np.array_equal(again["models"][0]["flux"], row["flux"])
+    assert d["models"][1]["model"]["name"] == "vdr"
+    ax = models_figure(d).axes[0]
+    assert ax.get_xlabel().startswith("density") and "L = 2000" in ax.get_title()
+
+
+def test_cli_models_figure_and_its_refusals(tmp_path):
+    out = tmp_path / "fd.png"
+    r = CliRunner().invoke(main, ["plot", "models", "--models", "nasch,kkw", "--vmax", "2",
+                                  "--param", "p=0.25", "-L", "200", "--densities", "4",
+                                  "--steps", "200", "--output", str(out)])
+    assert r.exit_code == 0, r.output
+    assert out.read_bytes()[:4] == b"\x89PNG"
+    for args, message in [(["--models", "nasch,nope"], "unknown model 'nope'"),
+                          (["--models", "nasch,nasch"], "names a model twice"),
+                          (["--param", "p0=0.5"], "--param p0: no model of --models has it"),
+                          (["--steps", "10"], "--steps must be at least 32"),
+                          (["--densities", "0"], "densities must be"),
+                          (["--output", str(tmp_path / "x.txt")], ".png")]:
+        bad = CliRunner().invoke(main, ["plot", "models", "--models", "nasch", "-L", "100",
+                                        "--output", str(tmp_path / "y.png")] + args)
+        assert bad.exit_code == 2 and bad.output.startswith("error: "), (args, bad.output)
+        assert bad.output.count("\n") == 1 and message in bad.output, (args, bad.output)

@@ -7,6 +7,7 @@ from markov.errors import InvalidParameterError
 
 from ..cli_common import (ensure_dask_options, ensure_probabilities, handle_errors, number_list,
                           quiet_option)
+from ..model_options import model_options
 
 __all__ = ["plot"]
 
@@ -18,6 +19,8 @@ def plot():
     \b
     Example:
       nasch plot fundamental --vmax 2 --p 0.5 --output fig.png
+      nasch plot spacetime --model vdr --param p0=0.75 -L 400 -c 0.2 --output st.png
+      nasch plot models --models nasch,vdr,tt --vmax 2 --output fd.png
     """
 
 
@@ -88,4 +91,133 @@ def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc
     for w in caught:
         click.echo(f"warning: {w.message}", err=True)
     save_figure(fundamental_figure(panels), output)
+    click.echo(f"wrote {output}", err=True)
+
+
+_UPDATES = ("parallel", "random-sequential", "ordered-sequential")
+
+
+@plot.command(short_help="Space-time diagram of a Monte Carlo trajectory, any model.")
+@click.option("--length", "-L", type=int, default=400, show_default=True,
+              help="Ring length L (cells across; at most 4000).")
+@click.option("--density", "-c", type=float, default=0.2, show_default=True,
+              help="Car density; N = round(c L).")
+@click.option("--vmax", type=int, default=None,
+              help="Maximal velocity [the model's default; nasch: 2].")
+@click.option("--p", "p", type=float, default=None,
+              help="The model's braking probability p [its default; nasch: 0.5].")
+@model_options
+@click.option("--update", type=click.Choice(_UPDATES), default="parallel", show_default=True,
+              help="Update order.")
+@click.option("--steps", type=int, default=300, show_default=True,
+              help="Time steps drawn (rows; at most 3999).")
+@click.option("--warmup", type=int, default=1000, show_default=True,
+              help="Time steps run before the first row.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Random seed.")
+@click.option("--bw", is_flag=True, help="Cars black on white instead of coloured by velocity.")
+@click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
+              help="Figure file, .png or .pdf.")
+@quiet_option
+@handle_errors
+def spacetime(length, density, vmax, p, model, params, update, steps, warmup, seed, bw,
+              output):
+    """Space-time diagram: cells across, time downwards, a pixel per occupied cell.
+
+    From a Monte Carlo trajectory after a warm-up (random start, cars at
+    rest); cars are coloured by velocity (red: standing, blue: vmax), or
+    black with --bw.  Jams show as bands drifting backwards.
+
+    \b
+    Example:
+      nasch plot spacetime --model nasch --p 0.25 -L 400 -c 0.2 --steps 300 --output st.png
+      nasch plot spacetime --model vdr --param p0=0.75 -L 400 -c 0.15 -o vdr.png
+      nasch plot spacetime --model kkw --update ordered-sequential --bw -o kkw.pdf
+    """
+    from markov.files import check_output_path
+    from markov.montecarlo import trajectory
+    from markov.ring import Ring
+    from markov.validate import ensure_int, ensure_real
+
+    from ..model_options import build_model
+    from ..plot import FIGURE_FORMATS, ensure_spacetime_size, save_figure, spacetime_figure
+
+    check_output_path(output, suffixes=FIGURE_FORMATS)   # before the work
+    length = ensure_int("--length", length, 1)
+    steps = ensure_int("--steps", steps, 1)
+    ensure_spacetime_size(length, steps)
+    cars = int(round(ensure_real("--density", density, 0, 1) * length))
+    ring = Ring(length, cars, update=update, model=build_model(model, params, vmax=vmax, p=p))
+    occupancy = trajectory(ring, steps, warmup=ensure_int("--warmup", warmup, 0), seed=seed)
+    save_figure(spacetime_figure(occupancy, ring, warmup, seed, colour=not bw), output)
+    click.echo(f"wrote {output}", err=True)
+
+
+@plot.command(short_help="Fundamental diagrams of several models, from Monte Carlo.")
+@click.option("--models", "models_text", default="nasch,vdr,tt,bjh,fi,cc,kkw",
+              show_default=True, help="Comma-separated models (shipped names or FILE.py:FUNC).")
+@click.option("--vmax", type=int, default=2, show_default=True,
+              help="Maximal velocity of every model.")
+@click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
+              help="A parameter for every model that has it (repeatable), e.g. --param p=0.25.")
+@click.option("--update", type=click.Choice(_UPDATES), default="parallel", show_default=True,
+              help="Update order.")
+@click.option("--length", "-L", type=int, default=1000, show_default=True,
+              help="Monte Carlo ring length.")
+@click.option("--densities", type=int, default=21, show_default=True,
+              help="Densities k/(n+1), k = 1..n.")
+@click.option("--steps", type=int, default=2000, show_default=True,
+              help="Recorded time steps per density (warm-up cut by MSER).")
+@click.option("--replicas", type=int, default=1, show_default=True,
+              help="Independent runs per density.")
+@click.option("--seed", type=int, default=0, show_default=True, help="Base random seed.")
+@click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
+              help="Figure file, .png or .pdf.")
+@quiet_option
+@handle_errors
+def models(models_text, vmax, params, update, length, densities, steps, replicas, seed,
+           output):
+    """Fundamental diagrams (flux against density) of several models, from Monte Carlo.
+
+    Each point is one run on a ring of --length cells with its 1-sigma
+    error bar; a hollow marker is a run without an honest bar (too short,
+    drifting or deterministic; the reasons go to stderr).  Each model takes
+    its own defaults (docs/models.md) except --vmax and the --param values.
+
+    \b
+    Example:
+      nasch plot models --models nasch,vdr,tt --vmax 2 --output fd.png
+      nasch plot models --models nasch,kkw --vmax 3 --param p=0.25 --steps 4000 -o fd.pdf
+    """
+    from markov.files import check_output_path
+    from markov.montecarlo import MIN_STEPS
+    from markov.rule import load_model
+    from markov.validate import ensure_int
+
+    from ..model_options import parse_params
+    from ..plot import FIGURE_FORMATS, models_data, models_figure, save_figure
+
+    check_output_path(output, suffixes=FIGURE_FORMATS)   # before the work
+    names = [m.strip() for m in models_text.split(",") if m.strip()]
+    if not names:
+        raise InvalidParameterError("--models needs at least one model")
+    if len(set(names)) < len(names):
+        raise InvalidParameterError(f"--models names a model twice: {models_text}")
+    values = {**parse_params(params), "vmax": ensure_int("--vmax", vmax, 1)}
+    specs = [load_model(n, {"vmax": values["vmax"]}) for n in names]
+    unused = sorted(set(values) - {k for s in specs for k in s.params})
+    if unused:
+        raise InvalidParameterError(f"--param {', '.join(unused)}: no model of --models has it")
+    chosen = [s.with_params(**{k: v for k, v in values.items() if k in s.params})
+              for s in specs]
+    if ensure_int("--steps", steps, 1) < MIN_STEPS:
+        raise InvalidParameterError(f"--steps must be at least {MIN_STEPS}, got {steps}")
+    data = models_data(chosen, length=length, densities=densities, steps=steps, update=update,
+                       seed=seed, replicas=replicas)
+    for m in data["models"]:
+        bad = int((~m["reliable"]).sum())
+        if bad:
+            why = next(w for w in m["warnings"] if w)
+            click.echo(f"warning: {m['model']['name']}: {bad} of {len(m['c'])} points without"
+                       f" an honest bar (hollow), e.g. {why}", err=True)
+    save_figure(models_figure(data), output)
     click.echo(f"wrote {output}", err=True)

@@ -6,6 +6,7 @@ import click
 from markov.errors import InvalidParameterError
 
 from ..cli_common import emit_json, handle_errors, quiet_option
+from ..model_options import build_model, model_options
 
 __all__ = ["simulate"]
 
@@ -15,8 +16,11 @@ __all__ = ["simulate"]
 @click.option("--density", "-c", type=float, default=None,
               help="Car density; N = round(c L).  Give this or --cars.")
 @click.option("--cars", "-N", type=int, default=None, help="Number of cars N.")
-@click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity.")
-@click.option("--p", "p", type=float, required=True, help="Braking probability in [0, 1].")
+@click.option("--vmax", type=int, default=None,
+              help="Maximal velocity [the model's default; nasch: 2].")
+@click.option("--p", "p", type=float, default=None,
+              help="Braking probability in [0, 1], the model's p [its default; nasch: 0.5].")
+@model_options
 @click.option("--steps", type=int, default=10000, show_default=True,
               help="Recorded time steps per replica.")
 @click.option("--warmup", type=int, default=None,
@@ -27,26 +31,31 @@ __all__ = ["simulate"]
               help="Blocks of the recorded flux series (at most one per step).")
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Random seed; the same seed gives identical output.")
-@click.option("--update", type=click.Choice(["parallel", "random-sequential"]),
-              default="parallel", show_default=True, help="Update order.")
+@click.option("--update", type=click.Choice(["parallel", "random-sequential",
+                                             "ordered-sequential"]),
+              default="parallel", show_default=True,
+              help="Update order (ordered-sequential: backward from a random start car).")
 @click.option("--max-memory", type=float, default=None,
               help="Refuse runs needing more than this many GiB (default 75% of RAM).")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @quiet_option
 @handle_errors
-def simulate(length, density, cars, vmax, p, steps, warmup, replicas, batches, seed, update,
-             max_memory, as_json):
+def simulate(length, density, cars, vmax, p, model, params, steps, warmup, replicas, batches,
+             seed, update, max_memory, as_json):
     """Monte Carlo flux of a large ring, with an autocorrelation error bar.
 
     The warm-up is cut from the data (MSER), the 1-sigma error comes from the
     integrated autocorrelation time, and a run too short for an honest bar
     (or whose replicas disagree) says so: a warning on stderr and
-    "reliable": false with the reason in the JSON.
+    "reliable": false with the reason in the JSON.  Any model (--model,
+    --param; docs/models.md) and update; the JSON records both.
 
     \b
     Example:
       nasch simulate --length 100000 --density 0.2 --vmax 5 --p 0.25 --steps 2000
       nasch simulate -L 1000 -c 0.5 --vmax 2 --p 0.5 --seed 7 --json
+      nasch simulate -L 10000 -c 0.2 --model vdr --param p0=0.75 --p 0.1 --steps 4000
+      nasch simulate -L 10000 -c 0.3 --model kkw --update ordered-sequential
     """
     from markov.ring import Ring
     from markov.montecarlo import simulate as run
@@ -57,7 +66,7 @@ def simulate(length, density, cars, vmax, p, steps, warmup, replicas, batches, s
     if density is not None:
         density = ensure_real("--density", density, 0, 1)
         cars = int(round(density * ensure_int("--length", length, 1)))
-    ring = Ring(length, cars, vmax, p, update)
+    ring = Ring(length, cars, update=update, model=build_model(model, params, vmax=vmax, p=p))
     max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
     r = run(ring, steps=steps, warmup=warmup, seed=seed, batches=batches, replicas=replicas,
             max_memory=None if max_memory is None else max_memory * 2**30)
@@ -66,8 +75,9 @@ def simulate(length, density, cars, vmax, p, steps, warmup, replicas, batches, s
     if as_json:
         emit_json(r.to_dict())
         return
-    click.echo(f"NaSch Monte Carlo L={length} N={cars} (c={ring.density:.6g}) vmax={vmax}"
-               f" p={p:g} update={update} seed={seed}")
+    values = " ".join(f"{k}={v:g}" for k, v in ring.model.params.items())
+    click.echo(f"Monte Carlo of {ring.model.name} ({values}) L={length} N={cars}"
+               f" (c={ring.density:.6g}) update={update} seed={seed}")
     warm = (f"{r.warmup} warm-up" if warmup is not None
             else f"automatic warm-up, at most {r.warmup_used} steps cut")
     click.echo(f"  {r.replicas} x {r.steps} steps ({warm}) in {r.batches} blocks,"
