@@ -334,7 +334,8 @@ def _exact_rings(model, c: Fraction, lengths, max_states: int, budget,
     vmax, p = model.vmax, model.params.get("p")
     if lengths is None:
         try:
-            Ls = choose_lengths(vmax, p, c, budget, order=order, model=model)
+            Ls = choose_lengths(vmax, p, c, budget, order=order,
+                                **({} if is_nasch(model) else {"model": model}))
         except InvalidParameterError as exc:
             notes.append(f"exact rings, {_where(vmax, p)}, c = {c}: {exc}")
             return []

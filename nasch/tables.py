@@ -453,7 +453,8 @@ def flux_table(vmax: int | None = None, p=None, lengths: Sequence[int] | None = 
 
         rings_of = {m: sorted({pt for c in (densities or [0.5]) for pt in table_points(
             choose_lengths(vmax, m.params.get("p"), c, budget, order=order, update=update,
-                           model=m), densities=[c])}) for m in models}
+                           **({} if is_nasch(m) else {"model": m})), densities=[c])})
+            for m in models}   # NaSch: the very call of the study and the figure
     else:
         rings = table_points(lengths, cars, densities)
         rings_of = {m: rings for m in models}
