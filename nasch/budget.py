@@ -17,6 +17,13 @@ with ``products(p)`` the products ``x P`` the default solver needs (about 25
 up to ``p = 0.3``, 60 at ``p = 0.5``, rising as ``p -> 1`` where the chain
 mixes slowly).  The
 model errs on the slow side: a ring it admits finishes within its budget.
+
+Other models (:mod:`markov.rule`): no transfer-matrix count exists, so the
+states are bounded by every configuration over ``L`` and priced at NaSch's
+cost per state; the choice is conservative (vdr, BJH, CC at vmax 2, L = 16,
+N = 8: 17.8 s, 17.8 s, 31.3 s predicted against 0.77 s, 0.65 s, 1.65 s
+measured on the shared 2-core VM, recurrent classes of 32077 states against
+the bound's 5.3 million), and :func:`choose_lengths` says so in its line.
 """
 from __future__ import annotations
 
@@ -24,7 +31,7 @@ import math
 import re
 
 from markov.errors import InvalidParameterError
-from markov.ring import PARALLEL, Ring
+from markov.ring import NASCH, PARALLEL, Ring
 
 from .rings import density_fraction
 
@@ -89,16 +96,27 @@ def parse_budget(text) -> float:
     return seconds
 
 
-def predicted_classes(length: int, cars: int, vmax: int, update: str = PARALLEL) -> int:
+def _ring(length: int, cars: int, vmax: int | None, update: str, model) -> Ring:
+    """The ring of a prediction: NaSch (its cost does not depend on ``p``) or ``model``."""
+    if model is None:
+        return Ring(length, cars, vmax, 0.5, update)
+    return Ring(length, cars, update=update, model=model)
+
+
+def predicted_classes(length: int, cars: int, vmax: int, update: str = PARALLEL,
+                      model=None) -> int:
     """Rotation classes of the recurrent class, predicted before enumerating.
 
     Exact count / L (a lower bound by at most the periodic orbits) where the
-    transfer-matrix count exists; otherwise every configuration over ``L``.
+    transfer-matrix count exists (NaSch, parallel update); otherwise every
+    configuration over ``L``, an upper bound for any model.
 
     Parameters
     ----------
     length, cars, vmax : int
     update : str
+    model : markov.rule.Model, optional
+        Default NaSch; given, its ``vmax`` is used.
 
     Returns
     -------
@@ -107,31 +125,39 @@ def predicted_classes(length: int, cars: int, vmax: int, update: str = PARALLEL)
     from markov.goe_census import recurrent_class_bound
     from markov.statespace import count_all
 
-    ring = Ring(length, cars, vmax, 0.5, update)
+    ring = _ring(length, cars, vmax, update, model)
     n = recurrent_class_bound(ring, lump=True)
     return n if n is not None else -(-count_all(ring) // length)
 
 
-def _products(p: float) -> float:
+def _products(p: float | None) -> float:
     """Products ``x P`` of the solver ``auto`` picks, measured at L = 22: aggregation
     18-22 up to p = 0.3 (:data:`markov.chain.AGGREGATION_MAX_P`), BiCGSTAB 59 at
     p = 0.5 and 179 at p = 0.9."""
     from markov.chain import AGGREGATION_MAX_P
 
+    if p is None:   # a model without p: the count of p = 0.5
+        p = 0.5
     if p <= AGGREGATION_MAX_P:
         return 25.0
     return max(50.0, 59.0 + 300.0 * (float(p) - 0.5))
 
 
-def predicted_seconds(length: int, cars: int, vmax: int, p: float,
-                      update: str = PARALLEL) -> float:
+def predicted_seconds(length: int, cars: int, vmax: int, p: float | None,
+                      update: str = PARALLEL, model=None) -> float:
     """Predicted seconds of one exact solve (search, operator, solver), one core.
+
+    For a model other than NaSch: NaSch's cost per state applied to every
+    configuration (:func:`predicted_classes`), an upper bound of its
+    recurrent class (see the module docstring for how far above).
 
     Parameters
     ----------
     length, cars, vmax : int
-    p : float
+    p : float or None
     update : str
+    model : markov.rule.Model, optional
+        Default NaSch; given, ``vmax`` and ``p`` should be its own.
 
     Returns
     -------
@@ -139,13 +165,13 @@ def predicted_seconds(length: int, cars: int, vmax: int, p: float,
     """
     if cars in (0, length):
         return 0.0
-    n = predicted_classes(length, cars, vmax, update)
+    n = predicted_classes(length, cars, vmax, update, model)
     seconds = _FIXED + n * (_PER_STATE + _PER_PRODUCT * _products(p))
     return seconds * (_SEQUENTIAL_FACTOR if update != PARALLEL else 1.0)
 
 
-def predicted_bytes(length: int, cars: int, vmax: int, p: float,
-                    update: str = PARALLEL) -> float:
+def predicted_bytes(length: int, cars: int, vmax: int, p: float | None,
+                    update: str = PARALLEL, model=None) -> float:
     """Predicted peak bytes of one exact solve (the solver ``auto`` picks, matrix-free).
 
     The chain's own memory model (:mod:`markov.memory`) per predicted rotation class.
@@ -153,8 +179,9 @@ def predicted_bytes(length: int, cars: int, vmax: int, p: float,
     Parameters
     ----------
     length, cars, vmax : int
-    p : float
+    p : float or None
     update : str
+    model : markov.rule.Model, optional
 
     Returns
     -------
@@ -165,23 +192,29 @@ def predicted_bytes(length: int, cars: int, vmax: int, p: float,
 
     if cars in (0, length):
         return 0.0
-    method = "aggregation" if update == PARALLEL and p <= AGGREGATION_MAX_P else "bicgstab"
+    method = ("aggregation" if update == PARALLEL and p is not None and p <= AGGREGATION_MAX_P
+              else "bicgstab")
     per_state = (memory.factored_bytes_per_state(method) if update == PARALLEL
                  else memory.rows_bytes_per_state(method))
-    return predicted_classes(length, cars, vmax, update) * per_state
+    return predicted_classes(length, cars, vmax, update, model) * per_state
 
 
-def _solvable(length: int, cars: int, vmax: int, update: str) -> bool:
+def _general(model) -> bool:
+    """Whether ``model`` is one the cost model was not measured on (not NaSch)."""
+    return model is not None and model.source != NASCH
+
+
+def _solvable(length: int, cars: int, vmax: int, update: str, model=None) -> bool:
     """Whether the exact solver can represent the ring at all (64-bit keys and words)."""
     from markov.chain import representable
 
-    return representable(Ring(length, cars, vmax, 0.5, update))
+    return representable(_ring(length, cars, vmax, update, model))
 
 
 def lengths_within_budget(vmax: int, p: float, density, budget: float, count: int = 4,
                           update: str = PARALLEL, shortest: int = 4,
                           longest: int = MAX_BUDGET_LENGTH,
-                          max_memory: float | None = None) -> list[int]:
+                          max_memory: float | None = None, model=None) -> list[int]:
     """The ``count`` largest ring lengths of a density that together fit the budget.
 
     Each ring must also fit the memory limit on its own (:func:`predicted_bytes`),
@@ -203,6 +236,8 @@ def lengths_within_budget(vmax: int, p: float, density, budget: float, count: in
     max_memory : float, optional
         Bytes one ring may use; default 75 % of physical memory
         (:func:`markov.memory.memory_limit`).
+    model : markov.rule.Model, optional
+        Default NaSch (``vmax``, ``p``); given, ``vmax`` and ``p`` should be its own.
 
     Returns
     -------
@@ -227,14 +262,14 @@ def lengths_within_budget(vmax: int, p: float, density, budget: float, count: in
     limit = memory_limit(max_memory)
     candidates = []
     for L in range(max(shortest, c.denominator), longest + 1):
-        if (c * L).denominator != 1 or not _solvable(L, int(c * L), vmax, update):
+        if (c * L).denominator != 1 or not _solvable(L, int(c * L), vmax, update, model):
             continue
-        if predicted_bytes(L, int(c * L), vmax, p, update) > limit:
+        if predicted_bytes(L, int(c * L), vmax, p, update, model) > limit:
             break  # the memory only grows with L
         candidates.append(L)
     if len(candidates) <= count:
         return candidates
-    cost = [predicted_seconds(L, int(c * L), vmax, p, update) for L in candidates]
+    cost = [predicted_seconds(L, int(c * L), vmax, p, update, model) for L in candidates]
     best = None
     for end in range(count, len(candidates) + 1):
         if sum(cost[end - count:end]) <= budget:
@@ -250,7 +285,8 @@ def lengths_within_budget(vmax: int, p: float, density, budget: float, count: in
 
 
 def choose_lengths(vmax: int, p: float, density, budget: float | None = None, *,
-                   order: int = 2, update: str = PARALLEL, announce: bool = True) -> list[int]:
+                   order: int = 2, update: str = PARALLEL, announce: bool = True,
+                   model=None) -> list[int]:
     """The rings of one density for the ``L -> inf`` extrapolation, by budget.
 
     The one ring choice of ``nasch table``, ``nasch study`` and ``nasch plot``
@@ -270,6 +306,9 @@ def choose_lengths(vmax: int, p: float, density, budget: float | None = None, *,
         Order of the 1/L series the rings are for.
     update : str
     announce : bool
+    model : markov.rule.Model, optional
+        Default NaSch (``vmax``, ``p``); another model's rings come from the
+        conservative cost model (:func:`predicted_seconds`), said in the line.
 
     Returns
     -------
@@ -278,10 +317,14 @@ def choose_lengths(vmax: int, p: float, density, budget: float | None = None, *,
     import sys
 
     budget = DEFAULT_BUDGET if budget is None else budget
-    lengths = lengths_within_budget(vmax, p, density, budget, count=order + 2, update=update)
+    lengths = lengths_within_budget(vmax, p, density, budget, count=order + 2, update=update,
+                                    model=model)
     if announce:
         c = density_fraction(density)
-        seconds = sum(predicted_seconds(L, int(c * L), vmax, p, update) for L in lengths)
-        print(f"rings for c = {c}, p = {p:g}: L = {', '.join(map(str, lengths))}"
-              f" (predicted {seconds:.3g} s of a {budget:g} s budget)", file=sys.stderr)
+        seconds = sum(predicted_seconds(L, int(c * L), vmax, p, update, model) for L in lengths)
+        where = f"c = {c}" + ("" if p is None else f", p = {p:g}")
+        note = (f"; model {model.name}: NaSch's cost per state on every configuration, an"
+                f" upper bound" if _general(model) else "")
+        print(f"rings for {where}: L = {', '.join(map(str, lengths))}"
+              f" (predicted {seconds:.3g} s of a {budget:g} s budget{note})", file=sys.stderr)
     return lengths

@@ -197,7 +197,7 @@ def extrapolate(lengths: Sequence[int], fluxes: Sequence[float], order: int = 2,
 
 def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int] | None = None,
                      order: int = 2, n_fit: int | None = None, update: str = PARALLEL,
-                     budget: float | None = None) -> Extrapolation:
+                     budget: float | None = None, model=None) -> Extrapolation:
     """Exact fluxes at fixed density on the given rings, extrapolated to ``L = inf``.
 
     Parameters
@@ -215,6 +215,8 @@ def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int] | None = None
         Seconds for the exact rings instead of ``lengths``: the ``n_fit``
         (default ``order + 2``) largest rings of this density that fit
         (:func:`nasch.budget.lengths_within_budget`).
+    model : markov.rule.Model, optional
+        Another update rule; ``vmax`` and ``p`` then None or the model's own.
 
     Returns
     -------
@@ -233,8 +235,10 @@ def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int] | None = None
     if budget is not None:
         from .budget import lengths_within_budget
 
-        lengths = lengths_within_budget(vmax, p, c, budget, count=n_fit or order + 2,
-                                        update=update)
+        vmax_, p_ = ((vmax, p) if model is None
+                     else (model.vmax, model.params.get("p")))
+        lengths = lengths_within_budget(vmax_, p_, c, budget, count=n_fit or order + 2,
+                                        update=update, model=model)
     elif lengths is None:
         raise InvalidParameterError("give the ring lengths or a budget")
     Ls = commensurate_lengths(c, lengths)
@@ -242,5 +246,5 @@ def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int] | None = None
         raise InvalidParameterError(
             f"density {c} needs at least {order + 1} ring lengths L with c*L integer;"
             f" usable among the given: {Ls}")
-    fluxes = [solve(Ring(L, int(c * L), vmax, p, update)).flux for L in Ls]
+    fluxes = [solve(Ring(L, int(c * L), vmax, p, update, model)).flux for L in Ls]
     return extrapolate(Ls, fluxes, order=order, n_fit=n_fit)

@@ -6,29 +6,37 @@ point, and fan them out through :func:`nasch.sweep.run_jobs`:
 
 * :class:`ExactJob`: the exact stationary state of one ring
   (:func:`markov.solve`, with the Garden of Eden size bound), giving an
-  :class:`ExactResult`;
+  :class:`ExactResult` (a NaN flux and the reason for a ring with several
+  closed classes);
 * :class:`MonteCarloJob`: a simulation of a large ring at one density
   (:func:`markov.montecarlo.simulate`), giving a :class:`MonteCarloResult`.
 
 The seed of a Monte Carlo job depends only on the base seed and the point
-(density, ``vmax``, ``p``, update order) through :func:`point_seed`, so the
+(density, model, update order) through :func:`point_seed`, so the
 same point gets the same simulation in a table, a figure and the study, on
 any worker and in any order.
+
+A job carries its model (:class:`markov.rule.Model`, picklable and hashable):
+a job is ``(length, cars, model, update, ...)``, and ``ExactJob(L, N, vmax, p)``
+the NaSch shorthand, as for :class:`markov.ring.Ring`.
 """
 from __future__ import annotations
 
+import hashlib
 from fractions import Fraction
 from typing import NamedTuple
 
 import numpy as np
 
-from markov.errors import InvalidParameterError, NaschError
-from markov.ring import PARALLEL, UPDATES, Ring
+from markov.errors import InvalidParameterError, NaschError, NoUniqueStationaryStateError
+from markov.ring import NASCH, PARALLEL, UPDATES, Ring
+from markov.rule import Model
 from markov.validate import ensure_int
 
 from .rings import mc_ring
 
-__all__ = ["ExactJob", "MonteCarloJob", "ExactResult", "MonteCarloResult", "job_ring",
+__all__ = ["ExactJob", "MonteCarloJob", "ExactResult", "MonteCarloResult", "job_model",
+           "job_ring", "is_nasch",
            "point_seed", "monte_carlo_job", "run_job", "run_job_keep_going", "job_cost",
            "preflight", "ensure_mc_steps"]
 
@@ -37,14 +45,58 @@ _PARALLEL_RATE = 1e8
 _SEQUENTIAL_RATE = 2e7
 
 
-class ExactJob(NamedTuple):
-    """The exact stationary state of one ring."""
+def job_model(vmax: int | None = None, p=None, model: Model | None = None,
+              update: str = PARALLEL) -> Model:
+    """The model of a job: ``model``, or NaSch with ``vmax`` and ``p`` (as :class:`Ring` reads them).
 
+    Parameters
+    ----------
+    vmax : int, optional
+    p : float, optional
+        With a model: None, or equal to the model's (``p`` the model's parameter ``p``).
+    model : Model, optional
+    update : str
+
+    Returns
+    -------
+    Model
+    """
+    return Ring(1, 0, vmax, p, update, model).model
+
+
+class _ExactFields(NamedTuple):
     length: int
     cars: int
-    vmax: int
-    p: float
-    update: str = PARALLEL
+    model: Model
+    update: str
+
+
+class ExactJob(_ExactFields):
+    """The exact stationary state of one ring: ``(length, cars, model, update)``.
+
+    Built like a :class:`markov.ring.Ring`: ``ExactJob(L, N, vmax, p)`` is the
+    NaSch ring, ``ExactJob(L, N, update=..., model=m)`` any model.
+    """
+
+    __slots__ = ()
+
+    def __new__(cls, length: int, cars: int, vmax: int | None = None, p=None,
+                update: str = PARALLEL, model: Model | None = None):
+        return super().__new__(cls, int(length), int(cars), job_model(vmax, p, model, update),
+                               update)
+
+    def __getnewargs__(self):   # pickle: rebuild from the model, not from (vmax, p)
+        return (self.length, self.cars, None, None, self.update, self.model)
+
+    @property
+    def vmax(self) -> int:
+        """The model's maximal velocity."""
+        return self.model.vmax
+
+    @property
+    def p(self):
+        """The model's parameter ``p`` (None for a model without one)."""
+        return self.model.params.get("p")
 
 
 class MonteCarloJob(NamedTuple):
@@ -55,13 +107,22 @@ class MonteCarloJob(NamedTuple):
 
     length: int
     cars: int
-    vmax: int
-    p: float
+    model: Model
     update: str
     steps: int
     warmup: int | None
     seed: int
     replicas: int = 1
+
+    @property
+    def vmax(self) -> int:
+        """The model's maximal velocity."""
+        return self.model.vmax
+
+    @property
+    def p(self):
+        """The model's parameter ``p`` (None for a model without one)."""
+        return self.model.params.get("p")
 
 
 class ExactResult(NamedTuple):
@@ -91,7 +152,7 @@ class MonteCarloResult(NamedTuple):
 
 
 def job_ring(job: ExactJob | MonteCarloJob) -> Ring:
-    """The ring a job computes.
+    """The ring a job computes, with its model.
 
     Parameters
     ----------
@@ -101,36 +162,55 @@ def job_ring(job: ExactJob | MonteCarloJob) -> Ring:
     -------
     Ring
     """
-    return Ring(job.length, job.cars, job.vmax, job.p, job.update)
+    return Ring(job.length, job.cars, update=job.update, model=job.model)
 
 
-def point_seed(seed: int, density: Fraction, vmax: int, p: float,
-               update: str = PARALLEL) -> int:
+def is_nasch(model: Model) -> bool:
+    """Whether ``model`` is the shipped NaSch rule.
+
+    Parameters
+    ----------
+    model : Model
+
+    Returns
+    -------
+    bool
+    """
+    return model.source == NASCH
+
+
+def point_seed(seed: int, density: Fraction, model: Model, update: str = PARALLEL) -> int:
     """The Monte Carlo seed of a point: a 63-bit function of the base seed and the point.
 
     Never of the worker, the order of completion, or which product (table,
-    figure, study) asks.
+    figure, study) asks.  A NaSch point is ``(density, vmax, p, update)`` (the
+    seeds of every NaSch table and figure so far); any other model's point
+    adds its :meth:`markov.rule.Model.key`, so two models never share a seed.
 
     Parameters
     ----------
     seed : int
         Base seed (``--seed``).
     density : Fraction
-    vmax : int
-    p : float
+    model : Model
     update : str
 
     Returns
     -------
     int
     """
-    ints = [int(seed), density.numerator, density.denominator, int(vmax),
-            round(float(p) * 2**40), UPDATES.index(update)]
+    p = model.params.get("p")
+    ints = [int(seed), density.numerator, density.denominator, int(model.vmax),
+            round(float(p if p is not None else 0.0) * 2**40), UPDATES.index(update)]
+    if not is_nasch(model):
+        digest = hashlib.sha256(model.key().encode()).digest()
+        ints += [int.from_bytes(digest[i:i + 4], "little") for i in range(0, 16, 4)]
     state = np.random.SeedSequence(ints).generate_state(2, dtype=np.uint32)
     return (int(state[0]) << 31) ^ int(state[1])
 
 
-def monte_carlo_job(density: Fraction, vmax: int, p: float, *, update: str = PARALLEL,
+def monte_carlo_job(density: Fraction, vmax: int | None = None, p=None, *,
+                    model: Model | None = None, update: str = PARALLEL,
                     mc_length: int, steps: int, warmup: int | None, replicas: int = 1,
                     seed: int = 0) -> MonteCarloJob:
     """The Monte Carlo job of a point: its ring (:func:`mc_ring`) and seed (:func:`point_seed`).
@@ -138,8 +218,9 @@ def monte_carlo_job(density: Fraction, vmax: int, p: float, *, update: str = PAR
     Parameters
     ----------
     density : Fraction
-    vmax : int
-    p : float
+    vmax, p : optional
+        The NaSch model; with ``model``, None or equal to the model's.
+    model : Model, optional
     update : str
     mc_length : int
         Smallest ring length.
@@ -152,14 +233,19 @@ def monte_carlo_job(density: Fraction, vmax: int, p: float, *, update: str = PAR
     -------
     MonteCarloJob
     """
+    model = job_model(vmax, p, model, update)
     length, cars = mc_ring(density, mc_length)
-    return MonteCarloJob(length, cars, int(vmax), float(p), update, int(steps),
+    return MonteCarloJob(length, cars, model, update, int(steps),
                          None if warmup is None else int(warmup),
-                         point_seed(seed, density, vmax, p, update), int(replicas))
+                         point_seed(seed, density, model, update), int(replicas))
 
 
 def run_job(job: ExactJob | MonteCarloJob) -> ExactResult | MonteCarloResult:
     """Compute one job (module level: it travels to Dask workers by pickle).
+
+    A ring whose chain has several closed classes reachable from the compact
+    jam has no one stationary state: its result is a NaN flux and the reason
+    (``error``), never the numbers of one arbitrary class.
 
     Parameters
     ----------
@@ -179,7 +265,10 @@ def run_job(job: ExactJob | MonteCarloJob) -> ExactResult | MonteCarloResult:
     from markov.chain import solve
     from markov.goe_census import recurrent_class_bound
 
-    sol = solve(job_ring(job), state_bound=recurrent_class_bound)
+    try:
+        sol = solve(job_ring(job), state_bound=recurrent_class_bound)
+    except NoUniqueStationaryStateError as exc:
+        return ExactResult(float("nan"), (), 0, float("nan"), str(exc))
     return ExactResult(float(sol.flux), tuple(float(x) for x in sol.c_v), int(sol.n_states),
                        float(sol.residual))
 
@@ -220,7 +309,8 @@ def job_cost(job: ExactJob | MonteCarloJob) -> float:
     if isinstance(job, ExactJob):
         from .budget import predicted_seconds
 
-        return predicted_seconds(*job)
+        return predicted_seconds(job.length, job.cars, job.vmax, job.p, job.update,
+                                 model=job.model)
     rate = _PARALLEL_RATE if job.update == PARALLEL else _SEQUENTIAL_RATE
     return job.cars * (job.steps + (job.warmup or 0)) * job.replicas / rate
 

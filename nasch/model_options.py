@@ -23,7 +23,7 @@ import click
 
 from markov.errors import InvalidParameterError
 
-__all__ = ["model_options", "parse_params", "build_model"]
+__all__ = ["model_options", "parse_params", "param_names", "build_model"]
 
 _INT = re.compile(r"^[+-]?\d+$")
 
@@ -94,6 +94,25 @@ def parse_params(params) -> dict:
             raise InvalidParameterError(
                 f"--param {name}: {text!r} is not a number") from None
     return out
+
+
+def param_names(params) -> set:
+    """The names ``--param NAME=VALUE`` sets (not yet checked), for a command's defaults.
+
+    Parameters
+    ----------
+    params : iterable of str
+
+    Returns
+    -------
+    set of str
+
+    Examples
+    --------
+    >>> sorted(param_names(["p0=0.5", "vmax=3"]))
+    ['p0', 'vmax']
+    """
+    return {str(item).partition("=")[0].strip() for item in params}
 
 
 def build_model(model: str, params=(), vmax: int | None = None, p: float | None = None):

@@ -40,7 +40,8 @@ from markov.errors import InvalidParameterError, NaschError
 from markov.validate import ensure_int, ensure_open_probability
 from symbolic import APPROXIMATIONS, approximate, label, method_name, supported
 
-from .jobs import ExactJob, job_cost, monte_carlo_job, run_job_keep_going
+from .jobs import (ExactJob, is_nasch, job_cost, job_model,
+                   monte_carlo_job, run_job_keep_going)
 from .rings import commensurate_lengths, density_fraction
 from .formatting import RenderedTable, csv_number, plus_minus
 
@@ -112,8 +113,11 @@ class StudyTable(RenderedTable):
     methods : tuple of str
     mc_steps, mc_replicas : int
     notes : tuple of str
-        Methods left out, and why.
+        Methods and rings left out, and why.
     seconds : float
+    model : markov.rule.Model or None
+        The model of the first grid point (the others differ in vmax and p
+        only); None: NaSch.
     """
 
     rows: tuple = field(repr=False)
@@ -122,6 +126,10 @@ class StudyTable(RenderedTable):
     mc_replicas: int
     notes: tuple = ()
     seconds: float = 0.0
+    model: object = None
+
+    def _nasch(self) -> bool:
+        return self.model is None or is_nasch(self.model)
 
     def deviation(self, row: StudyRow, method: str) -> float | None:
         """``(f - f_MC) / f_MC`` of ``method`` at ``row`` (None when missing).
@@ -159,7 +167,11 @@ class StudyTable(RenderedTable):
         -------
         dict
         """
-        return {"methods": list(self.methods), "mc_steps": self.mc_steps,
+        model = (job_model(self.rows[0].vmax, self.rows[0].p) if self.model is None
+                 else self.model).describe()
+        # the grid's vmax and p are in the rows
+        model["params"] = {k: v for k, v in model["params"].items() if k not in ("vmax", "p")}
+        return {"model": model, "methods": list(self.methods), "mc_steps": self.mc_steps,
                 "mc_replicas": self.mc_replicas, "notes": list(self.notes),
                 "seconds": self.seconds,
                 "rows": [r.to_dict() for r in self.rows]}
@@ -189,7 +201,7 @@ class StudyTable(RenderedTable):
                                                                    self.methods] + ["best"]
         body = []
         for r in self.rows:
-            row = [str(r.vmax), f"{r.p:g}", f"{r.density:.4f}",
+            row = [str(r.vmax), "--" if r.p is None else f"{r.p:g}", f"{r.density:.4f}",
                    plus_minus(r.mc_flux, r.mc_error, latex),
                    "--" if r.exact_flux is None else plus_minus(r.exact_flux, r.exact_error,
                                                              latex)]
@@ -203,7 +215,13 @@ class StudyTable(RenderedTable):
         return head, body
 
     def _caption(self) -> str:
-        return (f"NaSch flux: approximations (deviation from Monte Carlo in parentheses),"
+        if self._nasch():
+            name = "NaSch"
+        else:
+            extra = ", ".join(f"{k} = {v:g}" for k, v in self.model.values
+                              if k not in ("vmax", "p") and isinstance(v, (int, float)))
+            name = self.model.name + (f" ({extra})" if extra else "")
+        return (f"{name} flux: approximations (deviation from Monte Carlo in parentheses),"
                 f" Monte Carlo ({self.mc_replicas} x {self.mc_steps} steps) and exact rings"
                 f" extrapolated to L = inf")
 
@@ -225,9 +243,9 @@ class StudyTable(RenderedTable):
                     runs.append([best, c, c, dev])
             parts = [f"{label(b)} for c = {lo:.2f}" + (f"-{hi:.2f}" if hi != lo else "")
                      + f" (|dev| <= {100 * d:.1f}%)" for b, lo, hi, d in runs]
-            lines.append(f"vmax = {vmax}, p = {p:g}: best " + "; ".join(parts))
+            lines.append(f"{_where(vmax, p)}: best " + "; ".join(parts))
             worst = self.largest_deviation(vmax, p)
-            lines.append(f"vmax = {vmax}, p = {p:g}: largest |dev| over c: " + ", ".join(
+            lines.append(f"{_where(vmax, p)}: largest |dev| over c: " + ", ".join(
                 f"{label(m)} {100 * d:.1f}%" for m, d in worst.items()))
         return lines + list(self.notes)
 
@@ -297,32 +315,63 @@ class StudyTable(RenderedTable):
                          + [f"% {x}" for x in self.summary()]) + "\n"
 
 
-def _exact_rings(vmax: int, p: float, c: Fraction, lengths, max_states: int, budget,
+def _where(vmax: int, p: float | None) -> str:
+    return f"vmax = {vmax}" + ("" if p is None else f", p = {p:g}")
+
+
+def _exact_rings(model, c: Fraction, lengths, max_states: int, budget,
                  order: int, notes: list) -> list[tuple[int, int]]:
     """Rings ``(L, c L)``: among ``lengths`` with at most ``max_states`` rotation
     classes, or (``lengths`` None) the choice of the table and the figure
-    (:func:`nasch.budget.choose_lengths`); a density without rings that fit gets a note."""
+    (:func:`nasch.budget.choose_lengths`); a density without rings that fit gets a note.
+
+    NaSch's classes are counted exactly (the Garden of Eden census); another
+    model's are bounded by every configuration (:func:`nasch.budget.predicted_classes`)."""
     from markov.goe_census import recurrent_class_count
 
-    from .budget import choose_lengths
+    from .budget import choose_lengths, predicted_classes
 
+    vmax, p = model.vmax, model.params.get("p")
     if lengths is None:
         try:
-            Ls = choose_lengths(vmax, p, c, budget, order=order)
+            Ls = choose_lengths(vmax, p, c, budget, order=order,
+                                **({} if is_nasch(model) else {"model": model}))
         except InvalidParameterError as exc:
-            notes.append(f"exact rings, vmax = {vmax}, p = {p:g}, c = {c}: {exc}")
+            notes.append(f"exact rings, {_where(vmax, p)}, c = {c}: {exc}")
             return []
         return [(L, int(c * L)) for L in Ls]
     out = []
     for L in commensurate_lengths(c, lengths):
         N = int(c * L)
-        if 0 < N < L and recurrent_class_count(L, N, vmax) / L <= max_states:
+        if not 0 < N < L:
+            continue
+        classes = (recurrent_class_count(L, N, vmax) / L if is_nasch(model)
+                   else predicted_classes(L, N, vmax, model=model))
+        if classes <= max_states:
             out.append((L, N))
     return out
 
 
-def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequence[float],
-                      methods: Sequence[str] = DEFAULT_METHODS, *, mc_length: int = 10000,
+def _study_models(vmax, p, model) -> list:
+    """The grid of models: NaSch at each ``(vmax, p)``, or ``model`` with them set."""
+    if model is None:
+        if vmax is None or p is None:
+            raise InvalidParameterError("the study needs vmax and p values, or a model")
+        return [job_model(v, x) for v in vmax for x in p]
+    vmaxes = [model.vmax] if vmax is None else list(vmax)
+    if p is not None and "p" not in model.params:
+        raise InvalidParameterError(
+            f"model {model.name} has no parameter p (its parameters:"
+            f" {', '.join(model.params)}): a p grid needs one")
+    ps = [model.params.get("p")] if p is None else list(p)
+    return [model.with_params(vmax=v, **({} if x is None else {"p": x}))
+            for v in vmaxes for x in ps]
+
+
+def convergence_study(vmax: Sequence[int] | None, p: Sequence[float] | None,
+                      densities: Sequence[float],
+                      methods: Sequence[str] = DEFAULT_METHODS, *, model=None,
+                      mc_length: int = 10000,
                       mc_steps: int = 5000, mc_replicas: int = 2,
                       lengths: Sequence[int] | None = None, budget: float | None = None,
                       max_states: int = 300_000, order: int = 2, seed: int = 0,
@@ -334,8 +383,13 @@ def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequen
     vmax, p, densities : sequences
         The grid (``0 < p < 1``, ``0 < c < 1``; a density is read as the nearest
         fraction with denominator at most 1000, so that rings match it exactly).
+        With ``model``, ``vmax`` and ``p`` may be None (the model's own);
+        ``p`` is the model's parameter ``p`` (refused for a model without one).
     methods : sequence of str
-        Method names (``mf``, ``pmf``, ``pmf2``, ``clusterN``, ``comf``).
+        Method names (``mf``, ``pmf``, ``pmf2``, ``clusterN``, ``comf``); those
+        a model refuses are left out with a note.
+    model : markov.rule.Model, optional
+        The update rule; default NaSch; the Monte Carlo reference simulates it.
     mc_length, mc_steps, mc_replicas : int
         Monte Carlo ring (rounded up to match each density), steps per replica
         (plus ``mc_steps`` warm-up), independent replicas.
@@ -372,11 +426,12 @@ def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequen
     from .sweep import run_jobs
 
     start = time.perf_counter()
-    vmaxes = [ensure_int("vmax", v, 1) for v in vmax]
-    ps = [ensure_open_probability(float(x)) for x in p]
+    vmaxes = None if vmax is None else [ensure_int("vmax", v, 1) for v in vmax]
+    ps = None if p is None else [ensure_open_probability(float(x)) for x in p]
     fracs = sorted({density_fraction(float(c)) for c in densities})
-    if not ps or not fracs:
+    if ps == [] or vmaxes == [] or not fracs:
         raise InvalidParameterError("the study needs at least one p and one density")
+    models = _study_models(vmaxes, ps, model)
     names = [method_name(m) for m in methods]          # validates before any work
     if isinstance(mc_steps, bool) or int(mc_steps) < 20:
         raise InvalidParameterError(f"mc_steps must be at least 20, got {mc_steps}")
@@ -386,64 +441,68 @@ def convergence_study(vmax: Sequence[int], p: Sequence[float], densities: Sequen
     if lengths is not None and budget is not None:
         raise InvalidParameterError("give either the ring lengths or a budget")
     jobs, points, notes = [], [], []    # points[i]: (vmax, p, c) of jobs[i]
-    for v in vmaxes:
-        for x in ps:
-            rings = {c: _exact_rings(v, x, c, lengths, max_states, budget, order, notes)
-                     for c in fracs}
-            for c in fracs:
-                jobs.append(monte_carlo_job(c, v, x, mc_length=int(mc_length),
-                                            steps=int(mc_steps), warmup=int(mc_steps),
-                                            replicas=int(mc_replicas), seed=seed))
-                points.append((v, x, c))
-                if len(rings[c]) >= order + 1:
-                    jobs += [ExactJob(L, N, v, x) for L, N in rings[c]]
-                    points += [(v, x, c)] * len(rings[c])
+    grid = [(mod.vmax, mod.params.get("p"), mod) for mod in models]
+    for v, x, mod in grid:
+        rings = {c: _exact_rings(mod, c, lengths, max_states, budget, order, notes)
+                 for c in fracs}
+        for c in fracs:
+            jobs.append(monte_carlo_job(c, model=mod, mc_length=int(mc_length),
+                                        steps=int(mc_steps), warmup=int(mc_steps),
+                                        replicas=int(mc_replicas), seed=seed))
+            points.append((v, x, c))
+            if len(rings[c]) >= order + 1:
+                jobs += [ExactJob(L, N, model=mod) for L, N in rings[c]]
+                points += [(v, x, c)] * len(rings[c])
     results = run_jobs(run_job_keep_going, jobs, serial=serial, scheduler=scheduler,
                        cost=job_cost, desc="convergence study")
     mc, exact = {}, {}
     for job, point, r in zip(jobs, points, results):
         if not isinstance(job, ExactJob):
             mc[point] = r
-        elif math.isfinite(r.flux):   # a ring the solver refused is left out
+        elif math.isfinite(r.flux):
             exact.setdefault(point, []).append((job.length, r.flux))
+        else:   # refused, or several closed classes: left out, and said
+            notes.append(f"exact ring L = {job.length}, N = {job.cars}, {_where(*point[:2])}"
+                         f" left out: {r.error}")
 
     approx = {}
-    for v in vmaxes:
+    for v in dict.fromkeys(v for v, _, _ in grid):
         for name in names:
             if not supported(name, v):
                 notes.append(f"{label(name)}: not offered for vmax = {v}")
                 continue
-            for x in ps:
+            for _, x, mod in (g for g in grid if g[0] == v):
                 try:
-                    a = approximate(name, v, x, np.array([float(c) for c in fracs]))
+                    dens = np.array([float(c) for c in fracs])
+                    a = (approximate(name, v, x, dens) if is_nasch(mod)
+                         else approximate(name, v, x, dens, model=mod))
                 except NaschError as exc:
-                    notes.append(f"{label(name)}, vmax = {v}, p = {x:g}: {exc}")
+                    notes.append(f"{label(name)}, {_where(v, x)}: {exc}")
                     continue
                 for c, f in zip(fracs, np.atleast_1d(a.flux)):
                     approx[v, x, c, name] = float(f)
 
     rows = []
-    for v in vmaxes:
-        for x in ps:
-            for c in fracs:
-                m = mc[v, x, c]
-                if not m.reliable:   # the reference itself has no honest bar: say so
-                    notes.append(f"Monte Carlo, vmax = {v}, p = {x:g}, c = {float(c):.4f}:"
-                                 f" no honest error bar ({m.warning}); use more --mc-steps")
-                ring = sorted(exact.get((v, x, c), []))
-                ext = (extrapolate([L for L, _ in ring], [f for _, f in ring], order=order)
-                       if len(ring) >= order + 1 else None)
-                fluxes = {name: approx.get((v, x, c, name)) for name in names}
-                scored = {n: abs(f - m.flux) for n, f in fluxes.items() if f is not None}
-                rows.append(StudyRow(
-                    v, x, float(c), m.flux, m.error, m.length,
-                    None if ext is None else ext.f_inf, None if ext is None else ext.error,
-                    tuple(L for L, _ in ring) if ext else (), fluxes,
-                    min(scored, key=scored.get) if scored else None,
-                    # methods that Monte Carlo cannot tell apart from the truth
-                    tuple(n for n in names if n in scored and scored[n] <= 2 * m.error)))
+    for v, x, mod in grid:
+        for c in fracs:
+            m = mc[v, x, c]
+            if not m.reliable:   # the reference itself has no honest bar: say so
+                notes.append(f"Monte Carlo, {_where(v, x)}, c = {float(c):.4f}:"
+                             f" no honest error bar ({m.warning}); use more --mc-steps")
+            ring = sorted(exact.get((v, x, c), []))
+            ext = (extrapolate([L for L, _ in ring], [f for _, f in ring], order=order)
+                   if len(ring) >= order + 1 else None)
+            fluxes = {name: approx.get((v, x, c, name)) for name in names}
+            scored = {n: abs(f - m.flux) for n, f in fluxes.items() if f is not None}
+            rows.append(StudyRow(
+                v, x, float(c), m.flux, m.error, m.length,
+                None if ext is None else ext.f_inf, None if ext is None else ext.error,
+                tuple(L for L, _ in ring) if ext else (), fluxes,
+                min(scored, key=scored.get) if scored else None,
+                # methods that Monte Carlo cannot tell apart from the truth
+                tuple(n for n in names if n in scored and scored[n] <= 2 * m.error)))
     return StudyTable(tuple(rows), tuple(names), int(mc_steps), int(mc_replicas), tuple(notes),
-                      time.perf_counter() - start)
+                      time.perf_counter() - start, models[0])
 
 
 _STYLE = {"mf": (":", "k"), "pmf": ("-", "C0"), "pmf2": ("--", "C4"), "comf": ("-", "C3"),
@@ -498,7 +557,8 @@ def deviation_figure(table: StudyTable, width: float = 3.6, height: float = 3.0)
                 ec, ed, ee = map(np.array, zip(*ext))
                 ax.errorbar(ec, ed, yerr=ee, fmt="D", ms=4, color="k", mfc="w", capsize=2,
                             label=r"exact $L\to\infty$", zorder=5)
-            ax.set_title(f"$v_\\mathrm{{max}} = {v}$, $p = {x:g}$", fontsize=9)
+            ax.set_title(f"$v_\\mathrm{{max}} = {v}$" + ("" if x is None else f", $p = {x:g}$"),
+                         fontsize=9)
             devs = [100 * table.deviation(r, m) for r in rows for m in table.methods
                     if r.approximations[m] is not None]
             ax.set_ylim(max(-40.0, min(devs, default=-5) - 2), min(30.0, max(devs, default=5) + 2))

@@ -27,14 +27,16 @@ from typing import Sequence
 
 import numpy as np
 
-from markov.errors import InvalidParameterError
+from markov.errors import InvalidParameterError, NaschError
 from markov.ring import PARALLEL, UPDATES, Ring
+from markov.rule import Model
 from markov.validate import ensure_int, ensure_open_probability
 from symbolic import supported
 
 from .extrapolate import extrapolate
 from .formatting import RenderedTable, csv_number, plus_minus
-from .jobs import ExactJob, ensure_mc_steps, job_cost, monte_carlo_job, preflight, run_job
+from .jobs import (ExactJob, ensure_mc_steps, is_nasch, job_cost, job_model, monte_carlo_job,
+                   preflight, run_job)
 from .rings import table_points
 from .sweep import run_jobs
 
@@ -45,13 +47,21 @@ _LABELS = {"mf": "MF", "pmf": "pMF", "pmf2": "pMF2", "cluster2": "2-cluster"}
 
 
 @lru_cache(maxsize=4096)
-def _approximation(method: str, vmax: int, p: float, density: float):
-    """Flux of one approximation, or None where it is not defined for ``vmax``."""
+def _approximation(method: str, model: Model, density: float) -> float:
+    """Flux of one approximation of ``model`` (NaSch: the NaSch closed forms, as always)."""
     from symbolic import approximate
 
-    if not supported(method, vmax):
-        return None
-    return float(approximate(method, vmax, p, density).flux)
+    if is_nasch(model):
+        return float(approximate(method, model.vmax, model.params["p"], density).flux)
+    return float(approximate(method, model.vmax, model.params.get("p"), density,
+                             model=model).flux)
+
+
+def _describe(model: Model, skip=("vmax",)) -> str:
+    """``vdr (p = 0.1, p0 = 0.75)``: the model and its parameters but those in ``skip``."""
+    params = ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else f"{k} = {v}"
+                       for k, v in model.values if k not in skip)
+    return model.name + (f" ({params})" if params else "")
 
 
 @dataclass(frozen=True)
@@ -82,6 +92,9 @@ class FluxRow:
     mc_reliable : bool or None
         False: the run was too short for an honest bar (``mc_warning`` says why).
     mc_warning : str or None
+    note : str or None
+        Why the ring has no exact flux (several closed classes: no one
+        stationary state); ``flux`` is NaN then.
     """
 
     kind: str
@@ -99,6 +112,7 @@ class FluxRow:
     mc_length: int | None = None
     mc_reliable: bool | None = None
     mc_warning: str | None = None
+    note: str | None = None
 
     def to_dict(self) -> dict:
         """The row as in ``nasch table --format json``: one key per approximation.
@@ -112,7 +126,7 @@ class FluxRow:
                 "c_v": None if self.c_v is None else list(self.c_v), "states": self.states,
                 **self.approximations, "mc_flux": self.mc_flux, "mc_error": self.mc_error,
                 "mc_length": self.mc_length, "mc_reliable": self.mc_reliable,
-                "mc_warning": self.mc_warning}
+                "mc_warning": self.mc_warning, "note": self.note}
 
 
 # --- the table ---------------------------------------------------------------------
@@ -133,6 +147,13 @@ class FluxTable(RenderedTable):
         Approximation columns (those defined for this ``vmax``).
     mc_steps : int
         Monte Carlo time steps per point (0: no Monte Carlo).
+    order : int
+        Order of the extrapolation.
+    models : tuple of Model
+        One per ``p`` of the sweep (the one model where it has no ``p``).
+    notes : tuple of str
+        Columns or Monte Carlo left out, and rings without a unique stationary
+        state, and why (in the footnote and the JSON).
     """
 
     vmax: int
@@ -141,11 +162,27 @@ class FluxTable(RenderedTable):
     methods: tuple
     mc_steps: int
     order: int
+    models: tuple = ()
+    notes: tuple = ()
+
+    @property
+    def model(self) -> Model:
+        """The table's model (the first ``p`` of a sweep; NaSch if none recorded)."""
+        if self.models:
+            return self.models[0]
+        return job_model(self.vmax, self.ps[0] if self.ps else 0.5)
+
+    def _model_dict(self) -> dict:
+        d = self.model.describe()
+        ps = self.ps
+        if len(ps) > 1:   # a p sweep: every p of the table
+            d["params"] = {**d["params"], "p": ps}
+        return d
 
     @property
     def ps(self) -> list[float]:
-        """The braking probabilities of the table, increasing."""
-        return sorted({r.p for r in self.rows})
+        """The braking probabilities of the table, increasing (none for a model without ``p``)."""
+        return sorted({r.p for r in self.rows if r.p is not None})
 
     # -- machine-readable
 
@@ -156,8 +193,9 @@ class FluxTable(RenderedTable):
         -------
         dict
         """
-        return {"vmax": self.vmax, "update": self.update, "methods": list(self.methods),
-                "mc_steps": self.mc_steps, "extrapolation_order": self.order,
+        return {"model": self._model_dict(), "vmax": self.vmax, "update": self.update,
+                "methods": list(self.methods), "mc_steps": self.mc_steps,
+                "extrapolation_order": self.order, "notes": list(self.notes),
                 "rows": [r.to_dict() for r in self.rows]}
 
     def to_csv(self) -> str:
@@ -200,8 +238,9 @@ class FluxTable(RenderedTable):
                 N = "" if latex else "(extrap.)"
                 exact = plus_minus(r.flux, r.flux_error, latex)
             else:
-                L, N, exact = str(r.length), str(r.cars), f"{r.flux:.6f}"
-            row = [f"{r.p:g}", L, N, f"{r.density:.4f}", exact]
+                L, N = str(r.length), str(r.cars)
+                exact = "reducible" if r.note else f"{r.flux:.6f}"
+            row = ["--" if r.p is None else f"{r.p:g}", L, N, f"{r.density:.4f}", exact]
             row += ["--" if r.approximations[m] is None else f"{r.approximations[m]:.6f}"
                     for m in self.methods]
             if self.mc_steps:
@@ -271,7 +310,11 @@ class FluxTable(RenderedTable):
         return "\n".join(out) + "\n"
 
     def _caption(self) -> str:
-        return f"NaSch flux, vmax = {self.vmax}, {self.update} update"
+        if not self.models or is_nasch(self.model):
+            return f"NaSch flux, vmax = {self.vmax}, {self.update} update"
+        # a p sweep shows p in its column, not in the caption
+        text = _describe(self.model, ("vmax", "p") if len(self.ps) > 1 else ("vmax",))
+        return f"{text} flux, vmax = {self.vmax}, {self.update} update"
 
     def _footnote(self) -> str:
         parts = ["exact: stationary state of the finite ring (L cells, N cars)",
@@ -286,10 +329,33 @@ class FluxTable(RenderedTable):
             if any(r.mc_reliable is False for r in self.rows):
                 parts.append("*: Monte Carlo run too short for an honest error bar (reason in"
                              " the JSON, mc_warning); use more --mc-steps")
-        return "; ".join(parts)
+        return "; ".join(parts + list(self.notes))
 
 
-def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
+def _table_models(vmax, p, model: Model | None, update: str) -> list[Model]:
+    """One model per ``p`` of the sweep: NaSch (``vmax``, ``p``), or ``model`` with its ``p`` set."""
+    ps = None if p is None else sorted(
+        {ensure_open_probability(float(x)) for x in ([p] if np.ndim(p) == 0 else p)})
+    if model is None:
+        if vmax is None or not ps:
+            raise InvalidParameterError("a flux table needs vmax and p, or a model")
+        return [job_model(vmax, x, None, update) for x in ps]
+    if not isinstance(model, Model):
+        raise InvalidParameterError(
+            f"model must be a markov.rule.Model (see load_model), got {type(model).__name__}")
+    if vmax is not None and vmax != model.vmax:
+        model = model.with_params(vmax=vmax)
+    if ps is None:
+        return [model]
+    if "p" not in model.params:
+        raise InvalidParameterError(
+            f"model {model.name} has no parameter p (its parameters:"
+            f" {', '.join(model.params)}): a p sweep needs one")
+    return [model.with_params(p=x) for x in ps]
+
+
+def flux_table(vmax: int | None = None, p=None, lengths: Sequence[int] | None = None, *,
+               model: Model | None = None,
                cars: Sequence[int] | None = None, densities: Sequence[float] | None = None,
                budget: float | None = None, update: str = PARALLEL,
                mc_steps: int = 2000, mc_warmup: int | None = None, mc_length: int = 10000,
@@ -302,12 +368,20 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
 
     Parameters
     ----------
-    vmax : int
-    p : float or sequence of float
-        Braking probabilities, each in ``(0, 1)``.
+    vmax : int, optional
+        NaSch's maximal velocity; with ``model``, None (the model's) or a new one.
+    p : float or sequence of float, optional
+        Braking probabilities, each in ``(0, 1)``: NaSch's, or the parameter
+        ``p`` of ``model`` (default its own; refused for a model without ``p``).
     lengths : sequence of int, optional
         Ring lengths; default: chosen per density by ``budget``
         (:func:`nasch.budget.choose_lengths`, the choice of the study and the figure).
+    model : markov.rule.Model, optional
+        The update rule (:func:`markov.rule.load_model`); default NaSch.  For
+        another model the approximations it refuses (pMF, pMF2 need NaSch's
+        Garden of Eden patterns) are left out with a note, a ring with several
+        closed classes gets a note instead of a flux; the Monte Carlo column
+        simulates the model itself.
     cars, densities : sequences, optional
         Numbers of cars, or densities (``N = round(c L)``); default half filling.
     budget : float, optional
@@ -316,7 +390,7 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
         rings of each density that fit time and memory
         (:func:`nasch.budget.choose_lengths`, which names them on stderr);
         needs ``densities`` (or the default half filling), not ``cars``.
-    update : {"parallel", "random-sequential"}
+    update : {"parallel", "random-sequential", "ordered-sequential"}
     mc_steps : int
         Monte Carlo time steps per replica and (density, p); 0: no Monte Carlo.
     mc_warmup : int, optional
@@ -352,9 +426,10 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
     >>> [(r.length, r.cars, round(r.flux, 5)) for r in t.rows]   # L = 8: 21/128 exactly
     [(4, 2, 0.1875), (6, 3, 0.17105), (8, 4, 0.16406), (None, None, 0.14803)]
     """
-    ps = sorted({ensure_open_probability(float(x)) for x in ([p] if np.ndim(p) == 0 else p)})
     if update not in UPDATES:
         raise InvalidParameterError(f"update must be one of {', '.join(UPDATES)}, got {update!r}")
+    models = _table_models(vmax, p, model, update)
+    vmax = models[0].vmax
     for m in methods:
         if m not in APPROXIMATIONS:
             raise InvalidParameterError(
@@ -366,7 +441,7 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
     seed = ensure_int("seed", seed, 0)
     order = ensure_int("order", order, 1)
     n_workers = None if n_workers is None else ensure_int("n_workers", n_workers, 1)
-    Ring(mc_length, 1, vmax, ps[0], update)  # validates vmax
+    Ring(mc_length, 1, update=update, model=models[0])  # validates the Monte Carlo ring
     if lengths is not None and budget is not None:
         raise InvalidParameterError("give either the ring lengths or a budget")
     if lengths is None:
@@ -375,48 +450,74 @@ def flux_table(vmax: int, p, lengths: Sequence[int] | None = None, *,
                 "a budget chooses rings per density: give densities (or ring lengths)")
         from .budget import choose_lengths
 
-        rings_of = {p_: sorted({pt for c in (densities or [0.5]) for pt in table_points(
-            choose_lengths(vmax, p_, c, budget, order=order, update=update),
-            densities=[c])}) for p_ in ps}
+        rings_of = {m: sorted({pt for c in (densities or [0.5]) for pt in table_points(
+            choose_lengths(vmax, m.params.get("p"), c, budget, order=order, update=update,
+                           **({} if is_nasch(m) else {"model": m})), densities=[c])})
+            for m in models}   # NaSch: the very call of the study and the figure
     else:
         rings = table_points(lengths, cars, densities)
-        rings_of = {p_: rings for p_ in ps}
+        rings_of = {m: rings for m in models}
 
+    notes = []
     # Methods defined for this vmax only; the approximations describe parallel
     # update, so none for random-sequential.
     methods = tuple(m for m in methods if update == PARALLEL and supported(m, vmax))
+    fractions = sorted({Fraction(N, L) for m in models for L, N in rings_of[m]})
+    approx, refused = {}, {}
+    for method in methods:
+        for m in models:
+            for c in fractions:
+                try:
+                    approx[method, m, c] = _approximation(method, m, float(c))
+                except NaschError as exc:   # refused for this model: said, never guessed
+                    approx[method, m, c] = None
+                    refused.setdefault(method, str(exc))
+    for method, reason in refused.items():
+        if all(approx[method, m, c] is None for m in models for c in fractions):
+            notes.append(f"{_LABELS[method]} left out: {reason}")
+        else:
+            notes.append(f"{_LABELS[method]} -- where refused: {reason}")
+    methods = tuple(x for x in methods if x not in refused
+                    or any(approx[x, m, c] is not None for m in models for c in fractions))
 
-    exact_jobs = [ExactJob(L, N, vmax, p_, update) for p_ in ps for L, N in rings_of[p_]]
-    fractions = sorted({Fraction(N, L) for p_ in ps for L, N in rings_of[p_]})
-    mc_jobs = [monte_carlo_job(c, vmax, p_, update=update, mc_length=mc_length,
+    exact_jobs = [ExactJob(L, N, update=update, model=m) for m in models
+                  for L, N in rings_of[m]]
+    mc_jobs = [monte_carlo_job(c, model=m, update=update, mc_length=mc_length,
                                steps=mc_steps, warmup=mc_warmup, replicas=mc_replicas, seed=seed)
-               for p_ in ps for c in fractions] if mc_steps else []
+               for m in models for c in fractions] if mc_steps else []
     preflight(exact_jobs + mc_jobs)
     results = run_jobs(run_job, exact_jobs + mc_jobs, serial=serial, scheduler=scheduler,
                        client=client, n_workers=n_workers, cost=job_cost, desc="flux table")
-    exact = {(j.length, j.cars, j.p): r for j, r in zip(exact_jobs, results)}
-    mc = {(Fraction(j.cars, j.length), j.p): r
+    exact = {(j.length, j.cars, j.model): r for j, r in zip(exact_jobs, results)}
+    mc = {(Fraction(j.cars, j.length), j.model): r
           for j, r in zip(mc_jobs, results[len(exact_jobs):])}
 
     rows = []
-    for p_ in ps:
+    for m in models:
+        p_ = m.params.get("p")
         for c in fractions:
-            group = [(L, N) for L, N in rings_of[p_] if Fraction(N, L) == c]
-            approx = {m: _approximation(m, int(vmax), p_, float(c)) for m in methods}
-            m = mc.get((c, p_))
-            mc_cells = dict(mc_flux=m.flux, mc_error=m.error, mc_length=m.length,
-                            mc_reliable=m.reliable, mc_warning=m.warning) if m else {}
+            group = [(L, N) for L, N in rings_of[m] if Fraction(N, L) == c]
+            cells = {x: approx[x, m, c] for x in methods}
+            r_mc = mc.get((c, m))
+            mc_cells = dict(mc_flux=r_mc.flux, mc_error=r_mc.error, mc_length=r_mc.length,
+                            mc_reliable=r_mc.reliable, mc_warning=r_mc.warning) if r_mc else {}
             for L, N in group:
-                e = exact[(L, N, p_)]
-                rows.append(FluxRow("exact", p_, L, N, N / L, e.flux, 0.0, e.c_v, e.states,
-                                    approx, **mc_cells))
-            if extrapolation and len(group) >= order + 1:
-                ex = extrapolate([L for L, _ in group], [exact[(L, N, p_)].flux
-                                                         for L, N in group], order=order)
+                e = exact[(L, N, m)]
+                if e.error:   # several closed classes: no flux of an arbitrary one
+                    notes.append(f"reducible: L = {L}, N = {N}: {e.error}")
+                rows.append(FluxRow("exact", p_, L, N, N / L, e.flux, 0.0,
+                                    None if e.error else e.c_v, e.states or None, cells,
+                                    **mc_cells, note=e.error))
+            fit = [(L, exact[(L, N, m)].flux) for L, N in group if not exact[(L, N, m)].error]
+            if extrapolation and len(fit) >= order + 1:
+                ex = extrapolate([L for L, _ in fit], [f for _, f in fit], order=order)
                 rows.append(FluxRow("extrapolated", p_, None, None, float(c), ex.f_inf,
-                                    ex.error, None, None, approx, **mc_cells))
+                                    ex.error, None, None, cells, **mc_cells))
             elif extrapolation:   # said, not dropped in silence
-                warnings.warn(f"no L = inf row for p = {p_:g}, c = {c}: {len(group)} ring(s),"
+                where = "" if p_ is None else f"p = {p_:g}, "
+                unique = " with a unique stationary state" if len(fit) < len(group) else ""
+                warnings.warn(f"no L = inf row for {where}c = {c}: {len(fit)} ring(s){unique},"
                               f" an order-{order} fit needs {order + 1}", RuntimeWarning,
                               stacklevel=2)
-    return FluxTable(int(vmax), update, tuple(rows), methods, mc_steps, int(order))
+    return FluxTable(int(vmax), update, tuple(rows), methods, mc_steps, int(order),
+                     tuple(models), tuple(notes))

@@ -9,15 +9,17 @@ from markov.errors import InvalidParameterError
 
 from ..cli_common import ensure_probabilities, handle_errors, number_list, quiet_option
 from ..formatting import format_for_path
+from ..model_options import build_model, model_options, param_names
 
 __all__ = ["study"]
 
 
 @click.command()
-@click.option("--vmax", "vmax_text", default="2,3,5", show_default=True,
-              help="Maximal velocities, comma-separated.")
-@click.option("--p", "p_text", default="0.1,0.25,0.5,0.75", show_default=True,
-              help="Braking probabilities, comma-separated.")
+@click.option("--vmax", "vmax_text", default=None,
+              help="Maximal velocities, comma-separated [2,3,5 for NaSch, else the model's].")
+@click.option("--p", "p_text", default=None,
+              help="Braking probabilities (the model's parameter p), comma-separated"
+                   " [0.1,0.25,0.5,0.75 for NaSch, else the model's].")
 @click.option("--density", "density_text", default=None,
               help="Densities, comma-separated [k/20, k = 1..19].")
 @click.option("--methods", "methods_text", default=None,
@@ -49,9 +51,10 @@ __all__ = ["study"]
               help="Also draw the deviation from Monte Carlo against c (.png or .pdf).")
 @click.option("--serial", is_flag=True, help="Run everything in this process (no Dask).")
 @click.option("--scheduler", default=None, help="Address of a running Dask scheduler.")
+@model_options
 @quiet_option
 @handle_errors
-def study(vmax_text, p_text, density_text, methods_text, mc_length, mc_steps, mc_replicas,
+def study(model, params, vmax_text, p_text, density_text, methods_text, mc_length, mc_steps, mc_replicas,
           lengths_text, budget_text, no_extrapolation, max_states, seed, fmt, output, figure,
           serial, scheduler):
     """Convergence study: every approximation against Monte Carlo and exact rings.
@@ -65,6 +68,11 @@ def study(vmax_text, p_text, density_text, methods_text, mc_length, mc_steps, mc
     Example:
       nasch study --vmax 2 --p 0.5 --density 0.25,0.5 --mc-steps 2000
       nasch study --vmax 2,3 --p 0.25,0.5 -o study.csv --figure study.png
+      nasch study --model vdr --param p0=0.75 --p 0.1 --density 0.25,0.5
+
+    Monte Carlo is the reference, so a model other than NaSch needs a
+    simulator that moves its cars; methods a model refuses (pMF, pMF2) are
+    left out with a note (docs/models.md).
     """
     from markov.files import check_output_path
 
@@ -88,16 +96,29 @@ def study(vmax_text, p_text, density_text, methods_text, mc_length, mc_steps, mc
     budget = None if budget_text is None else parse_budget(budget_text)
     lengths = (() if no_extrapolation else None if lengths_text is None
                else number_list("--lengths", lengths_text, int))
-    ps = number_list("--p", p_text)
-    ensure_probabilities(ps)
+    nasch = model == "nasch"
+    given = param_names(params)
+    if p_text is None and nasch:   # NaSch's grid, unless --param sets the value
+        p_text = str(build_model(model, params).params["p"]) if "p" in given \
+            else "0.1,0.25,0.5,0.75"
+    if vmax_text is None and nasch:
+        vmax_text = str(build_model(model, params).vmax) if "vmax" in given else "2,3,5"
+    ps = None if p_text is None else number_list("--p", p_text)
+    if ps is not None:
+        ensure_probabilities(ps)
+    vmaxes = None if vmax_text is None else number_list("--vmax", vmax_text, int)
+    # the first grid point sets the model (checked against --param); the
+    # study sets vmax and p of the others
+    the_model = build_model(model, params, vmax=None if vmaxes is None else vmaxes[0],
+                            p=None if ps is None else ps[0])
     if fmt is None:
         fmt = format_for_path(output)
     methods = (DEFAULT_METHODS if methods_text is None
                else tuple(m.strip() for m in methods_text.split(",") if m.strip()))
     result = convergence_study(
-        number_list("--vmax", vmax_text, int), ps,
+        vmaxes, ps,
         DEFAULT_DENSITIES if density_text is None else number_list("--density", density_text),
-        methods=methods, mc_length=mc_length, mc_steps=mc_steps, mc_replicas=mc_replicas,
+        model=None if nasch else the_model, methods=methods, mc_length=mc_length, mc_steps=mc_steps, mc_replicas=mc_replicas,
         lengths=lengths, budget=budget, max_states=max_states, seed=seed, serial=True if serial else None,
         scheduler=scheduler)
     text = result.render(fmt)

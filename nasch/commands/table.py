@@ -8,14 +8,18 @@ from markov.errors import InvalidParameterError
 from ..cli_common import (ensure_dask_options, ensure_probabilities, handle_errors, number_list,
                           quiet_option)
 from ..formatting import format_for_path
+from ..model_options import build_model, model_options, param_names
 
 __all__ = ["table"]
 
 
+
 @click.command()
-@click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity.")
-@click.option("--p", "p_text", default="0.5", show_default=True,
-              help="Braking probability, or a comma-separated list.")
+@click.option("--vmax", type=int, default=None,
+              help="Maximal velocity [2 for NaSch, else the model's].")
+@click.option("--p", "p_text", default=None,
+              help="Braking probability (the model's parameter p), or a comma-separated"
+                   " list [0.5 for NaSch, else the model's].")
 @click.option("--lengths", "lengths_text", default=None,
               help="Ring lengths, comma-separated [chosen per density by --budget].")
 @click.option("--budget", "budget_text", default=None,
@@ -25,7 +29,8 @@ __all__ = ["table"]
 @click.option("--cars", "cars_text", default=None, help="Numbers of cars, comma-separated.")
 @click.option("--density", "density_text", default=None,
               help="Densities, comma-separated (rings with c L integer are used) [0.5].")
-@click.option("--update", type=click.Choice(["parallel", "random-sequential"]),
+@click.option("--update", type=click.Choice(["parallel", "random-sequential",
+                                             "ordered-sequential"]),
               default="parallel", show_default=True, help="Update order.")
 @click.option("--format", "fmt", type=click.Choice(["text", "csv", "md", "latex", "json"]),
               default=None, help="Output format [from the --output extension, else text];"
@@ -45,9 +50,10 @@ __all__ = ["table"]
               help="Address of a running Dask scheduler, tcp://HOST:PORT.")
 @click.option("--workers", type=int, default=None,
               help="Local Dask workers [cores; more than the cores are capped, with a note].")
+@model_options
 @quiet_option
 @handle_errors
-def table(vmax, p_text, lengths_text, budget_text, cars_text, density_text, update, fmt, output,
+def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, density_text, update, fmt, output,
           mc_steps, mc_length, seed, order, no_extrapolation, serial, scheduler, workers):
     """Exact finite-ring fluxes beside MF, pMF, 2-cluster and Monte Carlo.
 
@@ -56,6 +62,11 @@ def table(vmax, p_text, lengths_text, budget_text, cars_text, density_text, upda
       nasch table --vmax 2 --p 0.5 --lengths 8,10,12,14 --density 0.5,0.25
       nasch table --vmax 2 --p 0.5 --density 0.5,0.25 --budget 30s
       nasch table --vmax 1 --p 0.25,0.5 --lengths 8,12,16 --format latex -o flux.tex
+      nasch table --model vdr --param p0=0.75 --p 0.1 --lengths 8,10,12 --mc-steps 0
+
+    For a model other than NaSch the approximations it refuses (pMF, pMF2) are
+    left out with a note, and a ring with several closed classes gets a note
+    instead of a flux (docs/models.md).
     """
     from ..budget import parse_budget
     from markov.files import check_output_path, write_atomic
@@ -72,8 +83,20 @@ def table(vmax, p_text, lengths_text, budget_text, cars_text, density_text, upda
             click.echo(f"note: --workers {workers} capped at the {capped_workers(workers)}"
                        " usable cores (more processes than cores only add start-up time)",
                        err=True)
-    ps = number_list("--p", p_text)
-    ensure_probabilities(ps)
+    nasch = model == "nasch"
+    ps = (number_list("--p", p_text) if p_text is not None
+          else [0.5] if nasch and "p" not in param_names(params) else None)
+    if ps is not None:
+        ensure_probabilities(ps)
+    # --vmax and the first --p set the model (checked against --param); the
+    # table sweeps the model's p over the rest
+    the_model = build_model(model, params, vmax=2 if nasch and vmax is None and
+                            "vmax" not in param_names(params) else vmax,
+                            p=None if ps is None else ps[0])
+    if ps is not None and len(ps) > 1 and "p" not in the_model.params:
+        raise InvalidParameterError(
+            f"model {the_model.name} has no parameter p (its parameters:"
+            f" {', '.join(the_model.params)}): a --p list needs one")
     if output is not None:
         check_output_path(output)   # before the work, not after it
     if fmt is None:
@@ -88,7 +111,7 @@ def table(vmax, p_text, lengths_text, budget_text, cars_text, density_text, upda
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
         t = _flux_table(
-            vmax, ps, lengths, budget=budget,
+            None, ps, lengths, model=the_model, budget=budget,
             cars=None if cars_text is None else number_list("--cars", cars_text, int),
             densities=None if density_text is None else number_list("--density", density_text),
             update=update, mc_steps=mc_steps, mc_length=mc_length, seed=seed, order=order,
@@ -96,6 +119,8 @@ def table(vmax, p_text, lengths_text, budget_text, cars_text, density_text, upda
             scheduler=scheduler, n_workers=workers)
     for w in caught:
         click.echo(f"warning: {w.message}", err=True)
+    for note in t.notes:   # in the footnote too; here so that -o does not hide them
+        click.echo(f"note: {note}", err=True)
     flagged = {(r.p, r.density): r.mc_warning for r in t.rows if r.mc_reliable is False}
     if flagged:
         click.echo(f"warning: {len(flagged)} Monte Carlo value(s) marked * have no honest error"
