@@ -52,7 +52,7 @@ from .meanfield import (ANY_CAR, c, car_events, d, gap_horizons, p, q, velocity_
                         word_weight)
 
 __all__ = [
-    "GOE_PATTERNS", "SECOND_ORDER_PATTERNS", "goe_patterns",
+    "GOE_PATTERNS", "SECOND_ORDER_PATTERNS", "goe_patterns", "ensure_pmf_model",
     "pmf_rhs", "pmf_normalisation", "pmf_equations",
     "paper_pmf_equations", "paper_pmf_normalisation", "paper_c2", "paper_cubic",
 ]
@@ -142,6 +142,34 @@ def goe_patterns(vmax: int, second_order: bool = False,
             f"{name}: rule {model.name} has a Garden of Eden pattern starting with an empty"
             " cell; the construction removes patterns anchored at a car")
     return found
+
+
+def ensure_pmf_model(model, second_order: bool = False) -> None:
+    """Refuse, in one line, a model whose pMF (pMF2) cannot be derived; cheap except for fi.
+
+    Checks what :func:`pmf_rhs` needs: the rule ignores the car ahead beyond its
+    horizon (as for MF), its probability parameters do not clash with the
+    symbols ``c``, ``d``, ``q``, ``c_v`` of the equations, and
+    :func:`goe_patterns` succeeds (fi at vmax >= 2 is refused after the GoE
+    search has measured it: about 45 s).
+
+    Parameters
+    ----------
+    model : markov.rule.Model
+    second_order : bool
+    """
+    import re
+
+    from .ruleview import structure
+
+    structure(model)     # refuses a rule reading the car ahead beyond its horizon
+    clash = [n for n in model.spec.probability_parameters()
+             if n in ("c", "d", "q") or re.fullmatch(r"c_\d+", n)]
+    if clash:
+        raise InvalidParameterError(
+            f"{_label(second_order)}: the probability parameter {clash[0]!r} of rule"
+            f" {model.name} clashes with a symbol of the equations (c, d, q, c_v); rename it")
+    goe_patterns(model.vmax, second_order, model)
 
 
 def _meet(ahead, pattern):
