@@ -170,3 +170,20 @@ def test_cli_approx_pmf_with_a_model():
     r = CliRunner().invoke(main, ["approx", "--method", "pmf2", "--model", "kkw",
                                   "--param", "vmax=2", "-c", "0.25"])
     assert r.exit_code == 2 and r.output.startswith("error: ") and "infinitely many" in r.output
+
+
+def test_docs_table_pmf_columns():
+    # docs/symbolic.md, "Approximations of the other models": the pMF and pMF2 columns
+    from pathlib import Path
+    text = (Path(__file__).resolve().parents[1] / "docs" / "symbolic.md").read_text()
+    rows = [line.split(" | ") for line in text.splitlines()
+            if line.startswith("| ") and "vmax=2" in line and len(line.split(" | ")) == 10]
+    assert len(rows) == 14
+    for cells in rows:
+        name, c = cells[0][2:], float(cells[2])
+        for method, cell in zip(("pmf", "pmf2"), cells[7:9]):
+            if cell == "refused":
+                assert name in ("fi", "kkw")
+                continue
+            a = approximate(method, None, None, c, model=load_model(name, {"vmax": 2}))
+            assert f"{a.flux:.4f}" == cell, (name, c, method)
