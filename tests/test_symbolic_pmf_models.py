@@ -187,3 +187,17 @@ def test_docs_table_pmf_columns():
                 continue
             a = approximate(method, None, None, c, model=load_model(name, {"vmax": 2}))
             assert f"{a.flux:.4f}" == cell, (name, c, method)
+
+
+def test_a_probability_named_like_a_symbol_of_the_equations_is_refused(tmp_path):
+    rule = tmp_path / "qrule.py"
+    rule.write_text(
+        "from markov.rule import rule\n\n"
+        "@rule(vmax=1, q=0.3, name='qrule')\n"
+        "def f(v, gap, v_ahead, params):\n"
+        "    u = min(v + 1, params['vmax'], gap)\n"
+        "    return ((0, 1),) if u == 0 else ((u, 1 - params['q']), (u - 1, params['q']))\n")
+    model = load_model(f"{rule}:f", {})
+    with pytest.raises(InvalidParameterError) as err:
+        approximate("pmf", None, None, C, model=model)
+    assert "'q'" in str(err.value) and "clashes" in str(err.value)
