@@ -12,9 +12,10 @@ Methods (see ``docs/symbolic.md``):
   and densities c >= 0.005 (a banded system that grows like vmax^4 and 1 / c).
 
 Every method reads the update rule: NaSch by default, any
-:class:`markov.rule.Model` with ``model=`` (MF, the n-cluster approximation
-and COMF; pMF and pMF2 need the model's Garden of Eden patterns and are
-NaSch only; COMF refuses rules that read the car ahead).  See
+:class:`markov.rule.Model` with ``model=`` (pMF and pMF2 remove the model's
+own Garden of Eden patterns and refuse a rule whose patterns of that order are
+infinitely many: fi at vmax >= 2, kkw for pMF2; COMF refuses rules that read
+the car ahead).  See
 ``docs/symbolic.md``, "Approximations of the other models".
 
 Quick start
@@ -249,9 +250,9 @@ def _ensure_model_method(base: str, model) -> None:
     if model is None:
         return
     if base in ("pmf", "pmf2"):
-        raise InvalidParameterError(
-            f"{label(base)} needs the Garden of Eden patterns of the rule; they are derived"
-            f" for NaSch only, not for the model {model.name}")
+        from .paradisical import ensure_pmf_model
+        ensure_pmf_model(model, second_order=(base == "pmf2"))
+        return
     from .ruleview import structure
     structure(model)                 # refuses a rule reading the car ahead beyond its horizon
     if base == "comf":
@@ -287,8 +288,10 @@ def approximate(method: str, vmax: int | None, p: float | None, density,
     InvalidParameterError
         Unknown method, unsupported ``vmax`` (MF: above 100, COMF: above 10),
         a cluster too large to enumerate, ``p`` or ``density`` outside
-        ``(0, 1)``, COMF below ``c = 0.005``, pMF for a model other than
-        NaSch, COMF for a rule that reads the car ahead; all before any work.
+        ``(0, 1)``, COMF below ``c = 0.005``, pMF for a rule with infinitely
+        many GoE patterns of its order (fi at vmax >= 2, refused after the
+        GoE search measured it; kkw for pMF2), COMF for a rule that reads the
+        car ahead; all before any work.
 
     Examples
     --------
@@ -311,7 +314,7 @@ def approximate(method: str, vmax: int | None, p: float | None, density,
     if base == "mf":
         c_v = solve_mf(vmax, p_arg, c_arr, model=model)
     elif base in ("pmf", "pmf2"):
-        c_v = solve_pmf(vmax, p_val, c_arr, second_order=(base == "pmf2"))
+        c_v = solve_pmf(vmax, p_val, c_arr, second_order=(base == "pmf2"), model=model)
     elif base == "comf":
         from .comf import solve_comf
         c_v = solve_comf(vmax, p_arg, c_arr, model=model)
@@ -382,7 +385,7 @@ def equations(method: str, vmax: int | None, order: int | None = None, model=Non
         return mf_equations(vmax, model)
     if name in ("pmf", "pmf2"):
         from .paradisical import pmf_equations
-        return pmf_equations(vmax, second_order=(name == "pmf2"))
+        return pmf_equations(vmax, second_order=(name == "pmf2"), model=model)
     if name == "comf":
         from .comf import comf_equation_terms, comf_equations
         terms = comf_equation_terms(vmax, model)

@@ -48,10 +48,11 @@ from markov.errors import InvalidParameterError
 from markov.goe_patterns import MAX_VMAX, elementary_patterns
 from markov.rules import velocity_outcomes
 
-from .meanfield import c, d, gap_horizons, mf_rhs, p, q, velocity_symbols, word_weight
+from .meanfield import (ANY_CAR, c, car_events, d, gap_horizons, p, q, velocity_symbols,
+                        word_weight)
 
 __all__ = [
-    "GOE_PATTERNS", "SECOND_ORDER_PATTERNS", "goe_patterns",
+    "GOE_PATTERNS", "SECOND_ORDER_PATTERNS", "goe_patterns", "ensure_pmf_model",
     "pmf_rhs", "pmf_normalisation", "pmf_equations",
     "paper_pmf_equations", "paper_pmf_normalisation", "paper_c2", "paper_cubic",
 ]
@@ -67,12 +68,41 @@ SECOND_ORDER_PATTERNS = {1: (), 2: ("0..2",)}
 
 
 
+def _label(second_order: bool) -> str:
+    return "pMF2" if second_order else "pMF"
+
+
 @lru_cache(maxsize=None)
-def goe_patterns(vmax: int, second_order: bool = False) -> tuple[tuple[int, ...], ...]:
+def goe_patterns(vmax: int, second_order: bool = False,
+                 model=None) -> tuple[tuple[int, ...], ...]:
     """Elementary GoE patterns of order 1 (and 2 with ``second_order``), as cell tuples.
 
-    From the exhaustive search :func:`markov.goe_patterns.elementary_patterns`
-    (complete for every length).
+    The minimal forbidden words of the limit language ``L_inf`` of the rule
+    (:func:`markov.goe_patterns.elementary_patterns`) whose order is at most 1
+    (2).  Such a word lies outside ``L_1`` (``L_2``) with its proper factors
+    inside, so it is a minimal forbidden word of ``L_1`` (``L_2``): the longest
+    of those bounds the search, which is then complete for these orders even
+    where the patterns of higher order are infinitely many (kkw).
+
+    Parameters
+    ----------
+    vmax : int
+        1..6; with ``model``, the model's.
+    second_order : bool
+    model : markov.rule.Model, optional
+        The rule (default NaSch); only its support matters.
+
+    Returns
+    -------
+    tuple of tuple of int
+
+    Raises
+    ------
+    InvalidParameterError
+        The rule's languages ``L_n`` do not stabilise (fi at vmax >= 2: GoE
+        patterns of every order), or its minimal forbidden words of order
+        ``<= 2`` are infinitely many (kkw, ``second_order``), or a pattern does
+        not start with a car (the construction anchors patterns at a car).
 
     Examples
     --------
@@ -81,14 +111,83 @@ def goe_patterns(vmax: int, second_order: bool = False) -> tuple[tuple[int, ...]
     >>> goe_patterns(2, second_order=True)[-1]          # the paper's (0, •, •, 2)
     (0, -1, -1, 2)
     """
-    if isinstance(vmax, bool) or not isinstance(vmax, int) or not 1 <= vmax <= MAX_VMAX:
+    from markov.errors import StateSpaceTooLargeError
+    from markov.goe_patterns import limit_order, minimal_forbidden_words, order_automaton
+
+    from .ruleview import nasch
+
+    if model is None:
+        if isinstance(vmax, bool) or not isinstance(vmax, int) or not 1 <= vmax <= MAX_VMAX:
+            raise InvalidParameterError(
+                f"pMF needs the GoE patterns of vmax = 1..{MAX_VMAX}, got vmax = {vmax!r}")
+        model = nasch(vmax)
+    top, name = (2 if second_order else 1), _label(second_order)
+    try:
+        last = limit_order(None, model)
+    except StateSpaceTooLargeError as exc:
         raise InvalidParameterError(
-            f"pMF needs the GoE patterns of vmax = 1..{MAX_VMAX}, got vmax = {vmax!r}")
-    search = elementary_patterns(vmax, 40)
-    if not search.complete:
-        raise RuntimeError(f"GoE pattern search for vmax = {vmax} is not complete at 40 cells")
-    top = 2 if second_order else 1
-    return tuple(tuple(from_text(pt.pattern, vmax)) for pt in search.patterns if pt.order <= top)
+            f"{name} needs the elementary Garden of Eden patterns of the rule, and these are"
+            f" infinitely many (GoE patterns of every order): {exc}") from None
+    _, finite, longest = minimal_forbidden_words(order_automaton(None, min(top, last), model), 2)
+    if not finite:
+        raise InvalidParameterError(
+            f"{name} needs the Garden of Eden patterns of order <= {top} of rule {model.name}"
+            f" (vmax = {model.vmax}); its forbidden words of order {top} are infinitely many"
+            f" (patterns of every length), so no finite word sees them all")
+    search = elementary_patterns(None, max(longest, 2), model)
+    found = tuple(tuple(from_text(pt.pattern, model.vmax)) for pt in search.patterns
+                  if pt.order <= top)
+    if any(pat[0] == EMPTY for pat in found):
+        raise InvalidParameterError(
+            f"{name}: rule {model.name} has a Garden of Eden pattern starting with an empty"
+            " cell; the construction removes patterns anchored at a car")
+    return found
+
+
+def ensure_pmf_model(model, second_order: bool = False) -> None:
+    """Refuse, in one line, a model whose pMF (pMF2) cannot be derived; cheap except for fi.
+
+    Checks what :func:`pmf_rhs` needs: the rule ignores the car ahead beyond its
+    horizon (as for MF), its probability parameters do not clash with the
+    symbols ``c``, ``d``, ``q``, ``c_v`` of the equations, and
+    :func:`goe_patterns` succeeds (fi at vmax >= 2 is refused after the GoE
+    search has measured it: about 45 s).
+
+    Parameters
+    ----------
+    model : markov.rule.Model
+    second_order : bool
+    """
+    import re
+
+    from .ruleview import structure
+
+    structure(model)     # refuses a rule reading the car ahead beyond its horizon
+    clash = [n for n in model.spec.probability_parameters()
+             if n in ("c", "d", "q") or re.fullmatch(r"c_\d+", n)]
+    if clash:
+        raise InvalidParameterError(
+            f"{_label(second_order)}: the probability parameter {clash[0]!r} of rule"
+            f" {model.name} clashes with a symbol of the equations (c, d, q, c_v); rename it")
+    goe_patterns(model.vmax, second_order, model)
+
+
+def _meet(ahead, pattern):
+    """The word ahead of a car in both the event ``ahead`` and the pattern, or None.
+
+    Both are prefixes (cylinder sets of words); ``ahead`` may hold ``ANY_CAR``,
+    which a pattern's velocity refines.
+    """
+    out = list(pattern[len(ahead):]) if len(pattern) > len(ahead) else []
+    head = []
+    for i, x in enumerate(ahead):
+        if i >= len(pattern):
+            head.append(x)
+        elif x == pattern[i] or (x is ANY_CAR and pattern[i] != EMPTY):
+            head.append(pattern[i])
+        else:
+            return None
+    return tuple(head + out)
 
 
 def _gap(word) -> int:
@@ -104,26 +203,45 @@ def _starts_with(word, pattern) -> bool:
 
 @lru_cache(maxsize=None)
 def pmf_rhs(vmax: int, second_order: bool = False,
-            anchored: bool = True) -> tuple[sp.Expr, ...]:
+            anchored: bool = True, model=None) -> tuple[sp.Expr, ...]:
     """Un-normalised ``F_w`` of the pMF equations ``c_w = N F_w``.
 
-    ``anchored=True`` (the paper's construction): the closed form of the module
-    doc, MF minus the words starting with a pattern; expressions in ``c_v``,
-    ``c``, ``d``, ``p``, ``q``.  ``anchored=False`` is the alternative reading
-    (remove words with a pattern *anywhere* in the window of ``K`` cells ahead,
-    every car resolved by velocity), enumerated word by word; vmax 1 and 2
-    only.  It is not the paper's and is kept for the comparison in
-    ``docs/symbolic.md``.
+    ``anchored=True`` (the paper's construction): the MF right-hand side
+    (:func:`symbolic.meanfield.car_events` of the rule) minus, for each MF
+    event ``(v, ahead)`` and each pattern starting with ``v``, the weight of
+    the words in both (the longer of the two prefixes, or none); expressions in
+    ``c_v``, ``c``, ``d`` and the rule's probabilities (``q = 1 - p``).
+    ``anchored=False`` is the alternative reading (remove words with a pattern
+    *anywhere* in the window of ``K`` cells ahead, every car resolved by
+    velocity), enumerated word by word; NaSch, vmax 1 and 2 only.  It is not
+    the paper's and is kept for the comparison in ``docs/symbolic.md``.
+
+    Parameters
+    ----------
+    vmax : int
+    second_order : bool
+    anchored : bool
+    model : markov.rule.Model, optional
+        The rule (default NaSch), with this vmax.
+
+    Returns
+    -------
+    tuple of sympy.Expr
     """
     cv = velocity_symbols(vmax)
-    patterns = goe_patterns(vmax, second_order)
+    patterns = goe_patterns(vmax, second_order, model)
     if anchored:
-        rhs = list(mf_rhs(vmax))
-        for pat in patterns:
-            weight = cv[pat[0]] * word_weight(pat[1:], cv)
-            for w, coin in velocity_outcomes(pat[0], _gap(pat[1:]), vmax, p):
-                rhs[w] -= weight * sp.sympify(coin).subs(1 - p, q)
+        rhs = [sp.Integer(0)] * (vmax + 1)
+        for e in car_events(vmax, model):
+            car = cv[e.v] * e.weight
+            rhs[e.w] += car * word_weight(e.ahead, cv)
+            for pat in patterns:     # disjoint: no pattern is a prefix of another
+                both = _meet(e.ahead, pat[1:]) if pat[0] == e.v else None
+                if both is not None:
+                    rhs[e.w] -= car * word_weight(both, cv)
         return tuple(sp.collect(sp.expand(r), cv) for r in rhs)
+    if model is not None:
+        raise InvalidParameterError("the window reading of pMF is enumerated for NaSch only")
     if vmax > 2:
         raise InvalidParameterError("the window reading of pMF is enumerated for vmax <= 2 only")
     horizon = max(gap_horizons(vmax))
@@ -142,7 +260,7 @@ def pmf_rhs(vmax: int, second_order: bool = False,
 
 
 def pmf_normalisation(vmax: int, second_order: bool = False,
-                      anchored: bool = True) -> sp.Expr:
+                      anchored: bool = True, model=None) -> sp.Expr:
     """``N = c / sum_w F_w`` (makes ``sum_w c_w = c``).
 
     Parameters
@@ -150,6 +268,7 @@ def pmf_normalisation(vmax: int, second_order: bool = False,
     vmax : int
     second_order : bool
     anchored : bool
+    model : markov.rule.Model, optional
         See :func:`pmf_rhs`.
 
     Returns
@@ -157,10 +276,11 @@ def pmf_normalisation(vmax: int, second_order: bool = False,
     sympy.Expr
     """
     # p + q = 1 lets the sum factor (vmax = 1: (c_0 + c_1)(c_0 + d))
-    return c / sp.factor(sp.expand(sum(pmf_rhs(vmax, second_order, anchored)).subs(q, 1 - p)))
+    total = sp.expand(sum(pmf_rhs(vmax, second_order, anchored, model)).subs(q, 1 - p))
+    return c / sp.factor(total)
 
 
-def pmf_equations(vmax: int, second_order: bool = False) -> list[sp.Eq]:
+def pmf_equations(vmax: int, second_order: bool = False, model=None) -> list[sp.Eq]:
     """pMF equations ``c_w = N F_w`` with ``N`` written out.
 
     Parameters
@@ -168,6 +288,8 @@ def pmf_equations(vmax: int, second_order: bool = False) -> list[sp.Eq]:
     vmax : int
     second_order : bool
         Also remove the patterns of order 2 (pMF2).
+    model : markov.rule.Model, optional
+        The rule (default NaSch); its probabilities are the symbols.
 
     Returns
     -------
@@ -180,8 +302,9 @@ def pmf_equations(vmax: int, second_order: bool = False) -> list[sp.Eq]:
     True
     """
     cv = velocity_symbols(vmax)
-    norm = pmf_normalisation(vmax, second_order)
-    return [sp.Eq(cv[w], norm * f) for w, f in enumerate(pmf_rhs(vmax, second_order))]
+    norm = pmf_normalisation(vmax, second_order, model=model)
+    return [sp.Eq(cv[w], norm * f)
+            for w, f in enumerate(pmf_rhs(vmax, second_order, model=model))]
 
 
 def paper_pmf_equations(vmax: int, second_order: bool = False) -> tuple[tuple[sp.Expr, ...],

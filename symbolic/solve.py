@@ -11,8 +11,9 @@ functions once with :func:`sympy.lambdify` and cached.
   roots in ``(0, c)``, and the physical one is picked by the residual of
   (c0eq) with ``c_2`` from eq. (c2) (see :func:`solve_pmf_cubic`); the tests
   check it against the fixed point of the pMF map on a grid of ``0 < c, p < 1``.
-* pMF with the second-order pattern: fixed-point iteration of ``c <- N F(c)``
-  (:func:`solve_fixed_point`), vectorised, from the MF solution.
+* pMF with the second-order pattern, and pMF of any other model: fixed-point
+  iteration of ``c <- N F(c)`` (:func:`solve_fixed_point`), vectorised, from
+  the MF solution.
 """
 from __future__ import annotations
 
@@ -235,19 +236,24 @@ def solve_pmf_cubic(p_val, c_val, tol: float = 1e-7) -> np.ndarray:
 
 
 @lru_cache(maxsize=None)
-def _pmf_map(vmax: int, second_order: bool, anchored: bool = True):
+def _pmf_map(vmax: int, second_order: bool, anchored: bool = True, model=None):
+    """``(c_v, c, theta) -> N F`` as numpy; ``theta``: ``p`` (NaSch) or the model's probabilities."""
     cv = velocity_symbols(vmax)
-    norm = pmf_normalisation(vmax, second_order, anchored)
-    exprs = [_subs_pq(norm * f) for f in pmf_rhs(vmax, second_order, anchored)]
-    return sp.lambdify((cv, c, p), exprs, "numpy")
+    norm = pmf_normalisation(vmax, second_order, anchored, model)
+    exprs = [_subs_pq(norm * f) for f in pmf_rhs(vmax, second_order, anchored, model)]
+    if model is None:
+        return sp.lambdify((cv, c, p), exprs, "numpy")
+    from .ruleview import probability_symbols
+    return sp.lambdify((cv, c, *probability_symbols(model).values()), exprs, "numpy")
 
 
 def solve_pmf(vmax: int, p_val, c_val, second_order: bool = False,
-              method: str = "auto", anchored: bool = True) -> np.ndarray:
+              method: str = "auto", anchored: bool = True, model=None) -> np.ndarray:
     """pMF ``c_v`` on axis 0, broadcast over ``p`` and ``c``.
 
     ``method="auto"`` uses the closed form (vmax = 1) or the paper's cubic
-    (vmax = 2, first order) and the fixed-point iteration otherwise;
+    (vmax = 2, first order) and the fixed-point iteration otherwise (always
+    for a ``model``: ``p_val`` is then ignored, the model carries its values);
     ``method="iterate"`` always iterates (the independent route of the tests);
     ``anchored=False`` solves the non-paper variant (patterns removed anywhere
     in the window; always iterated).
@@ -260,32 +266,39 @@ def solve_pmf(vmax: int, p_val, c_val, second_order: bool = False,
         pMF2: also without the patterns of order 2.
     method : {"auto", "iterate"}
     anchored : bool
+    model : markov.rule.Model, optional
+        The rule (default NaSch with ``p_val``).
 
     Returns
     -------
     ndarray
         ``c_v`` on axis 0, then the broadcast shape of ``p`` and ``c``.
     """
+    if model is not None:
+        p_val = 0.0          # a placeholder: the model carries its parameters
     p_val, c_val = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
     if method not in ("auto", "iterate"):
         raise InvalidParameterError(f"method must be 'auto' or 'iterate', got {method!r}")
-    if not anchored:
+    if not anchored or model is not None:
         method = "iterate"
     if method == "auto" and vmax == 1:
         return solve_pmf_vmax1(p_val, c_val)
     if method == "auto" and vmax == 2 and not second_order:
         return solve_pmf_cubic(p_val, c_val)
-    fmap = _pmf_map(vmax, second_order, anchored)
+    fmap = _pmf_map(vmax, second_order, anchored, model)
 
     shape = c_val.shape
     c_flat, p_flat = c_val.ravel(), p_val.ravel()
+    theta = (p_flat,) if model is None else tuple(
+        float(model.params[n]) for n in model.spec.probability_parameters())
 
     def update(x):  # rows = (c, p) points, columns = v
         return np.array([np.broadcast_to(y, c_flat.shape)
-                         for y in fmap(list(x.T), c_flat, p_flat)]).T
+                         for y in fmap(list(x.T), c_flat, *theta)]).T
 
     def project(x):  # sum_v c_v = c
         return x * (c_flat / x.sum(axis=1))[:, None]
 
-    x, _ = solve_fixed_point(update, solve_mf(vmax, p_flat, c_flat).T, project=project)
+    start = solve_mf(vmax, None if model else p_flat, c_flat, model=model).T
+    x, _ = solve_fixed_point(update, start, project=project)
     return x.T.reshape((vmax + 1,) + shape)

@@ -1,4 +1,7 @@
-"""Approximations derived from other update rules (markov.rule models): MF, n-cluster, COMF."""
+"""Approximations derived from other update rules (markov.rule models): MF, n-cluster, COMF.
+
+pMF and pMF2: tests/test_symbolic_pmf_models.py.
+"""
 from __future__ import annotations
 
 import numpy as np
@@ -101,10 +104,8 @@ def test_vmax1_nasch_through_fi_is_exact_and_tt_is_not_for_2_cluster_or_comf():
      ["COMF", "bjh", "car ahead"]),
     (lambda: equations("comf", None, model=load_model("bjh", {"ps": 0.0})),
      ["COMF", "bjh", "car ahead"]),
-    (lambda: approximate("pmf", None, None, C, model=load_model("vdr", {})),
-     ["pMF", "vdr", "Garden of Eden"]),
-    (lambda: approximate("pmf2", None, None, C, model=load_model("tt", {})),
-     ["pMF2", "tt"]),
+    (lambda: approximate("pmf2", None, None, C, model=load_model("kkw", {})),
+     ["pMF2", "kkw", "Garden of Eden", "infinitely many"]),
     (lambda: approximate("mf", 3, None, C, model=load_model("vdr", {})),
      ["vmax", "vdr"]),
     (lambda: approximate("mf", None, 0.4, C, model=load_model("kkw", {})),

@@ -35,9 +35,10 @@ _METHOD_HELP = ("Approximation: mf, pmf, pmf2, cluster (with --order N; cluster2
 def approx(method, order, vmax, p, density, model, params, as_json):
     """Stationary c_v and flux of an analytic approximation.
 
-    The update rule is NaSch unless --model is given (MF, cluster and COMF
-    for any model; pMF/pMF2 for NaSch only; COMF not for rules that read the
-    velocity of the car ahead; docs/symbolic.md).
+    The update rule is NaSch unless --model is given (every method for any
+    model; pMF/pMF2 remove the model's own GoE patterns and refuse fi at
+    vmax >= 2, kkw for pMF2; COMF not for rules that read the velocity of
+    the car ahead; docs/symbolic.md).
 
     \b
     Example:
@@ -45,6 +46,7 @@ def approx(method, order, vmax, p, density, model, params, as_json):
       nasch approx --method cluster --order 4 --vmax 2 --p 0.5 -c 0.25
       nasch approx --method comf --vmax 2 --p 0.5 -c 0.25 --json
       nasch approx --method cluster4 --model vdr --param p0=0.5 -c 0.25
+      nasch approx --method pmf --model vdr --param p0=0.5 -c 0.25
     """
     name = method_name(method, order)      # validates method and order before any work
     if model == "nasch" and not params:
