@@ -82,14 +82,23 @@ def test_vdr_table_columns_and_notes():
         assert r.approximations["cluster2"] == float(
             approximate("cluster2", 2, 0.1, 0.5, model=VDR).flux)
         assert r.approximations["mf"] == float(approximate("mf", 2, 0.1, 0.5, model=VDR).flux)
-    assert t.methods == ("mf", "cluster2")   # pMF, pMF2 refuse: left out, and said
-    with pytest.raises(Exception):
-        approximate("pmf", 2, 0.1, 0.5, model=VDR)
+        assert r.approximations["pmf"] == float(approximate("pmf", 2, 0.1, 0.5, model=VDR).flux)
+    assert t.methods == ("mf", "pmf", "pmf2", "cluster2")
     text = t.to_text()
     assert text.startswith("vdr (p = 0.1, p0 = 0.75) flux, vmax = 2")
-    assert "pMF left out" in text and "pMF2 left out" in text
     d = json.loads(json.dumps(t.to_dict()))
-    assert d["model"] == VDR.describe() and any("pMF left out" in n for n in d["notes"])
+    assert d["model"] == VDR.describe()
+
+
+def test_a_method_the_model_refuses_is_left_out_and_said():
+    kkw = load_model("kkw", {"vmax": 2})
+    with pytest.raises(Exception, match="kkw"):
+        approximate("pmf2", None, None, 0.5, model=kkw)
+    t = flux_table(model=kkw, lengths=[8], densities=[0.5], mc_steps=0, serial=True,
+                   extrapolation=False)
+    assert "pmf2" not in t.methods and "pmf" in t.methods
+    assert "pMF2 left out" in t.to_text()
+    assert any("pMF2 left out" in n for n in t.to_dict()["notes"])
 
 
 def test_p_sweep_of_the_models_p_and_refusals():
@@ -162,5 +171,5 @@ def test_study_of_a_model_passes_it_to_the_simulator(monkeypatch):
     assert seen == [VDR] and d["model"]["name"] == "vdr"
     row = d["rows"][0]
     assert row["cluster2"] == float(approximate("cluster2", 2, 0.1, 0.5, model=VDR).flux)
-    assert row["pmf"] is None and any("pMF" in n for n in d["notes"])
+    assert row["pmf"] == float(approximate("pmf", 2, 0.1, 0.5, model=VDR).flux)
     assert row["best"] == "cluster2"   # the fake reference is the 2-cluster flux
