@@ -56,6 +56,12 @@ _LIGHTEST = "power"
 #: braking probability and with BiCGSTAB above (:meth:`RingChain._auto_method`).
 AGGREGATION_MAX_P = 0.3
 
+#: Largest reachable set that :attr:`RingChain.classes` splits into closed
+#: classes (the support graph, every successor stored); a larger one is solved
+#: as one class and verified by one more search (:meth:`RingChain.solution`),
+#: far cheaper than the graph (L = 24, N = 12: 26e6 states, 38 GiB of graph).
+SPLIT_MAX_STATES = 200_000
+
 #: Smallest ``p`` (and ``1 - p``) the floating-point chain accepts.  Below
 #: about 1.1e-16, ``1 - p`` rounds to 1 and the chain is no longer the
 #: model's; at 1e-15 it still carries ``p`` to about 10 %.  Fluxes measured
@@ -254,6 +260,8 @@ class RingChain:
         self.operator = _ensure_operator(operator)
         self.state_bound = state_bound
         self.build_seconds = 0.0
+        # True while the reachable set stands for one class that is not yet checked
+        self.unverified = False
 
     def with_p(self, p) -> "RingChain":
         """The same chain at another braking probability, sharing what is built.
@@ -334,15 +342,46 @@ class RingChain:
 
         One class, all of :attr:`reachable`, where that is proven
         (:func:`known_irreducible`); otherwise the support graph is split.
+        Above :data:`SPLIT_MAX_STATES` states, or where the support graph does
+        not fit in memory, :attr:`reachable` is taken as one class *to be verified*:
+        :meth:`solution` checks that the most probable state of its answer,
+        which is recurrent, reaches every state (one more search), and
+        refuses otherwise.
         """
         if known_irreducible(self.ring) and self.start is None:
             return [self.reachable]
-        from .classes import closed_classes
+        from .classes import closed_classes, support_graph_bytes
 
+        n = len(self.reachable)
+        if n > SPLIT_MAX_STATES or support_graph_bytes(self.ring, n) > self.limit:
+            self.unverified = True
+            return [self.reachable]
         start = time.perf_counter()
         classes = closed_classes(self.ring, self.reachable, self.lump, self.max_memory)
         self.build_seconds += time.perf_counter() - start
         return classes
+
+    def _verify_one_class(self, pi: np.ndarray) -> None:
+        """Refuse unless the most probable state of ``pi`` reaches all of :attr:`reachable`.
+
+        A state of stationary weight ``>= 1/n`` is recurrent (transient states
+        carry none), and everything a recurrent state reaches is its class: if
+        that is all that the start reaches, the chain on it is irreducible.
+        """
+        start = time.perf_counter()
+        top = int(self.keys[int(np.argmax(pi))])
+        found = recurrent_keys(self.ring, self.lump, self.max_memory,
+                               per_state=self._guard_bytes_per_state(), start=top)
+        self.build_seconds += time.perf_counter() - start
+        if len(found) != len(self.keys):
+            r = self.ring
+            raise NoUniqueStationaryStateError(
+                f"the chain of {r.model.name} (L={r.length}, N={r.cars}) is not one closed"
+                f" class: of the {len(self.keys):,} states the start reaches, the class of"
+                f" the most probable one holds {len(found):,} (the rest is transient or"
+                " other classes); the support graph is too large to split here, so no"
+                " unique answer is given")
+        self.unverified = False
 
     @cached_property
     def keys(self) -> np.ndarray:
@@ -567,6 +606,8 @@ class RingChain:
         aggregates = self.aggregates if not matrix and method == "aggregation" \
             or matrix and method == "aggregation" and not self.ring.trivial else None
         result = stationary(P, method=method, tol=tol, x0=x0, aggregates=aggregates)
+        if self.unverified:
+            self._verify_one_class(result.pi)
         if matrix:
             return Solution(self.ring, self.keys, result, self.matrix.nnz, self.build_seconds,
                             self.lump, "matrix")

@@ -201,3 +201,20 @@ def test_transition_matrix_equals_the_naive_chain_entry_by_entry(name, update):
     lorder = [where[naive.rotation_class(tuple(None if c < 0 else int(c)
                                                for c in decode(int(k), L, 2)))] for k in lkeys]
     assert np.abs(PL - lumped_naive[np.ix_(lorder, lorder)]).max() < 1e-14
+
+
+def test_a_chain_too_large_to_split_is_verified_by_a_second_search(monkeypatch):
+    # pretend the support graph does not fit: the reachable set is solved as one
+    # class and checked by a search from the answer's most probable state
+    import markov.classes
+
+    vdr = Ring(10, 4, model=_model("vdr", 2))
+    exact = solve(vdr).flux
+    monkeypatch.setattr(markov.classes, "support_graph_bytes", lambda ring, n: float("inf"))
+    chain = RingChain(vdr, operator="matrix-free")
+    assert chain.classes == [chain.reachable] and chain.unverified
+    sol = chain.solution(method="bicgstab", tol=1e-12)
+    assert not chain.unverified and abs(sol.flux - exact) < 1e-10
+    with pytest.raises(NoUniqueStationaryStateError, match="not one closed class"):
+        RingChain(Ring(12, 3, model=load_model("cc", {"vmax": 2, "p": 0.2})),
+                  operator="matrix-free").solution(method="power", tol=1e-10)
