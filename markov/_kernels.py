@@ -30,7 +30,6 @@ from numba import njit
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
-from .rules import deterministic_velocity, randomize
 
 __all__ = ["digits_of", "cars_of", "gap", "term", "rotate", "shift_bits",
            "canonical", "orbit_size", "rotate_mask", "smallest_rotation", "ahead_velocity",

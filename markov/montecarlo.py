@@ -190,6 +190,22 @@ def _parallel_steps(pos, vel, length, horizon, cum, new_velocity, steps, rng, co
             counts[u] += 1
 
 
+@njit(cache=True, inline="always")
+def _update_car(pos, vel, i, n, length, horizon, cum, new_velocity, rng):
+    """Car ``i`` draws its new velocity from where the others are now and moves; returns it."""
+    j = i + 1 if i + 1 < n else 0
+    gap = pos[j] - pos[i] - 1
+    if gap < 0:
+        gap += length
+    u = _draw(cum, new_velocity, vel[i], min(gap, horizon), vel[j], _next_uniform(rng))
+    vel[i] = u
+    x = pos[i] + u
+    if x >= length:
+        x -= length
+    pos[i] = x
+    return u
+
+
 @njit(cache=True)
 def _random_sequential_steps(pos, vel, length, horizon, cum, new_velocity, steps, rng, counts,
                              moved):
@@ -208,17 +224,7 @@ def _random_sequential_steps(pos, vel, length, horizon, cum, new_velocity, steps
             i = int(_next_uniform(rng) * length)
             if i >= n:
                 continue
-            j = i + 1 if i + 1 < n else 0
-            gap = pos[j] - pos[i] - 1
-            if gap < 0:
-                gap += length
-            u = _draw(cum, new_velocity, vel[i], min(gap, horizon), vel[j], _next_uniform(rng))
-            vel[i] = u
-            x = pos[i] + u
-            if x >= length:
-                x -= length
-            pos[i] = x
-            moved[0] += u
+            moved[0] += _update_car(pos, vel, i, n, length, horizon, cum, new_velocity, rng)
         for i in range(n):
             counts[vel[i]] += 1
 
@@ -240,17 +246,7 @@ def _ordered_sequential_steps(pos, vel, length, horizon, cum, new_velocity, step
             i = s - d
             if i < 0:
                 i += n
-            j = i + 1 if i + 1 < n else 0
-            gap = pos[j] - pos[i] - 1
-            if gap < 0:
-                gap += length
-            u = _draw(cum, new_velocity, vel[i], min(gap, horizon), vel[j], _next_uniform(rng))
-            vel[i] = u
-            x = pos[i] + u
-            if x >= length:
-                x -= length
-            pos[i] = x
-            counts[u] += 1
+            counts[_update_car(pos, vel, i, n, length, horizon, cum, new_velocity, rng)] += 1
 
 
 def _cumulative(ring: Ring) -> tuple[np.ndarray, np.ndarray]:
