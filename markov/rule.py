@@ -67,11 +67,15 @@ from .errors import InvalidParameterError
 from .validate import ensure_int
 
 __all__ = ["ModelSpec", "Model", "RuleTable", "rule", "tabulate", "symbolic_outcomes",
-           "load_model", "MODELS", "available_models", "HORIZON_PROBE"]
+           "load_model", "MODELS", "available_models", "HORIZON_PROBE", "MAX_RULE_CALLS"]
 
 #: Gaps above the horizon at which :func:`tabulate` checks that the rule no
 #: longer changes (a rule that still does must declare a larger horizon).
 HORIZON_PROBE = 3
+
+#: Most calls of the rule :func:`tabulate` makes (a few seconds of Python):
+#: a rule with horizon vmax fits up to vmax = 65 (300,000 calls, about 5 s).
+MAX_RULE_CALLS = 300_000
 
 #: Absolute tolerance of the numeric "weights sum to one" check.
 SUM_TOL = 1e-12
@@ -652,6 +656,12 @@ def tabulate(model: Model, max_gap: int | None = None, symbolic: bool = False) -
     horizon = model.horizon()
     max_gap = horizon if max_gap is None else ensure_int("max_gap", max_gap, 0)
     vmax = model.vmax
+    calls = (vmax + 1) ** 2 * (min(max_gap, horizon) + 1 + HORIZON_PROBE)
+    if calls > MAX_RULE_CALLS:
+        raise InvalidParameterError(
+            f"the table of rule {model.name} needs {calls:.3g} calls of the rule (vmax = {vmax},"
+            f" horizon {horizon}: (vmax + 1)^2 (horizon + {1 + HORIZON_PROBE})), more than"
+            f" {MAX_RULE_CALLS:,}; use a smaller vmax or horizon")
     params = _symbol_params(model) if symbolic else model.params
     values = dict(model.values)
     rows: dict[tuple[int, int, int], list] = {}

@@ -424,3 +424,28 @@ def test_a_spec_needs_an_integer_vmax():
         ModelSpec(name="x", function=nasch.rule, parameters={"p": 0.5})
     with pytest.raises(InvalidParameterError, match="default of p must be an int"):
         ModelSpec(name="x", function=nasch.rule, parameters={"vmax": 2, "p": "0.5"})
+
+
+def test_a_table_too_large_to_evaluate_is_refused_before_calling_the_rule():
+    from markov.rule import MAX_RULE_CALLS
+
+    calls = []
+
+    @rule(vmax=2, p=0.5, name="counted")
+    def counted(v, gap, v_ahead, params):
+        calls.append(1)
+        return ((min(v + 1, params["vmax"], gap), 1),)
+
+    import sys
+    import types
+
+    mod = types.ModuleType("_counted_rule")
+    mod.counted = counted
+    sys.modules["_counted_rule"] = mod
+    big = load_model("_counted_rule:counted", {"vmax": 1000})
+    with pytest.raises(InvalidParameterError, match="calls of the rule"):
+        tabulate(big)
+    assert calls == []
+    with pytest.raises(InvalidParameterError, match=f"more than {MAX_RULE_CALLS:,}"):
+        tabulate(load_model("kkw", {"d": 10**8}))
+    tabulate(load_model("_counted_rule:counted", {"vmax": 60}))   # within the limit
