@@ -33,7 +33,7 @@ from nasch.tables import flux_table  # noqa: E402
 def main() -> None:
     start = time.perf_counter()
     table = flux_table(vmax=2, p=0.5, densities=[0.5, 0.25], budget=15.0,
-                       mc_steps=3000, mc_length=10000, seed=2024)
+                       mc_steps=40000, mc_length=10000, seed=2024)
     print(table.render("text"))
     # One line of reading help: how far each approximation is from the best
     # estimate of the infinite system (the Monte Carlo value), per density.
