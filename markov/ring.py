@@ -123,7 +123,7 @@ class Ring:
     @property
     def is_nasch(self) -> bool:
         """Whether the model is the shipped NaSch rule (its fast paths apply)."""
-        return self.model.source == NASCH
+        return self.model.is_nasch
 
     def table(self, symbolic: bool = False) -> RuleTable:
         """The model's rule table up to its horizon, as the kernels read it (cached).

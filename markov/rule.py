@@ -242,6 +242,11 @@ class Model:
         return MappingProxyType(dict(self.values))
 
     @property
+    def is_nasch(self) -> bool:
+        """Whether this is the shipped NaSch rule (any parameters): its fast paths apply."""
+        return self.source == "nasch"
+
+    @property
     def vmax(self) -> int:
         """Maximal velocity."""
         return self.params["vmax"]

@@ -29,14 +29,14 @@ from typing import NamedTuple
 import numpy as np
 
 from markov.errors import InvalidParameterError, NaschError, NoUniqueStationaryStateError
-from markov.ring import NASCH, PARALLEL, UPDATES, Ring
+from markov.ring import PARALLEL, UPDATES, Ring
 from markov.rule import Model
 from markov.validate import ensure_int
 
 from .rings import mc_ring
 
 __all__ = ["ExactJob", "MonteCarloJob", "ExactResult", "MonteCarloResult", "job_model",
-           "job_ring", "is_nasch",
+           "job_ring",
            "point_seed", "monte_carlo_job", "run_job", "run_job_keep_going", "job_cost",
            "preflight", "ensure_mc_steps"]
 
@@ -165,19 +165,6 @@ def job_ring(job: ExactJob | MonteCarloJob) -> Ring:
     return Ring(job.length, job.cars, update=job.update, model=job.model)
 
 
-def is_nasch(model: Model) -> bool:
-    """Whether ``model`` is the shipped NaSch rule.
-
-    Parameters
-    ----------
-    model : Model
-
-    Returns
-    -------
-    bool
-    """
-    return model.source == NASCH
-
 
 def point_seed(seed: int, density: Fraction, model: Model, update: str = PARALLEL) -> int:
     """The Monte Carlo seed of a point: a 63-bit function of the base seed and the point.
@@ -202,7 +189,7 @@ def point_seed(seed: int, density: Fraction, model: Model, update: str = PARALLE
     p = model.params.get("p")
     ints = [int(seed), density.numerator, density.denominator, int(model.vmax),
             round(float(p if p is not None else 0.0) * 2**40), UPDATES.index(update)]
-    if not is_nasch(model):
+    if not model.is_nasch:
         digest = hashlib.sha256(model.key().encode()).digest()
         ints += [int.from_bytes(digest[i:i + 4], "little") for i in range(0, 16, 4)]
     state = np.random.SeedSequence(ints).generate_state(2, dtype=np.uint32)

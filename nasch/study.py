@@ -40,7 +40,7 @@ from markov.errors import InvalidParameterError, NaschError
 from markov.validate import ensure_int, ensure_open_probability
 from symbolic import APPROXIMATIONS, approximate, label, method_name, supported
 
-from .jobs import (ExactJob, is_nasch, job_cost, job_model,
+from .jobs import (ExactJob, job_cost, job_model,
                    monte_carlo_job, run_job_keep_going)
 from .rings import commensurate_lengths, density_fraction
 from .formatting import RenderedTable, csv_number, plus_minus
@@ -129,7 +129,7 @@ class StudyTable(RenderedTable):
     model: object = None
 
     def _nasch(self) -> bool:
-        return self.model is None or is_nasch(self.model)
+        return self.model is None or self.model.is_nasch
 
     def deviation(self, row: StudyRow, method: str) -> float | None:
         """``(f - f_MC) / f_MC`` of ``method`` at ``row`` (None when missing).
@@ -335,7 +335,7 @@ def _exact_rings(model, c: Fraction, lengths, max_states: int, budget,
     if lengths is None:
         try:
             Ls = choose_lengths(vmax, p, c, budget, order=order,
-                                **({} if is_nasch(model) else {"model": model}))
+                                **({} if model.is_nasch else {"model": model}))
         except InvalidParameterError as exc:
             notes.append(f"exact rings, {_where(vmax, p)}, c = {c}: {exc}")
             return []
@@ -345,7 +345,7 @@ def _exact_rings(model, c: Fraction, lengths, max_states: int, budget,
         N = int(c * L)
         if not 0 < N < L:
             continue
-        classes = (recurrent_class_count(L, N, vmax) / L if is_nasch(model)
+        classes = (recurrent_class_count(L, N, vmax) / L if model.is_nasch
                    else predicted_classes(L, N, vmax, model=model))
         if classes <= max_states:
             out.append((L, N))
@@ -474,7 +474,7 @@ def convergence_study(vmax: Sequence[int] | None, p: Sequence[float] | None,
             for _, x, mod in (g for g in grid if g[0] == v):
                 try:
                     dens = np.array([float(c) for c in fracs])
-                    a = (approximate(name, v, x, dens) if is_nasch(mod)
+                    a = (approximate(name, v, x, dens) if mod.is_nasch
                          else approximate(name, v, x, dens, model=mod))
                 except NaschError as exc:
                     notes.append(f"{label(name)}, {_where(v, x)}: {exc}")

@@ -35,7 +35,7 @@ from symbolic import supported
 
 from .extrapolate import extrapolate
 from .formatting import RenderedTable, csv_number, plus_minus
-from .jobs import (ExactJob, ensure_mc_steps, is_nasch, job_cost, job_model, monte_carlo_job,
+from .jobs import (ExactJob, ensure_mc_steps, job_cost, job_model, monte_carlo_job,
                    preflight, run_job)
 from .rings import table_points
 from .sweep import run_jobs
@@ -51,7 +51,7 @@ def _approximation(method: str, model: Model, density: float) -> float:
     """Flux of one approximation of ``model`` (NaSch: the NaSch closed forms, as always)."""
     from symbolic import approximate
 
-    if is_nasch(model):
+    if model.is_nasch:
         return float(approximate(method, model.vmax, model.params["p"], density).flux)
     return float(approximate(method, model.vmax, model.params.get("p"), density,
                              model=model).flux)
@@ -310,7 +310,7 @@ class FluxTable(RenderedTable):
         return "\n".join(out) + "\n"
 
     def _caption(self) -> str:
-        if not self.models or is_nasch(self.model):
+        if not self.models or self.model.is_nasch:
             return f"NaSch flux, vmax = {self.vmax}, {self.update} update"
         # a p sweep shows p in its column, not in the caption
         text = _describe(self.model, ("vmax", "p") if len(self.ps) > 1 else ("vmax",))
@@ -452,7 +452,7 @@ def flux_table(vmax: int | None = None, p=None, lengths: Sequence[int] | None = 
 
         rings_of = {m: sorted({pt for c in (densities or [0.5]) for pt in table_points(
             choose_lengths(vmax, m.params.get("p"), c, budget, order=order, update=update,
-                           **({} if is_nasch(m) else {"model": m})), densities=[c])})
+                           **({} if m.is_nasch else {"model": m})), densities=[c])})
             for m in models}   # NaSch: the very call of the study and the figure
     else:
         rings = table_points(lengths, cars, densities)

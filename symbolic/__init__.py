@@ -227,8 +227,6 @@ def _resolve_model(model, vmax, p):
     """
     from markov.rule import Model
 
-    from .ruleview import is_nasch
-
     if model is None:
         return None, vmax, p
     if not isinstance(model, Model):
@@ -240,7 +238,7 @@ def _resolve_model(model, vmax, p):
             raise InvalidParameterError(
                 f"{name} = {given} disagrees with the model {model.name}"
                 f" ({name} = {params.get(name, 'not a parameter')})")
-    if is_nasch(model):
+    if model.is_nasch:
         return None, model.vmax, params["p"]
     return model, model.vmax, params.get("p")
 

@@ -109,9 +109,7 @@ def _moves(model) -> np.ndarray:
 
 def _free(model) -> float:
     """Largest mean move of one car (NaSch: ``vmax - p``, in free flow)."""
-    from .ruleview import is_nasch
-
-    if is_nasch(model):
+    if model.is_nasch:
         return model.vmax - model.params["p"]
     table = _moves(model)
     return float((table @ np.arange(model.vmax + 1)).max())

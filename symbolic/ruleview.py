@@ -29,7 +29,7 @@ import numpy as np
 from markov.errors import InvalidParameterError
 from markov.rule import Model, load_model
 
-__all__ = ["nasch", "is_nasch", "numeric_moves", "horizons_of", "RuleStructure", "structure",
+__all__ = ["nasch", "numeric_moves", "horizons_of", "RuleStructure", "structure",
            "reads_ahead", "ensure_far_independent", "probability_symbols", "NASCH"]
 
 NASCH = "nasch"
@@ -51,20 +51,6 @@ def nasch(vmax: int, p: float = 0.5) -> Model:
     """
     return load_model(NASCH, {"vmax": int(vmax), "p": p})
 
-
-def is_nasch(model: Model) -> bool:
-    """Whether ``model`` is the shipped NaSch rule (any parameters).
-
-    Parameters
-    ----------
-    model : markov.rule.Model
-        The model.
-
-    Returns
-    -------
-    bool
-    """
-    return model.source == NASCH
 
 
 def probability_symbols(model: Model) -> dict:
@@ -129,7 +115,7 @@ def numeric_moves(model: Model) -> tuple[np.ndarray, tuple[int, ...]]:
         Per ``v``, the smallest gap from which the outcome no longer changes.
     """
     vmax = model.vmax
-    if is_nasch(model):
+    if model.is_nasch:
         from markov.rules import velocity_outcomes
 
         horizon = vmax
@@ -275,7 +261,7 @@ def _structure(source_key: str, model: Model) -> RuleStructure:
 
     vmax = model.vmax
     syms = probability_symbols(model)
-    if is_nasch(model):
+    if model.is_nasch:
         from markov.rules import velocity_outcomes
 
         horizon = vmax
