@@ -75,7 +75,7 @@ from ._kernels import ahead_velocity, canonical, cars_of, gap, rotate_mask, shif
 from .encoding import powers, unique_keys
 from .errors import InvalidParameterError
 from .ring import PARALLEL, Ring
-from .rule import Model, RuleTable, tabulate
+from .rule import Model, RuleTable, cached_table
 
 __all__ = ["FactoredOperator", "LevelRule", "level_rule", "word_bits", "factored_fits",
            "link_bytes_per_word", "frontier_successors"]
@@ -209,7 +209,7 @@ def _reweigh(rule: LevelRule, table: RuleTable) -> LevelRule | None:
 @lru_cache(maxsize=64)
 @lru_cache(maxsize=64)
 def _model_rule(model: Model) -> LevelRule:
-    return level_rule(tabulate(model))
+    return level_rule(cached_table(model))
 
 
 def link_bytes_per_word(ring: Ring) -> float:
@@ -241,10 +241,8 @@ def word_bits(ring: Ring) -> tuple[int, int]:
         When a word would not fit in 62 bits (``L + N w``, ``w`` the bits of
         the largest row id and ``vmax``).
     """
-    rule = _model_rule(ring.model)
-    w = max(int(ring.vmax), rule.rows - 1).bit_length()
-    total = ring.length + ring.cars * w
-    if not factored_fits(ring):
+    w, total = _word_width(ring)
+    if total > _MAX_WORD_BITS:
         raise InvalidParameterError(
             f"the factored operator packs a configuration into {ring.length} + {ring.cars}"
             f" x {w} = {total} bits, more than {_MAX_WORD_BITS}")
@@ -262,9 +260,13 @@ def factored_fits(ring: Ring) -> bool:
     -------
     bool
     """
-    rule = _model_rule(ring.model)
-    w = max(int(ring.vmax), rule.rows - 1).bit_length()
-    return ring.length + ring.cars * w <= _MAX_WORD_BITS
+    return _word_width(ring)[1] <= _MAX_WORD_BITS
+
+
+def _word_width(ring: Ring) -> tuple[int, int]:
+    """Bits per car field (the largest row id and ``vmax``) and of a whole word."""
+    w = max(int(ring.vmax), _model_rule(ring.model).rows - 1).bit_length()
+    return w, ring.length + ring.cars * w
 
 
 # -------------------------------------------------------------------------- level 0

@@ -126,7 +126,8 @@ def known_irreducible(ring: Ring) -> bool:
     """Whether everything reachable from the compact jam is one closed class, proven.
 
     NaSch with ``0 < p < 1``: every configuration reaches the compact jam.
-    Every other chain is split by :func:`markov.classes.closed_classes`.
+    Every other chain is split by :func:`markov.classes.closed_classes`, or,
+    when too large for that, verified after solving (:attr:`RingChain.classes`).
 
     Parameters
     ----------

@@ -60,7 +60,7 @@ import numpy as np
 
 from .encoding import EMPTY_DIGIT, from_text, to_text
 from .errors import InvalidParameterError, StateSpaceTooLargeError
-from .rule import Model, load_model, tabulate
+from .rule import Model, cached_table, load_model
 
 # the construction steps (preimage_automaton, same_language,
 # minimal_forbidden_words) are documented for readers of docs/goe.md
@@ -202,7 +202,7 @@ def rule_support(vmax: int | None = None, model: Model | None = None) -> RuleSup
 @functools.lru_cache(maxsize=64)
 def _support_of(model: Model) -> RuleSupport:
     vmax = _ensure_vmax(model.vmax)
-    table = tabulate(model)
+    table = cached_table(model)
     horizon = table.horizon
     ok = np.zeros((vmax + 1, vmax + 1, horizon + 1, vmax + 1), dtype=bool)
     for u in range(vmax + 1):

@@ -13,10 +13,9 @@ import math
 import numbers
 from dataclasses import dataclass
 from fractions import Fraction
-from functools import lru_cache
 
 from .errors import InvalidParameterError
-from .rule import Model, RuleTable, load_model, tabulate
+from .rule import Model, RuleTable, cached_table, load_model
 from .validate import ensure_int as _ensure_int
 
 __all__ = ["Ring", "UPDATES", "UPDATE_CODES", "PARALLEL", "RANDOM_SEQUENTIAL",
@@ -137,7 +136,7 @@ class Ring:
         -------
         RuleTable
         """
-        return _table(self.model, symbolic)
+        return cached_table(self.model, symbolic)
 
     @property
     def update_code(self) -> int:
@@ -191,8 +190,3 @@ class Ring:
         """
         return Ring(self.length, self.cars, update=self.update,
                     model=self.model.with_params(**changes))
-
-
-@lru_cache(maxsize=64)
-def _table(model: Model, symbolic: bool) -> RuleTable:
-    return tabulate(model, symbolic=symbolic)

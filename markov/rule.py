@@ -51,6 +51,7 @@ loading a rule file costs what the file itself imports.
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib
 import importlib.util
@@ -66,7 +67,8 @@ from typing import Any, Callable
 from .errors import InvalidParameterError
 from .validate import ensure_int
 
-__all__ = ["ModelSpec", "Model", "RuleTable", "rule", "tabulate", "symbolic_outcomes",
+__all__ = ["ModelSpec", "Model", "RuleTable", "rule", "tabulate", "cached_table",
+           "symbolic_outcomes",
            "load_model", "MODELS", "available_models", "HORIZON_PROBE", "MAX_RULE_CALLS"]
 
 #: Gaps above the horizon at which :func:`tabulate` checks that the rule no
@@ -703,6 +705,27 @@ def tabulate(model: Model, max_gap: int | None = None, symbolic: bool = False) -
             weight_id[v, g, a, k] = distinct.setdefault(ident, len(distinct))
     return RuleTable(model, max_gap, horizon, count, new_velocity, weight, weight_id,
                      tuple(distinct))
+
+
+@functools.lru_cache(maxsize=64)
+def cached_table(model: Model, symbolic: bool = False) -> RuleTable:
+    """:func:`tabulate` up to the model's horizon, once per model (shared; do not modify).
+
+    The kernels, the factored operator, the GoE automata and the derivations
+    all read the same table; evaluating a rule is the slow part (a Python call
+    per ``(v, gap, v_ahead)``), so it is done once per process.
+
+    Parameters
+    ----------
+    model : Model
+    symbolic : bool
+        Weights as sympy expressions.
+
+    Returns
+    -------
+    RuleTable
+    """
+    return tabulate(model, symbolic=symbolic)
 
 
 def symbolic_outcomes(model: Model, v: int, gap: int, v_ahead: int) -> tuple:

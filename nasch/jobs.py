@@ -165,7 +165,6 @@ def job_ring(job: ExactJob | MonteCarloJob) -> Ring:
     return Ring(job.length, job.cars, update=job.update, model=job.model)
 
 
-
 def point_seed(seed: int, density: Fraction, model: Model, update: str = PARALLEL) -> int:
     """The Monte Carlo seed of a point: a 63-bit function of the base seed and the point.
 

@@ -52,7 +52,6 @@ def nasch(vmax: int, p: float = 0.5) -> Model:
     return load_model(NASCH, {"vmax": int(vmax), "p": p})
 
 
-
 def probability_symbols(model: Model) -> dict:
     """``name -> sympy.Symbol(name, positive=True)`` for each probability parameter.
 
@@ -126,9 +125,9 @@ def numeric_moves(model: Model) -> tuple[np.ndarray, tuple[int, ...]]:
                     t[v, g, 0, int(w)] += float(weight)
         t = np.broadcast_to(t, (vmax + 1, horizon + 1, vmax + 1, vmax + 1))
     else:
-        from markov.rule import tabulate
+        from markov.rule import cached_table
 
-        table = tabulate(model)
+        table = cached_table(model)
         horizon = table.horizon
         t = np.zeros((vmax + 1, horizon + 1, vmax + 1, vmax + 1))
         vv, gg, aa, kk = np.meshgrid(*(np.arange(s) for s in table.new_velocity.shape),
@@ -273,9 +272,9 @@ def _structure(source_key: str, model: Model) -> RuleStructure:
                 for a in range(vmax + 1):
                     rows[v, g, a] = row
     else:
-        from markov.rule import tabulate
+        from markov.rule import cached_table
 
-        table = tabulate(model, symbolic=True)
+        table = cached_table(model, symbolic=True)
         horizon = table.horizon
         plain = {sp.Symbol(n): s for n, s in syms.items()}
         exprs0 = [sp.expand(sp.sympify(e).subs(plain)) for e in table.weights]
