@@ -266,6 +266,10 @@ def run_console(group: click.Group) -> None:
     sys.exit(code)
 
 
+def _ignore_unraisable(unraisable) -> None:
+    """``sys.unraisablehook`` after a Ctrl-C: the interrupted work's finalisers stay silent."""
+
+
 class NaschGroup(click.Group):
     """The ``nasch`` group: lazily imported subcommands and one-line errors.
 
@@ -319,6 +323,11 @@ class NaschGroup(click.Group):
 
         def on_sigint(signum, frame):
             seen.append(signum)
+            # The interrupt can land inside numba's compiler (the first run of a
+            # fresh install); llvmlite's finalisers and ctypes callbacks then
+            # report "Exception ignored in ..." blocks on the way out.  The
+            # command ends with "interrupted" and 130: nothing more to say.
+            sys.unraisablehook = _ignore_unraisable
             raise KeyboardInterrupt
 
         try:

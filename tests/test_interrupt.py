@@ -153,3 +153,16 @@ def test_serial_table_equals_worker_processes_bit_for_bit():
     processes = flux_table(**kwargs, serial=False, n_workers=2)
     assert serial.rows == processes.rows
     assert serial.render("csv") == processes.render("csv")
+
+
+@pytest.mark.parametrize("delay", [1.0, 2.0, 3.0])
+def test_ctrl_c_while_numba_compiles_the_kernels(tmp_path, delay):
+    # a fresh install compiles on its first solve: an interrupt inside the
+    # compiler must not leave llvmlite's "Exception ignored in ..." blocks on stderr
+    cache = tmp_path / "numba-cache"
+    proc, _, err, scratch = _interrupt(
+        ["solve", "-L", "12", "-N", "6", "--p", "0.5"], tmp_path, None, delay,
+        env_extra={"NUMBA_CACHE_DIR": str(cache)})
+    if proc.returncode == 0:
+        pytest.skip("the solve finished before the interrupt")
+    _check(proc, err, tmp_path, scratch, expected_files=("tmp", "numba-cache"))
