@@ -71,7 +71,8 @@ import numpy as np
 from numba import njit, prange
 
 from ._chain_operator import ChainOperator
-from ._kernels import ahead_velocity, canonical, cars_of, gap, rotate_mask, shift_bits, term
+from ._kernels import (ahead_velocity, canonical, canonical_shift, cars_of, gap, rotate_mask,
+                       shift_bits, term)
 from .encoding import powers, unique_keys
 from .errors import InvalidParameterError
 from .ring import PARALLEL, Ring
@@ -273,7 +274,7 @@ def _word_width(ring: Ring) -> tuple[int, int]:
 
 @njit(cache=True)
 def _frame_word(key, length, vmax, w, lump, row_id, horizon, pos, vel, u):
-    """Level-0 word of a state: positions in its frame and the row of every car."""
+    """Level-0 word of a state (positions in its frame, the row of every car) and the frame's rotation."""
     n = cars_of(key, length, vmax + 2, pos, vel)
     mask = np.int64(0)
     for i in range(n):
@@ -282,6 +283,7 @@ def _frame_word(key, length, vmax, w, lump, row_id, horizon, pos, vel, u):
         mask |= np.int64(1) << pos[i]
     shift = n * w
     best = np.int64(-1)
+    best_r = 0
     for r in range(length if lump else 1):
         rotated = rotate_mask(mask, r, length)
         if best >= 0 and rotated > (best >> shift):
@@ -295,24 +297,32 @@ def _frame_word(key, length, vmax, w, lump, row_id, horizon, pos, vel, u):
             word |= np.int64(u[(k0 + t) % n]) << (t * w)
         if best < 0 or word < best:
             best = word
-    return best
+            best_r = r
+    return best, best_r
 
 
 @njit(cache=True, parallel=True)
-def _frame_words(keys, length, vmax, w, lump, row_id, horizon, out):
+def _frame_words(keys, length, vmax, w, lump, row_id, horizon, out, rotation):
+    """Level-0 words of the states; ``rotation`` (if not empty) receives each frame's rotation."""
     n = keys.shape[0]
     nblocks = (n + 4095) // 4096
+    keep = rotation.shape[0] > 0
     for blk in prange(nblocks):
         pos = np.empty(length, np.int64)
         vel = np.empty(length, np.int64)
         u = np.empty(length, np.int64)
         for i in range(blk * 4096, min(n, (blk + 1) * 4096)):
-            out[i] = _frame_word(keys[i], length, vmax, w, lump, row_id, horizon, pos, vel, u)
+            word, r = _frame_word(keys[i], length, vmax, w, lump, row_id, horizon, pos, vel, u)
+            out[i] = word
+            if keep:
+                rotation[i] = r
 
 
-def _level0(ring: Ring, keys: np.ndarray, w: int, lump: bool, rule: LevelRule) -> np.ndarray:
+def _level0(ring: Ring, keys: np.ndarray, w: int, lump: bool, rule: LevelRule,
+            rotation: np.ndarray | None = None) -> np.ndarray:
     words = np.empty_like(keys)
-    _frame_words(keys, ring.length, ring.vmax, w, bool(lump), rule.row_id, rule.horizon, words)
+    _frame_words(keys, ring.length, ring.vmax, w, bool(lump), rule.row_id, rule.horizon, words,
+                 np.empty(0, np.int16) if rotation is None else rotation)
     return words
 
 
@@ -466,6 +476,14 @@ def _moved_key(word, length, ncars, w, pw, bits, lump):
 def _moved_keys(words, length, ncars, w, pw, bits, lump, out):
     for i in prange(words.shape[0]):
         out[i] = _moved_key(words[i], length, ncars, w, pw, bits, lump)
+
+
+@njit(cache=True, parallel=True)
+def _moved_shifts(words, length, ncars, w, pw, bits, out):
+    """For each last-level word: the shift ``r`` of its moved key from the canonical one."""
+    for i in prange(words.shape[0]):
+        key = _moved_key(words[i], length, ncars, w, pw, bits, False)
+        out[i] = canonical_shift(key, length, pw, bits)[1]
 
 
 @njit(cache=True)
@@ -629,24 +647,26 @@ class FactoredOperator(ChainOperator):
     [0.5, 0.5]
     """
 
-    def __init__(self, ring: Ring, keys: np.ndarray, lump: bool, _levels=None):
+    def __init__(self, ring: Ring, keys: np.ndarray, lump: bool, _levels=None,
+                 shifts: bool = False):
         if ring.update != PARALLEL:
             raise InvalidParameterError("the factored operator is for parallel update")
         if ring.cars < 1:
             raise InvalidParameterError("the factored operator needs at least one car")
         super().__init__(ring, keys, lump)
         if _levels is None:
-            _levels = self._build(_model_rule(ring.model))
+            _levels = self._build(_model_rule(ring.model), shifts and lump)
         (self.rule, self._perm, self._offsets0, self._links, self._offsets_last,
-         self.level_sizes) = _levels
+         self.level_sizes, self._shifts) = _levels
         self._buffers = (np.empty(max(self.level_sizes)), np.empty(max(self.level_sizes)))
 
-    def _build(self, rule: LevelRule):
+    def _build(self, rule: LevelRule, shifts: bool):
         ring, w = self.ring, word_bits(self.ring)[0]
         n = self.n
         if n >= 2**31:
             raise InvalidParameterError("the factored operator indexes states with int32")
-        words = _level0(ring, self.keys, w, self.lump, rule)
+        state_shift = np.empty(n, np.int16) if shifts else None
+        words = _level0(ring, self.keys, w, self.lump, rule, state_shift)
         perm = np.argsort(words, kind="stable").astype(np.int32)
         words = words[perm]
         first = np.flatnonzero(np.concatenate(([True], words[1:] != words[:-1])))
@@ -661,8 +681,12 @@ class FactoredOperator(ChainOperator):
             links.append(link)
             sizes.append(len(words))
         targets = np.empty_like(words)
-        _moved_keys(words, ring.length, ring.cars, w, powers(ring.length, ring.vmax),
-                    shift_bits(ring.vmax), self.lump, targets)
+        pw, bits = powers(ring.length, ring.vmax), shift_bits(ring.vmax)
+        _moved_keys(words, ring.length, ring.cars, w, pw, bits, self.lump, targets)
+        word_shift = None
+        if shifts:
+            word_shift = np.empty(len(words), np.int16)
+            _moved_shifts(words, ring.length, ring.cars, w, pw, bits, word_shift)
         del words
         order = np.argsort(targets, kind="stable")
         offsets_last = np.empty(n + 1, dtype=np.int64)
@@ -673,7 +697,8 @@ class FactoredOperator(ChainOperator):
             links[-1] = (a[order], b[order])
         else:
             links[-1] = _permute_rows(*links[-1], order)
-        return rule, perm, offsets0, links, offsets_last, sizes
+        shift_arrays = (state_shift, word_shift[order]) if shifts else None
+        return rule, perm, offsets0, links, offsets_last, sizes, shift_arrays
 
     @property
     def edges(self) -> int:
@@ -724,12 +749,17 @@ class FactoredOperator(ChainOperator):
     def _with_ring(self, ring: Ring) -> "FactoredOperator":
         rule = _reweigh(self.rule, ring.table())
         if rule is None:
-            return FactoredOperator(ring, self.keys, self.lump)
+            return FactoredOperator(ring, self.keys, self.lump, shifts=self._shifts is not None)
         levels = (rule, self._perm, self._offsets0, self._links, self._offsets_last,
-                  self.level_sizes)
+                  self.level_sizes, self._shifts)
         return FactoredOperator(ring, self.keys, self.lump, _levels=levels)
 
     def _product(self, x: np.ndarray, out: np.ndarray) -> None:
+        self._through_levels(x, out, fused=True)
+
+    def _through_levels(self, x: np.ndarray, out: np.ndarray, fused: bool) -> None:
+        """Level 0 to level ``N``; ``fused``: summed into the states (``x P``), else
+        ``out`` gets the last level's words in the order of :attr:`_offsets_last`."""
         rule = self.rule
         which = 0  # ping-pong between the two level buffers
         z = self._buffers[0][:self.level_sizes[0]]
@@ -741,11 +771,63 @@ class FactoredOperator(ChainOperator):
                 parents, z = z, self._buffers[which][:a.shape[0]]
                 _gather_level(a, b, parents, p, q, z)
             a, b = self._links[-1]
-            _gather_last(a, b, self._offsets_last, z, p, q, out)
+            if fused:
+                _gather_last(a, b, self._offsets_last, z, p, q, out)
+            else:
+                _gather_level(a, b, z, p, q, out)
             return
         for indptr, parent, slot in self._links[:-1]:
             which ^= 1
             parents, z = z, self._buffers[which][:indptr.shape[0] - 1]
             _gather_rows(indptr, parent, slot, rule.weight, parents, z)
         indptr, parent, slot = self._links[-1]
-        _gather_rows_last(indptr, parent, slot, self._offsets_last, rule.weight, z, out)
+        if fused:
+            _gather_rows_last(indptr, parent, slot, self._offsets_last, rule.weight, z, out)
+        else:
+            _gather_rows(indptr, parent, slot, rule.weight, z, out)
+
+    def sector_apply(self, x: np.ndarray, k: int) -> np.ndarray:
+        """``x P_k``: the chain in momentum sector ``k`` (:mod:`markov.spectrum`).
+
+        ``P_k[c, c']`` sums ``P(c, s) exp(2 pi i k r / L)`` over the successors
+        ``s`` of ``c`` that are ``c'`` moved ``r`` cells forward
+        (:func:`markov._kernels.canonical_shift`).  The levels are real: the
+        phase of a state's frame enters at level 0, that of each moved word at
+        the end, and the real and imaginary parts go through the levels apart.
+
+        Parameters
+        ----------
+        x : (n,) complex array
+            A row vector on the states (zero on states whose orbit does not
+            carry sector ``k``).
+        k : int
+            The sector, ``0 <= k < L``.
+
+        Returns
+        -------
+        (n,) complex128 array
+        """
+        if self._shifts is None:
+            raise InvalidParameterError("this operator was built without shifts=True")
+        length = self.ring.length
+        phase = np.exp(2j * np.pi * (int(k) % length) * np.arange(length) / length)
+        state_shift, word_shift = self._shifts
+        x = np.asarray(x, dtype=np.complex128) * phase[state_shift]
+        words = self.level_sizes[-1]
+        values = np.empty((2, words))
+        self._through_levels(np.ascontiguousarray(x.real), values[0], fused=False)
+        self._through_levels(np.ascontiguousarray(x.imag), values[1], fused=False)
+        out = np.empty(self.n, np.complex128)
+        _phase_segments(values[0], values[1], self._offsets_last, word_shift, phase, out)
+        self.products += 1
+        return out
+
+
+@njit(cache=True, parallel=True)
+def _phase_segments(re, im, offsets, shift, phase, out):
+    """``out[s] = sum over the words k moving onto s of phase[shift[k]] (re[k] + i im[k])``."""
+    for s in prange(out.shape[0]):
+        acc = 0j
+        for k in range(offsets[s], offsets[s + 1]):
+            acc += phase[shift[k]] * (re[k] + 1j * im[k])
+        out[s] = acc

@@ -32,7 +32,7 @@ from numba.extending import intrinsic
 
 
 __all__ = ["digits_of", "cars_of", "gap", "term", "rotate", "shift_bits",
-           "canonical", "orbit_size", "rotate_mask", "smallest_rotation", "ahead_velocity",
+           "canonical", "canonical_shift", "orbit_size", "rotate_mask", "smallest_rotation", "ahead_velocity",
            "row_length", "successor_row", "PARALLEL_CODE", "RANDOM_SEQUENTIAL_CODE",
            "ORDERED_SEQUENTIAL_CODE"]
 
@@ -180,6 +180,21 @@ def canonical(key, length, pw, bits):
         if best < 0 or rotated < best:
             best = rotated
     return best
+
+
+@njit(cache=True, inline="always")
+def canonical_shift(key, length, pw, bits):
+    """The canonical rotation ``c`` of a key and the shift ``r`` with ``rotate(key, r) = c``.
+
+    ``key`` is ``c`` moved ``r`` cells forward (cell ``x`` of ``c`` is cell
+    ``x + r`` of ``key``); for a periodic ``c`` the smallest such ``r``.  The
+    phase ``exp(2 pi i k r / L)`` of a momentum sector is read from it.
+    """
+    c = canonical(key, length, pw, bits)
+    for r in range(length):
+        if rotate(key, r, length, pw) == c:
+            return c, r
+    return c, 0
 
 
 @njit(cache=True)

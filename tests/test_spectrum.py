@@ -1,0 +1,181 @@
+"""The relaxation spectrum in momentum sectors against dense linear algebra and closed forms."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from markov.chain import RingChain
+from markov.ring import Ring
+from markov.rule import load_model
+from markov.spectrum import (orbit_sizes, relaxation_spectrum, sector_matrix, sector_operator,
+                             sector_states)
+from markov.errors import InvalidParameterError
+
+
+def _multiset_close(a, b, tol=1e-3, small=1e-2):
+    """Match every eigenvalue of ``a`` to a distinct one of ``b`` (greedy, by distance).
+
+    Defective eigenvalues (Jordan blocks: near 0, and the degenerate ones of
+    random-sequential update) move by ``eps**(1/m)`` under rounding, hence the
+    loose ``tol``; below ``small`` only their numbers are compared.  The
+    power sums in the test are the tight check.
+    """
+    a, b = list(a), list(b)
+    assert len(a) == len(b)
+    assert sum(abs(z) < small for z in a) == sum(abs(z) < small for z in b)
+    for x in sorted((z for z in a if abs(z) >= small), key=lambda z: (-abs(z), np.angle(z))):
+        d = [abs(x - y) for y in b]
+        j = int(np.argmin(d))
+        assert d[j] < tol, (x, b[j])
+        b.pop(j)
+
+
+RINGS = [
+    Ring(6, 3, 1, 0.3),
+    Ring(6, 2, 2, 0.5),
+    Ring(7, 3, 2, 0.25),
+    Ring(8, 4, 2, 0.4),
+    Ring(6, 3, 2, 0.5, update="random-sequential"),
+    Ring(6, 2, 2, 0.3, update="ordered-sequential"),
+    Ring(7, 3, model=load_model("vdr", {"vmax": 2, "p": 0.2, "p0": 0.6})),
+    Ring(6, 2, model=load_model("kkw", {"vmax": 2})),
+    Ring(6, 3, model=load_model("tt", {"vmax": 2, "p": 0.3, "pt": 0.6})),
+]
+
+
+@pytest.mark.parametrize("ring", RINGS, ids=repr)
+def test_union_of_sectors_is_the_unlumped_spectrum(ring):
+    full = RingChain(ring, lump=False).matrix.toarray()
+    expected = np.linalg.eigvals(full)
+    keys = RingChain(ring).keys
+    got = []
+    traces = np.zeros(30, complex)
+    for k in range(ring.length):
+        Pk, states = sector_matrix(ring, keys, k)
+        if not len(states):
+            continue
+        M = Pk.toarray()
+        got.extend(np.linalg.eigvals(M))
+        power = np.eye(len(M))
+        for m in range(30):
+            power = power @ M
+            traces[m] += np.trace(power)
+    # the sectors hold every configuration once: sum of orbit sizes
+    assert len(got) == full.shape[0] == int(orbit_sizes(ring, keys).sum())
+    # power sums tr(P^m) fix the multiset of eigenvalues and, unlike defective
+    # eigenvalues, are well conditioned
+    power = np.eye(len(full))
+    for m in range(30):
+        power = power @ full
+        assert abs(traces[m] - np.trace(power)) < 1e-10 * max(1.0, abs(np.trace(power)))
+    _multiset_close(got, expected)
+
+
+@pytest.mark.parametrize("length", [3, 5, 8, 11])
+@pytest.mark.parametrize("p", [0.1, 0.5, 0.8])
+def test_one_car_closed_form(length, p):
+    """NaSch vmax = 1, one car: lambda_k = p + (1 - p) exp(2 pi i k / L) in every sector."""
+    ring = Ring(length, 1, 1, p)
+    spec = relaxation_spectrum(ring, count=1)
+    by_sector = {e.sector: e.value for e in spec.eigenvalues}
+    for k in range(1, length):
+        expected = p + (1 - p) * np.exp(2j * np.pi * k / length)
+        # p = q, k = L/2: lambda = 0 is a Jordan block of size 2 (eig error ~ sqrt(eps))
+        assert abs(by_sector[k] - expected) < (1e-12 if abs(expected) > 1e-6 else 1e-7)
+    slowest = abs(p + (1 - p) * np.exp(2j * np.pi / length))
+    assert spec.relaxation_time == pytest.approx(-1 / math.log(slowest), rel=1e-12)
+    assert spec.second.sector in (1, length - 1)
+
+
+def test_sector_zero_is_the_lumped_chain():
+    ring = Ring(9, 4, 2, 0.35)
+    chain = RingChain(ring)
+    P0, states = sector_matrix(ring, chain.keys, 0)
+    assert len(states) == chain.n_states
+    assert np.abs(P0.toarray() - chain.matrix.toarray()).max() < 1e-15
+
+
+def test_periodic_orbits_only_in_their_sectors():
+    """X.X.X. (period 2 on six cells) carries the sectors k with 2k = 0 mod 6: k = 0, 3."""
+    ring = Ring(6, 3, 1, 0.5)
+    keys = RingChain(ring).keys
+    sizes = orbit_sizes(ring, keys)
+    periodic = np.flatnonzero(sizes < 6)
+    assert len(periodic) > 0 and set(sizes[periodic]) <= {2}
+    for k in range(6):
+        inside = set(sector_states(ring, keys, k).tolist())
+        assert (set(periodic.tolist()) <= inside) == (k in (0, 3))
+
+
+@pytest.mark.parametrize("ring", [Ring(11, 5, 2, 0.5), Ring(10, 4, 3, 0.2),
+                                  Ring(10, 4, model=load_model("kkw", {"vmax": 2})),
+                                  Ring(10, 5, model=load_model("bjh", {"vmax": 2}))], ids=repr)
+def test_factored_sector_operator_equals_the_sector_matrix(ring):
+    from markov._factored import FactoredOperator
+
+    keys = RingChain(ring).keys
+    op = FactoredOperator(ring, keys, lump=True, shifts=True)
+    rng = np.random.default_rng(3)
+    for k in range(ring.length):
+        A, states = sector_operator(ring, keys, k, factored=op)
+        Pk, states_m = sector_matrix(ring, keys, k)
+        assert np.array_equal(states, states_m)
+        x = rng.standard_normal(len(states)) + 1j * rng.standard_normal(len(states))
+        assert np.abs(A.matvec(x) - Pk.T @ x).max() < 1e-13
+
+
+def test_arpack_and_factored_agree_with_dense(monkeypatch):
+    import markov.spectrum as spectrum
+
+    # 270 classes: with the dense limit lowered, ARPACK runs on every sector
+    monkeypatch.setattr(spectrum, "DENSE_SECTOR_STATES", 50)
+    ring = Ring(10, 5, 2, 0.5)
+    dense = []
+    keys = RingChain(ring).keys
+    for k in range(10):
+        Pk, _ = sector_matrix(ring, keys, k)
+        vals = np.linalg.eigvals(Pk.toarray())
+        if k == 0:
+            vals = np.delete(vals, np.argmin(np.abs(vals - 1)))
+        dense.append((k, vals[np.argsort(-np.abs(vals))][:3]))
+    for operator in ("matrix", "matrix-free"):
+        spec = relaxation_spectrum(ring, count=3, operator=operator)
+        assert spec.operator == operator
+        for k, vals in dense:
+            got = [e.value for e in spec.eigenvalues if e.sector == k]
+            assert max(abs(e.residual) for e in spec.eigenvalues) < 1e-9
+            # the largest modulus agrees; ties in modulus may swap order
+            assert abs(max(abs(np.array(got))) - abs(vals[0])) < 1e-10
+        top = max(abs(v) for _, vals in dense for v in vals)
+        assert abs(abs(spec.second.value) - top) < 1e-10
+
+
+def test_one_sector_and_its_mirror():
+    ring = Ring(10, 5, 2, 0.5)
+    all_ = relaxation_spectrum(ring, count=2)
+    s3 = relaxation_spectrum(ring, count=2, sectors=3)
+    s7 = relaxation_spectrum(ring, count=2, sectors=[7])
+    a3 = sorted((e.value for e in all_.eigenvalues if e.sector == 3), key=lambda z: z.imag)
+    assert np.allclose(sorted((e.value for e in s3.eigenvalues), key=lambda z: z.imag), a3)
+    assert np.allclose(sorted((e.value.conjugate() for e in s7.eigenvalues),
+                              key=lambda z: z.imag), a3)
+
+
+def test_bad_input():
+    ring = Ring(8, 4, 2, 0.5)
+    for bad in (dict(count=0), dict(sectors=8), dict(sectors=[-1]), dict(sectors="some"),
+                dict(operator="fast"), dict(tol=0)):
+        with pytest.raises(InvalidParameterError):
+            relaxation_spectrum(ring, **bad)
+    with pytest.raises(InvalidParameterError):
+        relaxation_spectrum(Ring(8, 4, 2, 0.5, update="random-sequential"),
+                            operator="matrix-free")
+
+
+def test_deterministic_chain_has_no_relaxation_time():
+    """p = 0: the chain on its class is a permutation: |lambda_2| = 1."""
+    spec = relaxation_spectrum(Ring(7, 2, 2, 0.0), count=2)
+    assert spec.relaxation_time == math.inf
+    assert spec.to_dict()["relaxation_time"] is None
