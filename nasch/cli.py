@@ -43,6 +43,8 @@ _LAZY = {
                  "Monte Carlo flux of a large ring, with an autocorrelation error bar."),
     "solve": ("nasch.commands.solve", "solve",
               "Exact stationary state of one ring: flux, c_v; --json adds the gap distribution."),
+    "spectrum": ("nasch.commands.spectrum", "spectrum",
+                 "Relaxation spectrum: leading eigenvalues of P in every momentum sector."),
     "study": ("nasch.commands.study", "study",
               "Convergence study: every approximation against Monte Carlo and exact rings."),
     "table": ("nasch.commands.table", "table",

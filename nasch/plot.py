@@ -566,3 +566,82 @@ def models_figure(data: dict, width: float = 6.4, height: float = 5.2):
     # below the axes: it never hides a point
     fig.legend(loc="outside lower center", ncol=2, fontsize=7, frameon=False)
     return fig
+
+
+# ------------------------------------------------------------- relaxation: exact spectra
+
+def relaxation_figure(data: dict, spectrum=None, width: float = 9.6, height: float = 4.2):
+    """``tau`` against density for several ``p`` (left) and one ring's spectrum (right).
+
+    Parameters
+    ----------
+    data : dict
+        From :func:`nasch.relaxation.relaxation_curves`.
+    spectrum : markov.spectrum.Spectrum, optional
+        Drawn in the complex plane (one colour per momentum sector, the unit
+        circle for reference); without it only the left panel is drawn.
+    width, height : float
+        Inches.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Examples
+    --------
+    >>> from nasch.relaxation import relaxation_curves
+    >>> fig = relaxation_figure(relaxation_curves(6, [0.25, 0.5], vmax=1))
+    >>> fig.axes[0].get_xlabel()
+    'density $c = N/L$'
+    """
+    import matplotlib
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    panels = 2 if spectrum is not None else 1
+    fig = Figure(figsize=(width if panels == 2 else width / 2 + 0.4, height),
+                 layout="constrained")
+    axes = fig.subplots(1, panels, squeeze=False)[0]
+    ax = axes[0]
+    for i, curve in enumerate(data["curves"]):
+        tau = np.array(curve["tau"], dtype=float)
+        finite = np.isfinite(tau)
+        ax.plot(np.array(data["density"])[finite], tau[finite], "o-", ms=3.5, lw=1,
+                color=f"C{i % 10}", label=f"$p = {curve['p']:g}$, all sectors")
+        tau0 = np.array(curve["tau_sector0"], dtype=float)
+        finite = np.isfinite(tau0)
+        ax.plot(np.array(data["density"])[finite], tau0[finite], "s--", ms=3, lw=0.9,
+                mfc="white", color=f"C{i % 10}", label=f"$p = {curve['p']:g}$, sector 0")
+    ax.set_xlabel("density $c = N/L$")
+    ax.set_ylabel(r"relaxation time $\tau = -1/\ln|\lambda_2|$ (steps)")
+    ax.set_title(f"exact, NaSch $v_\\mathrm{{max}} = {data['vmax']}$, L = {data['length']}",
+                 fontsize=9)
+    ax.set_xlim(0, 1)
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.25, lw=0.5)
+    handles, labels = ax.get_legend_handles_labels()
+    # below the axes: it never hides a curve
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 6),
+               fontsize=7, frameon=False)
+    if spectrum is not None:
+        ax = axes[1]
+        t = np.linspace(0, 2 * np.pi, 400)
+        ax.plot(np.cos(t), np.sin(t), color="0.6", lw=0.6)
+        ring = spectrum.ring
+        values = np.array([e.value for e in spectrum.eigenvalues])
+        sectors = np.array([e.sector for e in spectrum.eigenvalues])
+        sc = ax.scatter(values.real, values.imag, c=sectors, cmap="twilight", s=12,
+                        vmin=0, vmax=ring.length, zorder=3)
+        ax.plot([1], [0], "k*", ms=7, zorder=4, label="stationary 1")
+        fig.colorbar(sc, ax=ax, label="momentum sector $k$", shrink=0.85)
+        ax.set_aspect("equal")
+        ax.set_xlim(-1.05, 1.05)
+        ax.set_ylim(-1.05, 1.05)
+        ax.set_xlabel(r"Re $\lambda$")
+        ax.set_ylabel(r"Im $\lambda$")
+        per = max(1, len(values) // max(1, len(spectrum.sector_sizes)))
+        ax.set_title(f"leading eigenvalues ({per} per sector), L = {ring.length},"
+                     f" N = {ring.cars}, {ring.model.name}", fontsize=9)
+        ax.grid(alpha=0.25, lw=0.5)
+        ax.legend(fontsize=8, frameon=False, loc="lower left")
+    return fig

@@ -21,6 +21,7 @@ def plot():
       nasch plot fundamental --vmax 2 --p 0.5 --output fig.png
       nasch plot spacetime --model vdr --param p0=0.75 -L 400 -c 0.2 --output st.png
       nasch plot models --models nasch,vdr,tt --vmax 2 --output fd.png
+      nasch plot relaxation -L 12 --vmax 2 --p 0.25,0.5,0.75 --output tau.png
     """
 
 
@@ -220,4 +221,56 @@ def models(models_text, vmax, params, update, length, densities, steps, replicas
             click.echo(f"warning: {m['model']['name']}: {bad} of {len(m['c'])} points without"
                        f" an honest bar (hollow), e.g. {why}", err=True)
     save_figure(models_figure(data), output)
+    click.echo(f"wrote {output}", err=True)
+
+
+@plot.command(short_help="Exact relaxation time against density, and a spectrum.")
+@click.option("--length", "-L", type=int, default=12, show_default=True,
+              help="Ring length of the tau(c) curves.")
+@click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity.")
+@click.option("--p", "p_text", default="0.25,0.5,0.75", show_default=True,
+              help="Braking probabilities, one curve each.")
+@click.option("--spectrum-cars", type=int, default=None,
+              help="Cars of the ring whose spectrum is drawn (default L/2; 0: no panel).")
+@click.option("--count", type=int, default=6, show_default=True,
+              help="Eigenvalues per sector in the spectrum panel.")
+@click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
+              help="Figure file, .png or .pdf.")
+@quiet_option
+@handle_errors
+def relaxation(length, vmax, p_text, spectrum_cars, count, output):
+    """Relaxation time tau = -1/ln|lambda_2| against density, exactly, for several p.
+
+    Left: per p over N = 1..L-1 on a ring of L cells (NaSch), the slowest
+    eigenvalue of all sectors (solid; usually k = 1, a density wave drifting
+    round the ring) and of sector 0 alone (dashed: what the flux and other
+    translation-invariant observables see from a translation-invariant start,
+    as in the Monte Carlo relaxation-time curves of the literature).  Right: the leading eigenvalues of every momentum sector of
+    the ring with --spectrum-cars cars at the first p, in the complex plane.
+
+    \b
+    Example:
+      nasch plot relaxation -L 12 --vmax 2 --p 0.25,0.5,0.75 --output tau.png
+    """
+    from markov.files import check_output_path
+    from markov.ring import Ring
+    from markov.spectrum import relaxation_spectrum
+    from markov.validate import ensure_int
+
+    from ..plot import FIGURE_FORMATS, relaxation_figure, save_figure
+    from ..relaxation import relaxation_curves
+
+    check_output_path(output, suffixes=FIGURE_FORMATS)   # before the work
+    length = ensure_int("--length", length, 3, 16)
+    vmax = ensure_int("--vmax", vmax, 1, 5)
+    ps = number_list("--p", p_text)
+    for p in ps:
+        if not 0 < p < 1:
+            raise InvalidParameterError(f"--p values must lie strictly between 0 and 1, got {p}")
+    count = ensure_int("--count", count, 1, 50)
+    cars = length // 2 if spectrum_cars is None else ensure_int("--spectrum-cars",
+                                                                spectrum_cars, 0, length - 1)
+    data = relaxation_curves(length, ps, vmax=vmax)
+    spec = relaxation_spectrum(Ring(length, cars, vmax, ps[0]), count=count) if cars else None
+    save_figure(relaxation_figure(data, spec), output)
     click.echo(f"wrote {output}", err=True)

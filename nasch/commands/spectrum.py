@@ -1,0 +1,172 @@
+"""``nasch spectrum``: the relaxation spectrum of one ring or a series of rings."""
+from __future__ import annotations
+
+import math
+
+import click
+
+from markov.choices import OPERATORS
+from markov.errors import InvalidParameterError
+
+from ..cli_common import emit_json, handle_errors, quiet_option
+from ..model_options import build_model, model_options
+
+__all__ = ["spectrum"]
+
+
+def _integer(text: str):
+    text = text.strip()
+    try:
+        return int(text)
+    except ValueError:
+        return text      # ensure_int names the option and the value
+
+
+def _lengths(text: str) -> list[int]:
+    from markov.validate import ensure_int
+
+    items = [t.strip() for t in str(text).split(",") if t.strip()]
+    if not items:
+        raise InvalidParameterError("--length needs at least one ring length")
+    lengths = [ensure_int("--length", _integer(t), 2) for t in items]
+    if len(set(lengths)) < len(lengths):
+        raise InvalidParameterError(f"--length names a ring twice: {text}")
+    return sorted(lengths)
+
+
+def _sectors(text: str):
+    if text.strip() == "all":
+        return "all"
+    from markov.validate import ensure_int
+
+    try:
+        return [ensure_int("--sector", _integer(t), 0) for t in text.split(",") if t.strip()]
+    except InvalidParameterError:
+        raise InvalidParameterError(
+            f"--sector must be 'all' or comma-separated integers, got {text!r}") from None
+
+
+@click.command()
+@click.option("--length", "-L", "length_text", required=True, metavar="L[,L...]",
+              help="Ring length, or several (comma-separated) for tau(L) and its power law.")
+@click.option("--cars", "-N", type=int, default=None,
+              help="Number of cars (one ring length).")
+@click.option("--density", "-c", type=float, default=None,
+              help="Density: N = round(c L) on each ring (several lengths).")
+@model_options
+@click.option("--vmax", type=int, default=None,
+              help="Maximal velocity >= 1 (default: the model's, 2 for nasch).")
+@click.option("--p", "p", type=float, default=None,
+              help="Braking probability (NaSch: required; a model: its p).")
+@click.option("--update", type=click.Choice(["parallel", "random-sequential",
+                                             "ordered-sequential"]),
+              default="parallel", show_default=True, help="Update order.")
+@click.option("--count", "-k", type=int, default=4, show_default=True,
+              help="Eigenvalues per sector after the stationary 1.")
+@click.option("--sector", "sector_text", default="all", show_default=True,
+              metavar="all|k[,k...]", help="Momentum sectors k = 0..L-1.")
+@click.option("--operator", type=click.Choice(OPERATORS), default="auto", show_default=True,
+              help="Sector matrices, or the factored operator (parallel update).")
+@click.option("--tol", type=float, default=1e-10, show_default=True,
+              help="ARPACK's relative accuracy of the eigenvalues.")
+@click.option("--show", type=int, default=10, show_default=True,
+              help="Eigenvalues listed in the text output (all are in --json).")
+@click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
+@quiet_option
+@handle_errors
+def spectrum(length_text, cars, density, model, params, vmax, p, update, count, sector_text,
+             operator, tol, show, as_json):
+    """Relaxation spectrum: leading eigenvalues of P in every momentum sector.
+
+    The chain of a ring commutes with rotations, so P splits into momentum
+    sectors k = 0..L-1 (sector 0 is the lumped chain).  For each sector the
+    COUNT eigenvalues of largest modulus after the stationary 1 are found
+    (ARPACK, with residuals); the relaxation time is tau = -1/ln|lambda_2|
+    steps (sub-steps for random-sequential update) for the slowest of them,
+    with its sector and its oscillation arg(lambda_2).  With several lengths
+    tau(L) is fitted to A L^z.
+
+    \b
+    Example:
+      nasch spectrum -L 16 -N 8 --p 0.5
+      nasch spectrum -L 12 -N 4 --model vdr --param p0=0.75 --p 0.1 --sector 0,1
+      nasch spectrum -L 10,12,14,16,18 -c 0.5 --vmax 1 --p 0.5 --count 1 --json
+    """
+    from markov.ring import Ring
+    from markov.spectrum import relaxation_spectrum
+    from markov.validate import ensure_int, ensure_tol
+
+    from ..relaxation import fit_power_law
+
+    lengths = _lengths(length_text)
+    if model == "nasch" and p is None and not any(
+            item.partition("=")[0].strip() == "p" for item in params):
+        raise click.UsageError("--p is required for the NaSch model")
+    if cars is not None and density is not None:
+        raise click.UsageError("give --cars or --density, not both")
+    if cars is None and density is None:
+        raise click.UsageError("give --cars (one length) or --density")
+    if cars is not None and len(lengths) > 1:
+        raise click.UsageError("several lengths need --density, not --cars")
+    if density is not None and not 0 < density < 1:
+        raise InvalidParameterError(f"--density must lie strictly between 0 and 1, got {density}")
+    count = ensure_int("--count", count, 1, 1000)
+    show = ensure_int("--show", show, 0)
+    tol = ensure_tol(tol, "--tol")
+    sectors = _sectors(sector_text)
+    m = build_model(model, params, vmax=vmax, p=p)
+    rings = []
+    for L in lengths:
+        n = cars if cars is not None else round(density * L)
+        rings.append(Ring(L, ensure_int("--cars", n, 0, L), update=update, model=m))
+    for ring in rings:
+        if sectors != "all":
+            for k in sectors:
+                ensure_int("--sector", k, 0, ring.length - 1)
+    results = [relaxation_spectrum(ring, count=count, sectors=sectors, tol=tol,
+                                   operator=operator) for ring in rings]
+    fit = None
+    taus = [s.relaxation_time for s in results]
+    if len(rings) > 1 and all(math.isfinite(t) and t > 0 for t in taus):
+        fit = fit_power_law(lengths, taus)
+    if as_json:
+        entries = [{"length": r.length, "cars": r.cars, "model": r.model.describe(),
+                    "update": r.update, **s.to_dict()} for r, s in zip(rings, results)]
+        emit_json(entries[0] if len(entries) == 1 else {"rings": entries, "fit": fit})
+        return
+    for ring, s in zip(rings, results):
+        _echo_ring(ring, s, show)
+    if len(rings) > 1:
+        if fit is None:
+            click.echo("tau(L): no power-law fit (a ring without a finite, positive tau)")
+        else:
+            local = ", ".join(f"{z:.3f}" for z in fit["local_z"])
+            click.echo(f"tau(L) = {fit['amplitude']:.4g} L^{fit['z']:.4f}"
+                       f" (least squares on logs, rms {fit['rms_log_residual']:.1e});"
+                       f" local exponents {local}")
+
+
+def _echo_ring(ring, s, show: int) -> None:
+    params = " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
+                      for k, v in ring.model.params.items())
+    sizes = s.sector_sizes
+    click.echo(f"{ring.model.name} ring L={ring.length} N={ring.cars} {params}"
+               f" update={ring.update}: {len(sizes)} sector{'s' if len(sizes) != 1 else ''},"
+               f" {max(sizes.values()) if sizes else 0:,} states in the largest,"
+               f" {s.operator}, {s.seconds:.2f} s")
+    lam = s.second
+    if lam is None:
+        click.echo("  no eigenvalue besides the stationary 1 (a single configuration)")
+        return
+    tau = s.relaxation_time
+    tau_text = "infinite (|lambda_2| = 1: the chain does not relax)" if math.isinf(tau) \
+        else f"{tau:.10g} steps"
+    click.echo(f"  lambda_2 = {lam.value.real:.12f} {lam.value.imag:+.12f}i"
+               f"  |lambda_2| = {abs(lam.value):.12f}  sector {lam.sector}")
+    click.echo(f"  relaxation time tau = -1/ln|lambda_2| = {tau_text};"
+               f" oscillation arg = {s.oscillation:.6f} rad/step")
+    if show:
+        click.echo("  eigenvalues (by modulus; sector, residual):")
+        for e in s.eigenvalues[:show]:
+            click.echo(f"    {e.value.real:+.12f} {e.value.imag:+.12f}i  |{abs(e.value):.12f}|"
+                       f"  k={e.sector:<3d} res {e.residual:.1e}")
