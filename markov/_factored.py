@@ -105,6 +105,9 @@ class LevelRule:
         Row ``u`` has the outcomes ``{u}`` (``u = 0``, weight 1) or ``{u - 1, u}``
         with the same two weights for every ``u >= 1``, ``R = vmax + 1``: the
         two-parent levels apply.
+    dweight : (R K,) float64 array or None
+        Derivatives of the weights with respect to one parameter, slot by slot,
+        when the rows were numbered with them (:func:`level_rule`).
     """
 
     row_id: np.ndarray
@@ -113,6 +116,7 @@ class LevelRule:
     weight: np.ndarray
     horizon: int
     nasch_form: bool
+    dweight: np.ndarray | None = None
 
     @property
     def rows(self) -> int:
@@ -130,24 +134,31 @@ def _cells(table: RuleTable):
     return itertools.product(range(vmax + 1), range(table.horizon + 1), range(vmax + 1))
 
 
-def _nasch_form(count, new, weight) -> bool:
+def _nasch_form(count, new, weight, dweight=None) -> bool:
     k = new.shape[1]
     if count[0] != 1 or new[0, 0] != 0 or k < 2:
         return False
+    same = (weight,) if dweight is None else (weight, dweight)
+    if dweight is not None and dweight[0] != 0:   # the two-parent gather takes weight 1 there
+        return False
     for r in range(1, count.shape[0]):
         if count[r] != 2 or new[r, 0] != r - 1 or new[r, 1] != r \
-                or weight[r * k] != weight[k] or weight[r * k + 1] != weight[k + 1]:
+                or any(x[r * k] != x[k] or x[r * k + 1] != x[k + 1] for x in same):
             return False
     return True
 
 
-def level_rule(table: RuleTable) -> LevelRule:
+def level_rule(table: RuleTable, dweight: np.ndarray | None = None) -> LevelRule:
     """Number the distinct rows of a rule table (NaSch: the row id is ``u``).
 
     Parameters
     ----------
     table : RuleTable
         Numeric, tabulated up to its horizon (:meth:`markov.ring.Ring.table`).
+    dweight : array shaped like ``table.weight``, optional
+        Derivatives of the weights with respect to a parameter: cells of equal
+        weights but different derivatives then get rows of their own, and the
+        rule carries them (:attr:`LevelRule.dweight`).
 
     Returns
     -------
@@ -158,25 +169,55 @@ def level_rule(table: RuleTable) -> LevelRule:
     for v, g, a in _cells(table):
         n = int(table.count[v, g, a])
         signature[v, g, a] = (tuple(int(x) for x in table.new_velocity[v, g, a, :n]),
-                              tuple(float(x) for x in table.weight[v, g, a, :n]))
+                              tuple(float(x) for x in table.weight[v, g, a, :n]),
+                              () if dweight is None
+                              else tuple(float(x) for x in dweight[v, g, a, :n]))
     rows = sorted(set(signature.values()))
     number = {s: r for r, s in enumerate(rows)}
     row_id = np.zeros((vmax + 1, table.horizon + 1, vmax + 1), dtype=np.int64)
     for cell, s in signature.items():
         row_id[cell] = number[s]
-    k = max(len(new) for new, _ in rows)
+    k = max(len(new) for new, _, _ in rows)
     if len(rows) * k > np.iinfo(np.int16).max:
         raise InvalidParameterError(
             f"the factored operator numbers outcomes with int16: {len(rows)} distinct rows of"
             f" {k} outcomes are too many")
-    count = np.array([len(new) for new, _ in rows], dtype=np.int64)
+    count = np.array([len(new) for new, _, _ in rows], dtype=np.int64)
     new = np.full((len(rows), k), -1, dtype=np.int64)
     weight = np.zeros(len(rows) * k)
-    for r, (vs, ws) in enumerate(rows):
+    dw = None if dweight is None else np.zeros(len(rows) * k)
+    for r, (vs, ws, ds) in enumerate(rows):
         new[r, :len(vs)] = vs
         weight[r * k:r * k + len(ws)] = ws
+        if dw is not None:
+            dw[r * k:r * k + len(ds)] = ds
     return LevelRule(row_id, count, new, weight, int(table.horizon),
-                     _nasch_form(count, new, weight))
+                     _nasch_form(count, new, weight, dw), dw)
+
+
+def _slot_derivatives(rule: LevelRule, dweight: np.ndarray) -> np.ndarray | None:
+    """``dweight`` (shaped like the table's weights) slot by slot of ``rule``'s rows.
+
+    ``None`` when two cells that share a row have different derivatives (a
+    row merged for equal weights, e.g. VDR with ``p0 = p`` and the derivative
+    in ``p0``), or when the NaSch form's one ``(dp, dq)`` does not hold:
+    the rows must then be numbered with the derivatives (:func:`level_rule`).
+    """
+    k = rule.new_velocity.shape[1]
+    out = np.full(rule.weight.shape, np.nan)
+    vmax = rule.row_id.shape[0] - 1
+    for v, g, a in itertools.product(range(vmax + 1), range(rule.horizon + 1), range(vmax + 1)):
+        r = int(rule.row_id[v, g, a])
+        n = int(rule.count[r])
+        mine = out[r * k:r * k + n]
+        if np.isnan(mine[0]):
+            mine[:] = dweight[v, g, a, :n]
+        elif not np.array_equal(mine, dweight[v, g, a, :n]):
+            return None
+    out[np.isnan(out)] = 0.0
+    if rule.nasch_form and not _nasch_form(rule.count, rule.new_velocity, rule.weight, out):
+        return None
+    return out
 
 
 def _reweigh(rule: LevelRule, table: RuleTable) -> LevelRule | None:
@@ -204,10 +245,9 @@ def _reweigh(rule: LevelRule, table: RuleTable) -> LevelRule | None:
     weight[np.isnan(weight)] = 0.0
     if rule.nasch_form and not _nasch_form(rule.count, rule.new_velocity, weight):
         return None
-    return replace(rule, weight=weight)
+    return replace(rule, weight=weight, dweight=None)
 
 
-@lru_cache(maxsize=64)
 @lru_cache(maxsize=64)
 def _model_rule(model: Model) -> LevelRule:
     return level_rule(cached_table(model))
@@ -264,9 +304,10 @@ def factored_fits(ring: Ring) -> bool:
     return _word_width(ring)[1] <= _MAX_WORD_BITS
 
 
-def _word_width(ring: Ring) -> tuple[int, int]:
+def _word_width(ring: Ring, rule: LevelRule | None = None) -> tuple[int, int]:
     """Bits per car field (the largest row id and ``vmax``) and of a whole word."""
-    w = max(int(ring.vmax), _model_rule(ring.model).rows - 1).bit_length()
+    rule = _model_rule(ring.model) if rule is None else rule
+    w = max(int(ring.vmax), rule.rows - 1).bit_length()
     return w, ring.length + ring.cars * w
 
 
@@ -605,6 +646,67 @@ def _gather_rows_last(indptr, parent, slot, offsets, weight, z, out):
         out[s] = acc
 
 
+# Forward mode: a level is linear in z and in the weights, z_j = G_j(w) z_{j-1},
+# so dz_j = G_j(w) dz_{j-1} + G_j(dw) z_{j-1} (dz_0 = 0: level 0 has no weights).
+
+@njit(cache=True, inline="always")
+def _two_parents_pair(a, b, z, dz, p, q, dp, dq):
+    s = 0.0
+    ds = 0.0
+    if a >= 0:
+        s = q * z[a]
+        ds = q * dz[a] + dq * z[a]
+    elif a < -1:           # a row of one outcome: weight 1, derivative 0
+        s = z[-a - 2]
+        ds = dz[-a - 2]
+    if b >= 0:
+        s += p * z[b]
+        ds += p * dz[b] + dp * z[b]
+    return s, ds
+
+
+@njit(cache=True, parallel=True)
+def _gather_level_pair(a, b, z, dz, p, q, dp, dq, out, dout):
+    """NaSch form, level ``j``, and its derivative."""
+    for i in prange(a.shape[0]):
+        out[i], dout[i] = _two_parents_pair(a[i], b[i], z, dz, p, q, dp, dq)
+
+
+@njit(cache=True, parallel=True)
+def _gather_last_pair(a, b, offsets, z, dz, p, q, dp, dq, dout):
+    """NaSch form, level ``N`` fused with R4: the derivative only."""
+    for s in prange(dout.shape[0]):
+        acc = 0.0
+        for k in range(offsets[s], offsets[s + 1]):
+            acc += _two_parents_pair(a[k], b[k], z, dz, p, q, dp, dq)[1]
+        dout[s] = acc
+
+
+@njit(cache=True, parallel=True)
+def _gather_rows_pair(indptr, parent, slot, weight, dweight, z, dz, out, dout):
+    """Any rule, level ``j``, and its derivative."""
+    for i in prange(out.shape[0]):
+        s = 0.0
+        ds = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            w, x = weight[slot[e]], z[parent[e]]
+            s += w * x
+            ds += w * dz[parent[e]] + dweight[slot[e]] * x
+        out[i] = s
+        dout[i] = ds
+
+
+@njit(cache=True, parallel=True)
+def _gather_rows_last_pair(indptr, parent, slot, offsets, weight, dweight, z, dz, dout):
+    """Any rule, level ``N`` fused with R4: the derivative only."""
+    for s in prange(dout.shape[0]):
+        acc = 0.0
+        for k in range(offsets[s], offsets[s + 1]):
+            for e in range(indptr[k], indptr[k + 1]):
+                acc += weight[slot[e]] * dz[parent[e]] + dweight[slot[e]] * z[parent[e]]
+        dout[s] = acc
+
+
 class FactoredOperator(ChainOperator):
     """The parallel-update chain as a ``LinearOperator`` (``A = P^T``), through the per-car levels.
 
@@ -631,6 +733,9 @@ class FactoredOperator(ChainOperator):
         The rows of the rule table and their weights.
     products, seconds
         Products applied so far and the time spent in them.
+    derivative_split : bool or None
+        Whether the last :meth:`derivative_apply` needed levels with the rows
+        split by their derivatives (``None`` before the first).
 
     Notes
     -----
@@ -659,9 +764,16 @@ class FactoredOperator(ChainOperator):
         (self.rule, self._perm, self._offsets0, self._links, self._offsets_last,
          self.level_sizes, self._shifts) = _levels
         self._buffers = (np.empty(max(self.level_sizes)), np.empty(max(self.level_sizes)))
+        self.derivative_split = None   # set by derivative_apply
+        self._split = None             # (dweight, operator with rows split by it)
 
-    def _build(self, rule: LevelRule, shifts: bool):
-        ring, w = self.ring, word_bits(self.ring)[0]
+    def _build(self, rule: LevelRule, shifts: bool = False):
+        ring = self.ring
+        w, total = _word_width(ring, rule)
+        if total > _MAX_WORD_BITS:
+            raise InvalidParameterError(
+                f"the factored operator packs a configuration into {ring.length} + {ring.cars}"
+                f" x {w} = {total} bits, more than {_MAX_WORD_BITS}")
         n = self.n
         if n >= 2**31:
             raise InvalidParameterError("the factored operator indexes states with int32")
@@ -753,6 +865,88 @@ class FactoredOperator(ChainOperator):
         levels = (rule, self._perm, self._offsets0, self._links, self._offsets_last,
                   self.level_sizes, self._shifts)
         return FactoredOperator(ring, self.keys, self.lump, _levels=levels)
+
+    def derivative_apply(self, x: np.ndarray, dweight: np.ndarray,
+                         out: np.ndarray | None = None) -> np.ndarray:
+        """``x dP``: the product with the derivative of ``P`` in one parameter.
+
+        Forward mode through the levels: each level is linear in the weights,
+        so the derivative of level ``j`` is ``G_j(w) dz + G_j(dw) z``, about
+        twice the reads of :meth:`apply`.  When two table cells that share a
+        row (merged for equal weights) have different derivatives, or the
+        NaSch form's single ``(dp, dq)`` does not hold, the levels are rebuilt
+        once with the rows numbered by their derivatives too (kept for the next
+        call with the same ``dweight``; :attr:`derivative_split` says so).
+
+        Parameters
+        ----------
+        x : (n,) float64 array
+        dweight : float64 array shaped like ``ring.table().weight``
+            Derivatives of the table's weights (:func:`markov.sensitivity.weight_derivatives`).
+        out : (n,) float64 array, optional
+
+        Returns
+        -------
+        (n,) float64 array
+
+        Examples
+        --------
+        >>> from markov.statespace import recurrent_keys
+        >>> ring = Ring(3, 1, 1, 0.5)            # one car: v' = 0 with p, 1 with q
+        >>> op = FactoredOperator(ring, recurrent_keys(ring), lump=True)
+        >>> dw = np.zeros_like(ring.table().weight)
+        >>> dw[..., 0], dw[..., 1] = 1.0, -1.0   # d/dp of (p, q) in every two-outcome row
+        >>> dw[ring.table().count == 1] = 0.0
+        >>> op.derivative_apply(np.array([1.0, 0.0]), dw).tolist()
+        [1.0, -1.0]
+        """
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        if x.shape != (self.n,):
+            raise InvalidParameterError(f"x must have shape ({self.n},), got {x.shape}")
+        table = self.ring.table()
+        dweight = np.ascontiguousarray(dweight, dtype=np.float64)
+        if dweight.shape != table.weight.shape:
+            raise InvalidParameterError(
+                f"dweight must have the table's shape {table.weight.shape}, got {dweight.shape}")
+        op, slots = self, _slot_derivatives(self.rule, dweight)
+        self.derivative_split = slots is None
+        if slots is None:
+            cached = self._split
+            if cached is None or not np.array_equal(cached[0], dweight):
+                rule = level_rule(table, dweight)
+                split = FactoredOperator(self.ring, self.keys, self.lump,
+                                         _levels=self._build(rule))
+                cached = (dweight.copy(), split)
+                self._split = cached
+            op = cached[1]
+            slots = op.rule.dweight
+        out = np.empty(self.n) if out is None else out
+        op._derivative_product(x, slots, out)
+        return out
+
+    def _derivative_product(self, x: np.ndarray, dweight: np.ndarray, out: np.ndarray) -> None:
+        rule = self.rule
+        z, dz = np.empty(self.level_sizes[0]), np.zeros(self.level_sizes[0])
+        _gather_states(x, self._perm, self._offsets0, z)
+        if rule.nasch_form:
+            p, q = rule.brake_weights
+            k = rule.new_velocity.shape[1]
+            dp, dq = float(dweight[k]), float(dweight[k + 1])
+            for a, b in self._links[:-1]:
+                nz, ndz = np.empty(a.shape[0]), np.empty(a.shape[0])
+                _gather_level_pair(a, b, z, dz, p, q, dp, dq, nz, ndz)
+                z, dz = nz, ndz
+            a, b = self._links[-1]
+            _gather_last_pair(a, b, self._offsets_last, z, dz, p, q, dp, dq, out)
+            return
+        for indptr, parent, slot in self._links[:-1]:
+            m = indptr.shape[0] - 1
+            nz, ndz = np.empty(m), np.empty(m)
+            _gather_rows_pair(indptr, parent, slot, rule.weight, dweight, z, dz, nz, ndz)
+            z, dz = nz, ndz
+        indptr, parent, slot = self._links[-1]
+        _gather_rows_last_pair(indptr, parent, slot, self._offsets_last, rule.weight, dweight,
+                               z, dz, out)
 
     def _product(self, x: np.ndarray, out: np.ndarray) -> None:
         self._through_levels(x, out, fused=True)

@@ -264,6 +264,38 @@ class RingChain:
         # True while the reachable set stands for one class that is not yet checked
         self.unverified = False
 
+    @classmethod
+    def on_class(cls, ring: Ring, keys: np.ndarray, lump: bool = True,
+                 max_memory: float | None = None, operator: str = "matrix") -> "RingChain":
+        """The chain on a closed class given by its keys, without the search.
+
+        Parameters
+        ----------
+        ring : Ring
+        keys : (n,) int64 array, sorted
+            One closed class (canonical rotations if ``lump``), e.g. a
+            :class:`ClassSolution`'s ``solution.keys``.
+        lump : bool
+        max_memory : float, optional
+            Bytes allowed.
+        operator : {"auto", "matrix", "matrix-free"}
+
+        Returns
+        -------
+        RingChain
+
+        Examples
+        --------
+        >>> chain = RingChain(Ring(5, 2, 1, 0.5))
+        >>> RingChain.on_class(chain.ring, chain.keys).n_states == chain.n_states
+        True
+        """
+        chain = cls(ring, lump=lump, max_memory=max_memory, operator=operator)
+        keys = np.ascontiguousarray(keys, dtype=np.int64)
+        chain.__dict__["reachable"] = keys
+        chain.__dict__["classes"] = [keys]
+        return chain
+
     def with_p(self, p) -> "RingChain":
         """The same chain at another braking probability, sharing what is built.
 
@@ -902,10 +934,7 @@ def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
     firsts = {int(c[0]) for c in reachable}
     out = []
     for keys in classes:
-        sub = RingChain(ring, lump=lump, max_memory=max_memory, operator="matrix")
-        sub.__dict__["reachable"] = keys
-        sub.__dict__["classes"] = [keys]
-        sol = sub.solution(tol=tol)
+        sol = RingChain.on_class(ring, keys, lump, max_memory).solution(tol=tol)
         out.append(ClassSolution(to_text(decode(int(keys[0]), ring.length, ring.vmax)),
                                  int(keys[0]) in firsts, sol))
     return out

@@ -140,25 +140,46 @@ def _expected_move(keys, weights, length, vmax, count, new_velocity, weight, hor
     return total
 
 
-def expected_move(ring: Ring, keys: np.ndarray, pi: np.ndarray) -> float:
+def expected_move(ring: Ring, keys: np.ndarray, pi: np.ndarray,
+                  weight: np.ndarray | None = None) -> float:
     """Mean number of cells all cars advance in the next update, divided by ``L``.
 
     For parallel update this is the flux of the *next* step, so in a
     stationary state it equals ``sum_v v c_v``; for random-sequential update
     every car is updated once per time step on average, so it is the flux per
-    time step (``L`` sub-steps).
+    time step (``L`` sub-steps).  It is linear in ``pi`` and in the table's
+    weights, so with the derivatives of either it gives the derivative.
 
     Parameters
     ----------
     ring : Ring
     keys : (m,) int64 array
     pi : (m,) float array
+    weight : array shaped like ``ring.table().weight``, optional
+        Outcome weights to average instead of the table's (e.g. their
+        derivatives in a parameter, :mod:`markov.sensitivity`).
 
     Returns
     -------
     float
+
+    Examples
+    --------
+    One car on three cells at v = 1 moves one cell with ``q = 0.75``:
+
+    >>> from markov.encoding import encode
+    >>> keys = np.array([encode([1, -1, -1], 1)])
+    >>> expected_move(Ring(3, 1, 1, 0.25), keys, np.array([1.0])) * 3
+    0.75
     """
-    count, new_velocity, weight, _, horizon = ring.kernel_rule()
+    count, new_velocity, table_weight, _, horizon = ring.kernel_rule()
+    if weight is None:
+        weight = table_weight
+    else:
+        weight = np.ascontiguousarray(weight, dtype=np.float64)
+        if weight.shape != table_weight.shape:
+            raise InvalidParameterError(
+                f"weight must have the table's shape {table_weight.shape}, got {weight.shape}")
     total = _expected_move(np.ascontiguousarray(keys, np.int64),
                            np.ascontiguousarray(pi, np.float64), ring.length, ring.vmax,
                            count, new_velocity, weight, horizon)

@@ -45,11 +45,15 @@ __all__ = ["solve"]
               help="Also print the K most probable configurations ('.' empty, digit = velocity).")
 @click.option("--save", type=click.Path(dir_okay=False), default=None, metavar="FILE.npz",
               help="Store configurations, probabilities and metadata (see docs/storage.md).")
+@click.option("--sensitivity", "sensitivity", multiple=True, metavar="NAME[,NAME]",
+              help="Also the exact derivative of the flux (and of c_v) in these probability"
+                   " parameters of the model, e.g. --sensitivity p,p0 (repeatable): one more"
+                   " linear solve each; --json adds dflux_NAME (docs/dynamics.md).")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @quiet_option
 @handle_errors
 def solve(length, cars, model, params, vmax, p, update, start, every_class, method, operator,
-          tol, no_lump, max_memory, top, save, as_json):
+          tol, no_lump, max_memory, top, save, sensitivity, as_json):
     """Exact stationary state of one ring: flux, c_v; --json adds the gap distribution.
 
     By default a state is a rotation class of the ring and its probability is
@@ -62,6 +66,10 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
     classes is refused with their sizes; --start solves the class a start
     configuration falls into, --classes every class.
 
+    --sensitivity p adds d flux / d p (and d c_v / d p), exact: one more
+    linear solve with the chain's operator and the exact derivative of P
+    (docs/dynamics.md); any probability parameter of the model, not vmax.
+
     \b
     Example:
       nasch solve --length 12 --cars 6 --vmax 2 --p 0.5
@@ -69,9 +77,10 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
       nasch solve -L 22 -N 11 --p 0.5 --operator matrix-free --tol 1e-10
       nasch solve -L 12 -N 4 --model vdr --param p0=0.75 --p 0.1
       nasch solve -L 12 -N 3 --model cc --p 0.2 --classes
+      nasch solve -L 10 -N 4 --model vdr --p 0.1 --param p0=0.5 --sensitivity p,p0
     """
     # every check before the work: the solver's own up-front checks, then the options
-    from markov.chain import solve as solve_ring
+    from markov.chain import RingChain
     from markov.files import check_output_path
     from markov.goe_census import recurrent_class_bound
     from markov.ring import Ring
@@ -88,6 +97,7 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
         top = ensure_int("--top", top, 1)
     if save is not None:
         save = check_output_path(save, suffixes=(".npz",))
+    names = _sensitivity_names(ring, sensitivity, every_class)
     limit = None if max_memory is None else max_memory * 2**30
     if every_class or start is not None:
         from markov.chain import solve_classes
@@ -98,10 +108,18 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
             _echo_classes(ring, classes, as_json, start)
             return
         sol = classes[0].solution
+        chain = None
     else:
-        sol = solve_ring(ring, method=method, lump=not no_lump, tol=tol, max_memory=limit,
-                         operator=operator, state_bound=recurrent_class_bound)
+        # markov.chain.solve, keeping the chain: a sensitivity reuses its operator
+        chain = RingChain(ring, lump=not no_lump, max_memory=limit, operator=operator,
+                          state_bound=recurrent_class_bound)
+        sol = chain.solution(method=method, tol=tol)
     data = sol.to_dict()
+    derivatives = _sensitivities(ring if chain is None else chain, sol, names, tol)
+    for name, d in derivatives.items():
+        data[f"dflux_d{name}"] = d.dflux
+    if derivatives:
+        data["sensitivity"] = {name: d.to_dict() for name, d in derivatives.items()}
     rows = sol.top_configurations(top) if top else None
     if save is not None:
         sol.save(save)
@@ -127,10 +145,44 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
         click.echo(f"  mean velocity  {data['mean_velocity']:.15g}")
     for v, c in enumerate(data["c_v"]):
         click.echo(f"  c_{v}            {c:.15g}")
+    for name, d in derivatives.items():
+        click.echo(f"  dflux/d{name} = {d.dflux:.15g}  (residual {d.residual:.1e},"
+                   f" {d.derivative} weights, {d.route} route, {d.seconds:.3f} s)")
     if rows is not None:
         _echo_top(rows, sol.lumped, len(sol.keys))
     if save is not None:
         click.echo(f"wrote {save} ({data['states']:,} states)", err=True)
+
+
+def _sensitivity_names(ring, given, every_class: bool) -> list[str]:
+    """The parameter names of --sensitivity, each checked before any solve."""
+    if not given:
+        return []
+    from markov.sensitivity import weight_derivatives
+
+    names: list[str] = []
+    for item in given:
+        for name in (x.strip() for x in item.split(",")):
+            if name and name not in names:
+                names.append(name)
+    if not names:
+        raise click.UsageError("--sensitivity needs a parameter name, e.g. --sensitivity p")
+    if every_class:
+        raise click.UsageError("--sensitivity needs one stationary state; --classes gives"
+                               " several (use --start for one class)")
+    for name in names:
+        weight_derivatives(ring.model, name)   # refuses vmax, unknown names, p = 0 or 1
+    return names
+
+
+def _sensitivities(system, sol, names, tol) -> dict:
+    if not names:
+        return {}
+    from markov.sensitivity import sensitivity
+
+    # the solve for dpi targets the stationary solve's tolerance, at most 1e-12
+    return {name: sensitivity(system, name, solution=sol, tol=min(tol, 1e-12))
+            for name in names}
 
 
 def _title(ring) -> str:
