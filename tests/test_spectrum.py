@@ -179,3 +179,30 @@ def test_deterministic_chain_has_no_relaxation_time():
     spec = relaxation_spectrum(Ring(7, 2, 2, 0.0), count=2)
     assert spec.relaxation_time == math.inf
     assert spec.to_dict()["relaxation_time"] is None
+
+
+@pytest.mark.parametrize("name, params, update, L, N", [
+    ("nasch", {"vmax": 2, "p": 0.3}, "parallel", 7, 3),
+    ("vdr", {"vmax": 2, "p": 0.2, "p0": 0.6}, "random-sequential", 6, 3),
+    ("kkw", {"vmax": 2}, "ordered-sequential", 6, 2),
+])
+def test_sectors_against_the_naive_chain(name, params, update, L, N):
+    """Power sums of the sectors against the naive chain (tests/naive_rule.py: the rule
+    function called on every configuration, no tables, no kernels) on its closed class."""
+    import naive_rule as naive
+
+    model = load_model(name, params)
+    chain = naive.Chain(L, N, model.spec.function, dict(model.params), update)
+    (members,) = chain.closed_classes()
+    full = chain.P[members][:, members].toarray()
+    ring = Ring(L, N, update=update, model=model)
+    keys = RingChain(ring).keys
+    mats = [sector_matrix(ring, keys, k)[0].toarray() for k in range(L)]
+    assert sum(len(M) for M in mats) == len(members)
+    powers = [np.eye(len(M)) for M in mats]
+    power = np.eye(len(full))
+    for _ in range(25):
+        power = power @ full
+        powers = [P @ M for P, M in zip(powers, mats)]
+        total = sum(np.trace(P) for P in powers)
+        assert abs(total - np.trace(power)) < 1e-10 * max(1.0, abs(np.trace(power)))

@@ -1,0 +1,124 @@
+"""tau(L) and its power law, nasch spectrum and nasch plot relaxation."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from markov.errors import InvalidParameterError
+from markov.ring import Ring
+from markov.spectrum import relaxation_spectrum
+from nasch.cli import main
+from nasch.relaxation import fit_power_law, relaxation_curves
+
+
+def run(*args):
+    return CliRunner().invoke(main, list(args))
+
+
+def test_fit_recovers_a_power_law_and_refuses_what_has_none():
+    L = np.array([6, 9, 13, 20])
+    fit = fit_power_law(L, 0.7 * L ** 1.37)
+    assert fit["z"] == pytest.approx(1.37, abs=1e-12)
+    assert fit["amplitude"] == pytest.approx(0.7, rel=1e-12)
+    assert fit["lengths"] == [6, 9, 13, 20]
+    for lengths, taus in (([8], [1.0]), ([8, 8], [1.0, 2.0]), ([8, 10], [1.0, math.inf]),
+                          ([8, 10], [1.0, 0.0]), ([8, 10], [1.0])):
+        with pytest.raises(InvalidParameterError):
+            fit_power_law(lengths, taus)
+
+
+def test_one_car_relaxes_diffusively():
+    """One car, vmax = 1: tau = -1/ln|p + q exp(2 pi i/L)| -> L^2 / (2 pi^2 p q): z -> 2."""
+    p = 0.3
+    lengths = [20, 28, 36]
+    taus = [relaxation_spectrum(Ring(L, 1, 1, p), count=1, sectors=[1]).relaxation_time
+            for L in lengths]
+    for L, tau in zip(lengths, taus):
+        assert tau == pytest.approx(-1 / math.log(abs(p + (1 - p) * np.exp(2j * np.pi / L))),
+                                    rel=1e-12)
+    fit = fit_power_law(lengths, taus)
+    assert abs(fit["local_z"][-1] - 2) < 2e-3
+    assert taus[-1] == pytest.approx(36**2 / (2 * math.pi**2 * p * (1 - p)), rel=2e-3)
+
+
+def test_vmax1_half_filling_exponent_approaches_kpz_from_above():
+    """vmax = 1 (parallel TASEP) at c = 1/2: local exponents 1.67, 1.64, 1.62 on
+    L = 8..14, falling towards the KPZ value 3/2 (the slowest mode is sector 1)."""
+    lengths = [8, 10, 12, 14]
+    spectra = [relaxation_spectrum(Ring(L, L // 2, 1, 0.5), count=1, sectors=[1])
+               for L in lengths]
+    local = fit_power_law(lengths, [s.relaxation_time for s in spectra])["local_z"]
+    assert all(1.5 < z < 1.75 for z in local)
+    assert all(a > b for a, b in zip(local, local[1:]))
+
+
+def test_curves_sector_zero_is_never_slower():
+    d = relaxation_curves(7, [0.25, 0.6], vmax=2)
+    for curve in d["curves"]:
+        for tau, tau0 in zip(curve["tau"], curve["tau_sector0"]):
+            assert tau0 <= tau + 1e-12
+    with pytest.raises(InvalidParameterError):
+        relaxation_curves(7, [1.0])
+
+
+def test_spectrum_cli_one_car_json():
+    res = run("spectrum", "-L", "6", "-N", "1", "--vmax", "1", "--p", "0.3", "--count", "1",
+              "--json")
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.output)
+    assert data["sector"] in (1, 5)
+    by_sector = {e["sector"]: complex(e["re"], e["im"]) for e in data["eigenvalues"]}
+    for k in range(1, 6):
+        assert abs(by_sector[k] - (0.3 + 0.7 * np.exp(2j * np.pi * k / 6))) < 1e-12
+    slowest = abs(0.3 + 0.7 * np.exp(2j * np.pi / 6))
+    assert data["relaxation_time"] == pytest.approx(-1 / math.log(slowest), rel=1e-12)
+    assert all(e["residual"] < 1e-12 for e in data["eigenvalues"])
+
+
+def test_spectrum_cli_several_lengths_fit_and_text():
+    res = run("spectrum", "-L", "6,8,10", "-c", "0.5", "--vmax", "1", "--p", "0.5",
+              "--count", "1", "--json")
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.output)
+    taus = [r["relaxation_time"] for r in data["rings"]]
+    assert [r["cars"] for r in data["rings"]] == [3, 4, 5]
+    assert data["fit"]["z"] == pytest.approx(fit_power_law([6, 8, 10], taus)["z"], rel=1e-12)
+    text = run("spectrum", "-L", "8", "-N", "4", "--p", "0.5", "--sector", "0,1")
+    assert text.exit_code == 0, text.output
+    assert "relaxation time tau" in text.output and "sector 1" in text.output
+
+
+@pytest.mark.parametrize("args, words", [
+    (["-L", "8", "-N", "4", "--p", "0.5", "--sector", "8"], "--sector"),
+    (["-L", "8", "-N", "4", "--p", "0.5", "--sector", "one"], "--sector"),
+    (["-L", "8,8", "-c", "0.5", "--p", "0.5"], "twice"),
+    (["-L", "8,10", "-N", "4", "--p", "0.5"], "--density"),
+    (["-L", "8", "--p", "0.5"], "--cars"),
+    (["-L", "8", "-c", "1.5", "--p", "0.5"], "--density"),
+    (["-L", "8", "-N", "4", "--p", "0.5", "--count", "0"], "--count"),
+    (["-L", "8", "-N", "4", "--p", "0.5", "--tol", "0"], "--tol"),
+    (["-L", "8", "-N", "4"], "--p"),
+    (["-L", "8", "-N", "4", "--p", "0.5", "--update", "random-sequential",
+      "--operator", "matrix-free"], "parallel"),
+])
+def test_spectrum_cli_bad_input(args, words):
+    res = run("spectrum", *args)
+    assert res.exit_code == 2, res.output
+    assert words in res.output
+    assert "Traceback" not in res.output
+
+
+def test_plot_relaxation(tmp_path):
+    out = tmp_path / "tau.png"
+    res = run("plot", "relaxation", "-L", "5", "--vmax", "1", "--p", "0.5", "--count", "2",
+              "-o", str(out))
+    assert res.exit_code == 0, res.output
+    assert out.read_bytes()[:4] == b"\x89PNG"
+    bad = run("plot", "relaxation", "-L", "5", "-o", str(tmp_path / "no" / "tau.png"))
+    assert bad.exit_code == 2 and "tau.png" in bad.output
+    bad = run("plot", "relaxation", "-L", "5", "--p", "1", "-o", str(out))
+    assert bad.exit_code == 2
