@@ -63,7 +63,7 @@ from pathlib import Path  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 TABLES = ("baseline", "large", "previous", "models", "solvers", "vmax1", "psweep", "budget",
-          "compare")
+          "compare", "spectrum")
 # (vmax, L, N, p) of the budget table: half filling, low and high density
 BUDGET_CASES = [(2, 16, 8, 0.5), (2, 20, 10, 0.5), (2, 22, 11, 0.1), (2, 22, 11, 0.5),
                 (2, 22, 11, 0.9), (2, 24, 6, 0.5), (2, 24, 18, 0.5), (1, 24, 12, 0.5),
@@ -259,6 +259,30 @@ def work_storm(L, N, vmax, p, route) -> dict:
     return out
 
 
+def work_spectrum(L, N, vmax, p, count=2, sectors="all", tol=1e-10) -> dict:
+    """The relaxation spectrum of every sector: search, factored operator with shifts, ARPACK."""
+    from markov import Ring, RingChain
+    from markov.spectrum import relaxation_spectrum
+
+    _warm_up()
+    relaxation_spectrum(Ring(12, 6, vmax, p), count=1, operator="matrix-free")  # kernels
+    start = time.perf_counter()
+    chain = RingChain(Ring(L, N, vmax, p))
+    keys = chain.keys
+    search = time.perf_counter() - start
+    spec = relaxation_spectrum(chain.ring, count=count, sectors=sectors, tol=tol, keys=keys)
+    lam = spec.second
+    return {"states": len(keys), "lumped": True, "operator": spec.operator,
+            "method": f"eigs k={count}/sector", "products": spec.products,
+            "search_s": search, "build_s": search, "solve_s": spec.seconds,
+            "total_s": search + spec.seconds,
+            "residual": max(e.residual for e in spec.eigenvalues),
+            "note": f"tau = {spec.relaxation_time:.6f} (sector {lam.sector}), lambda_2 ="
+                    f" {lam.value.real:.10f}{lam.value.imag:+.10f}i,"
+                    f" sector-0 tau = {spec.sector_relaxation_time(0):.6f};"
+                    f" {len(spec.sector_sizes)} sectors ({sectors})"}
+
+
 def work_baseline() -> dict:
     """Interpreter, numpy/scipy and the compiled kernels on a small ring."""
     _warm_up()
@@ -266,7 +290,7 @@ def work_baseline() -> dict:
 
 
 WORKERS = {"ours": work_ours, "previous": work_previous, "psweep": work_psweep,
-           "model": work_model,
+           "model": work_model, "spectrum": work_spectrum,
            "budget": work_budget,
            "naive": work_naive, "quantecon": work_quantecon, "storm": work_storm,
            "baseline": work_baseline}
@@ -418,6 +442,8 @@ def main(argv=None) -> None:
                     help="L of the models table for rules with three outcomes (kkw)")
     ap.add_argument("--solver-sizes", type=int, nargs="*", default=[18, 20, 22])
     ap.add_argument("--psweep-size", type=int, default=22)
+    ap.add_argument("--spectrum-sizes", type=int, nargs="*", default=[12, 14, 16, 18, 20],
+                    help="ring lengths of the spectrum table (vmax=2, N=L/2, p=0.5)")
     ap.add_argument("--compare", type=int, nargs="*", default=[8, 10, 12, 14, 16, 18],
                     help="small ring lengths for naive / QuantEcon / Storm / ours")
     ap.add_argument("--naive-max", type=int, default=12,
@@ -503,6 +529,12 @@ def main(argv=None) -> None:
         L = args.psweep_size
         record(run_case("psweep", "psweep", args.timeout, L=L, N=L // 2, vmax=2,
                         ps=[0.5, 0.45, 0.4, 0.35, 0.3, 0.25], **common))
+    if "spectrum" in args.only:
+        for L in args.spectrum_sizes:
+            record(run_case("spectrum", "spectrum", args.timeout, **half(L), tol=args.tol))
+        # the second eigenvalue alone: sector 1 holds it on every ring above
+        record(run_case("spectrum", "spectrum", args.timeout, **half(16), tol=args.tol,
+                        count=1, sectors=[1]))
     if "budget" in args.only:
         for vmax, L, N, p in BUDGET_CASES:
             record(run_case("budget", "budget", args.timeout, L=L, N=N, vmax=vmax, p=p))

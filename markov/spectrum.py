@@ -65,6 +65,12 @@ class Eigenvalue:
     residual: float
 
     def to_dict(self) -> dict:
+        """``re``, ``im``, ``sector`` and ``residual``, as the JSON writes them.
+
+        Returns
+        -------
+        dict
+        """
         return {"re": float(self.value.real), "im": float(self.value.imag),
                 "sector": int(self.sector), "residual": float(self.residual)}
 
@@ -142,6 +148,12 @@ class Spectrum:
         return 0.0 if lam is None else float(np.angle(lam.value))
 
     def to_dict(self) -> dict:
+        """The spectrum as JSON-ready values (``None`` for an infinite time).
+
+        Returns
+        -------
+        dict
+        """
         tau = self.relaxation_time
         lam = self.second
         tau0 = self.sector_relaxation_time(0)
