@@ -166,13 +166,25 @@ def _increments(sc: StationaryChain, keep: bool = False) -> _Increments:
         J = float(np.dot(pi, m))
         d = m - J
         # cov_j = (pi o d) P^j . m: start one product further
-        return _Increments(J, float(np.dot(pi, d * d)), sc.step(pi * d), m, m, None)
+        return _Increments(J, float(np.dot(pi, d * d)), _sum_free(sc.step(pi * d), pi), m, m,
+                           None)
     if keep:
         memory.check_fits(f"the tilted matrix ({sc.chain.transitions:,} transitions)",
                           40.0 * sc.chain.transitions, sc.chain.limit)
     a, a2, b, entries = _transition_moves(sc, keep)
     J = float(np.dot(pi, a))
-    return _Increments(J, float(np.dot(pi, a2)) - J * J, b - J * pi, a, None, entries)
+    return _Increments(J, float(np.dot(pi, a2)) - J * J, _sum_free(b - J * pi, pi), a, None,
+                       entries)
+
+
+def _sum_free(h: np.ndarray, pi: np.ndarray) -> np.ndarray:
+    """``h`` with its rounding sum removed along ``pi``.
+
+    ``h`` sums to zero in exact arithmetic; when every covariance vanishes (a
+    lone car: independent steps) it is rounding noise, whose sum is of the
+    order of the vector itself, which :func:`solve_fundamental` would refuse.
+    """
+    return h - pi * h.sum()
 
 
 # --- diffusion ---------------------------------------------------------------------
