@@ -4,8 +4,7 @@ import pytest
 from threadpoolctl import threadpool_limits
 
 from markov import InvalidParameterError, Ring, RingChain
-from markov.correlations import (autocorrelation, autocorrelation_time, observable_values,
-                                 prepare)
+from markov.correlations import autocorrelation, autocorrelation_time, observable_values
 from markov.encoding import decode
 from markov.fluctuations import block_autocorrelation_time
 from markov.montecarlo import integrated_autocorrelation_time, mser_truncation, simulate
