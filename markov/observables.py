@@ -26,7 +26,8 @@ from .errors import InvalidParameterError
 from .ring import Ring
 from .validate import ensure_int
 
-__all__ = ["cluster_probabilities", "velocity_densities", "gap_distribution", "expected_move"]
+__all__ = ["cluster_probabilities", "velocity_densities", "gap_distribution", "expected_move",
+           "velocity_counts"]
 
 
 @njit(cache=True)
@@ -93,6 +94,47 @@ def velocity_densities(ring: Ring, keys: np.ndarray, pi: np.ndarray) -> np.ndarr
     (vmax + 1,) float array
     """
     return cluster_probabilities(ring, keys, pi, 1)[1:]
+
+
+@njit(cache=True)
+def _velocity_counts(keys, length, b, out):
+    digits = np.empty(length, np.int64)
+    for i in range(keys.shape[0]):
+        digits_of(keys[i], length, b, digits)
+        for x in range(length):
+            if digits[x] > 0:
+                out[i, digits[x] - 1] += 1
+
+
+def velocity_counts(ring: Ring, keys: np.ndarray) -> np.ndarray:
+    """Cars of each velocity in each state: the per-state form of :func:`velocity_densities`.
+
+    Observables of one state (the velocity sum, the stopped cars) are products
+    of this table with a vector over ``v``; ``pi @ velocity_counts(...) / L``
+    is ``c_v``.
+
+    Parameters
+    ----------
+    ring : Ring
+    keys : (m,) int64 array
+        State keys (any rotation: the counts are translation invariant).
+
+    Returns
+    -------
+    (m, vmax + 1) int16 array
+        Entry ``[i, v]``: cars of velocity ``v`` in state ``keys[i]``.
+
+    Examples
+    --------
+    >>> from markov.encoding import encode
+    >>> keys = np.array([encode([2, -1, 0, 2, -1], 2), encode([0, 1, -1, 0, -1], 2)])
+    >>> velocity_counts(Ring(5, 3, 2, 0.5), keys).tolist()
+    [[1, 0, 2], [2, 1, 0]]
+    """
+    keys = np.ascontiguousarray(keys, np.int64)
+    out = np.zeros((keys.shape[0], ring.vmax + 1), np.int16)
+    _velocity_counts(keys, ring.length, ring.vmax + 2, out)
+    return out
 
 
 @njit(cache=True)

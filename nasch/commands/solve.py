@@ -49,11 +49,19 @@ __all__ = ["solve"]
               help="Also the exact derivative of the flux (and of c_v) in these probability"
                    " parameters of the model, e.g. --sensitivity p,p0 (repeatable): one more"
                    " linear solve each; --json adds dflux_NAME (docs/dynamics.md).")
+@click.option("--fluctuations", is_flag=True,
+              help="Also the diffusion coefficient of the cells moved by all cars and the"
+                   " integrated autocorrelation times of the flux and the stopped cars"
+                   " (docs/dynamics.md).")
+@click.option("--autocorrelation", "lags", type=int, default=None, metavar="T",
+              help="Also the stationary autocorrelations C(t), t = 0..T, of the flux and the"
+                   " stopped cars (docs/dynamics.md).")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @quiet_option
 @handle_errors
 def solve(length, cars, model, params, vmax, p, update, start, every_class, method, operator,
-          tol, no_lump, max_memory, top, save, sensitivity, as_json):
+          tol, no_lump, max_memory, top, save, sensitivity, fluctuations, lags,
+          as_json):
     """Exact stationary state of one ring: flux, c_v; --json adds the gap distribution.
 
     By default a state is a rotation class of the ring and its probability is
@@ -95,6 +103,11 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
         raise click.UsageError("--classes reports every class; --top and --save need one")
     if top is not None:
         top = ensure_int("--top", top, 1)
+    if lags is not None:
+        lags = ensure_int("--autocorrelation", lags, 0, MAX_CLI_LAGS)
+    if every_class and (fluctuations or lags is not None):
+        raise click.UsageError("--classes reports every class; --fluctuations and"
+                               " --autocorrelation need one")
     if save is not None:
         save = check_output_path(save, suffixes=(".npz",))
     names = _sensitivity_names(ring, sensitivity, every_class)
@@ -120,6 +133,8 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
         data[f"dflux_d{name}"] = d.dflux
     if derivatives:
         data["sensitivity"] = {name: d.to_dict() for name, d in derivatives.items()}
+    if fluctuations or lags is not None:
+        data.update(_dynamics(sol, chain, start, limit, operator, fluctuations, lags))
     rows = sol.top_configurations(top) if top else None
     if save is not None:
         sol.save(save)
@@ -148,6 +163,8 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
     for name, d in derivatives.items():
         click.echo(f"  dflux/d{name} = {d.dflux:.15g}  (residual {d.residual:.1e},"
                    f" {d.derivative} weights, {d.route} route, {d.seconds:.3f} s)")
+    if fluctuations or lags is not None:
+        _echo_dynamics(data)
     if rows is not None:
         _echo_top(rows, sol.lumped, len(sol.keys))
     if save is not None:
@@ -183,6 +200,52 @@ def _sensitivities(system, sol, names, tol) -> dict:
     # the solve for dpi targets the stationary solve's tolerance, at most 1e-12
     return {name: sensitivity(system, name, solution=sol, tol=min(tol, 1e-12))
             for name in names}
+#: Largest T of --autocorrelation (T products x P).
+MAX_CLI_LAGS = 100_000
+
+
+def _dynamics(sol, chain, start, limit, operator, fluctuations: bool, lags) -> dict:
+    """The JSON fields of --fluctuations and --autocorrelation, on the solved chain
+    (``chain``, or, after --start, the chain of the class the start falls into)."""
+    import numpy as np
+
+    from markov.chain import RingChain
+    from markov.correlations import autocorrelation, autocorrelation_time
+    from markov.fluctuations import current_fluctuations
+
+    if chain is None:
+        chain = RingChain(sol.ring, lump=sol.lumped, max_memory=limit, operator=operator,
+                          start=start)
+    pi = sol.pi if np.array_equal(chain.keys, sol.keys) else None
+    out = {"time_unit": "sub-step" if sol.ring.update == "random-sequential" else "step"}
+    if fluctuations:
+        fl = current_fluctuations(chain, pi)
+        # parallel, ordered-sequential: the increments are L times the flux per step
+        tau_flux = fl.tau_int if fl.sub_steps == 1 else autocorrelation_time(chain, "flux", pi)
+        out.update(diffusion=fl.diffusion, current=fl.current, tau_int_flux=tau_flux,
+                   tau_int_stopped=autocorrelation_time(chain, "stopped", pi),
+                   diffusion_per_time_step=fl.diffusion_per_time_step)
+    if lags is not None:
+        out["autocorrelation"] = {name: autocorrelation(chain, name, lags, pi).tolist()
+                                  for name in ("flux", "stopped")}
+    return out
+
+
+def _echo_dynamics(data: dict) -> None:
+    unit = data["time_unit"]
+    if "diffusion" in data:
+        click.echo(f"  diffusion      {data['diffusion']:.15g}  (var of the cells moved by all"
+                   f" cars per {unit})")
+        if unit == "sub-step":
+            click.echo(f"  diffusion/step {data['diffusion_per_time_step']:.15g}"
+                       "  (per time step of L sub-steps)")
+        click.echo(f"  tau_int flux   {data['tau_int_flux']:.15g}  {unit}s")
+        click.echo(f"  tau_int stop   {data['tau_int_stopped']:.15g}  {unit}s")
+    if "autocorrelation" in data:
+        flux, stopped = data["autocorrelation"]["flux"], data["autocorrelation"]["stopped"]
+        click.echo(f"  autocorrelation C(t), t in {unit}s:  t  flux  stopped")
+        for t, (a, b) in enumerate(zip(flux, stopped)):
+            click.echo(f"    {t:>6}  {a: .12e}  {b: .12e}")
 
 
 def _title(ring) -> str:
