@@ -385,9 +385,36 @@ def _leading(apply_t, m: int, count: int, tol: float, maxiter: int, dense):
     return out
 
 
+#: Bytes per transition of the sector-matrix route: the shifted rows (row, column,
+#: shift, probability) and one complex sector matrix with its transpose.
+_ROW_BYTES = 8 + 8 + 2 + 8 + 2 * (16 + 4)
+
+
+def _check_memory(ring: Ring, keys: np.ndarray, free: bool, count: int, limit: float) -> None:
+    """Refuse, before building, a route whose arrays would not fit in ``limit`` bytes."""
+    from . import memory
+    from .transition import successor_counts
+
+    n = len(keys)
+    ncv = max(2 * count + 3, count + 21)
+    vectors = 16 * n * (ncv + 4)      # ARPACK's complex basis and work vectors
+    if free:
+        from ._factored import link_bytes_per_word
+
+        need = n * memory.factored_bytes_per_state(
+            "power", link_bytes=link_bytes_per_word(ring)) + 4 * n + vectors
+        memory.check_fits(f"the factored sector operator on {n:,} classes", need, limit)
+        return
+    entries = int(successor_counts(ring, keys).sum())
+    memory.check_fits(f"the sector matrices ({entries:,} transitions on {n:,} classes)",
+                      entries * _ROW_BYTES + vectors, limit,
+                      "; parallel update can use operator='matrix-free'"
+                      if ring.update == PARALLEL else "")
+
+
 def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 1e-10,
                         keys: np.ndarray | None = None, operator: str = "auto",
-                        maxiter: int = 20_000) -> Spectrum:
+                        maxiter: int = 20_000, max_memory: float | None = None) -> Spectrum:
     """The ``count`` leading eigenvalues (after 1) of every momentum sector asked.
 
     Parameters
@@ -407,6 +434,9 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
         :data:`FACTORED_SECTOR_STATES` states, else sector matrices.
     maxiter : int
         ARPACK restarts.
+    max_memory : float, optional
+        Bytes allowed (default 75 % of physical memory): the route is refused
+        before it is built when its arrays would not fit.
 
     Returns
     -------
@@ -437,8 +467,11 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
         raise InvalidParameterError(f"operator must be one of {', '.join(OPERATORS)}")
     wanted = _parse_sectors(ring, sectors)
     start = time.perf_counter()
+    from .memory import memory_limit
+
+    limit = memory_limit(max_memory)
     if keys is None:
-        keys = RingChain(ring).keys
+        keys = RingChain(ring, max_memory=max_memory).keys
     keys = np.ascontiguousarray(keys, dtype=np.int64)
     n = len(keys)
     if ring.trivial:
@@ -450,6 +483,7 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
     if free and ring.update != PARALLEL:
         raise InvalidParameterError("the matrix-free sector operator is for parallel update;"
                                     " use operator='matrix'")
+    _check_memory(ring, keys, free, count, limit)
     sizes = orbit_sizes(ring, keys)
     factored = rows = None
     if free:
@@ -461,7 +495,11 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
     # sectors above L/2 are the complex conjugates of their mirror L - k
     mirror = sorted({min(k, (ring.length - k) % ring.length) for k in wanted})
     found, sector_sizes, route = [], {}, "dense"
+    from .progress import progress_bar
+
+    bar = progress_bar(len(mirror), "spectrum", "sector")
     for k in mirror:
+        bar.update(1)
         states = sector_states(ring, keys, k, sizes)
         m = len(states)
         for kk in {k, (ring.length - k) % ring.length} & set(wanted):
@@ -494,6 +532,7 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
         for kk in sorted({k, (ring.length - k) % ring.length} & set(wanted)):
             for value, res in pairs:
                 found.append(Eigenvalue(value if kk == k else value.conjugate(), kk, res))
+    bar.close()
     found.sort(key=lambda e: (-round(abs(e.value), 12), e.sector, np.angle(e.value)))
     products = factored.products if factored is not None else 0
     return Spectrum(ring, tuple(found), dict(sorted(sector_sizes.items())), route,

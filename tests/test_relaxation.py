@@ -102,6 +102,8 @@ def test_spectrum_cli_several_lengths_fit_and_text():
     (["-L", "8", "-N", "4", "--p", "0.5", "--count", "0"], "--count"),
     (["-L", "8", "-N", "4", "--p", "0.5", "--tol", "0"], "--tol"),
     (["-L", "8", "-N", "4"], "--p"),
+    (["-L", "14", "-N", "7", "--p", "0.5", "--operator", "matrix", "--max-memory", "0.001"],
+     "memory limit"),
     (["-L", "8", "-N", "4", "--p", "0.5", "--update", "random-sequential",
       "--operator", "matrix-free"], "parallel"),
 ])

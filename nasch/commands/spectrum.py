@@ -69,13 +69,15 @@ def _sectors(text: str):
               help="Sector matrices, or the factored operator (parallel update).")
 @click.option("--tol", type=float, default=1e-10, show_default=True,
               help="ARPACK's relative accuracy of the eigenvalues.")
+@click.option("--max-memory", type=float, default=None,
+              help="Refuse rings needing more than this many GiB (default 75% of RAM).")
 @click.option("--show", type=int, default=10, show_default=True,
               help="Eigenvalues listed in the text output (all are in --json).")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @quiet_option
 @handle_errors
 def spectrum(length_text, cars, density, model, params, vmax, p, update, count, sector_text,
-             operator, tol, show, as_json):
+             operator, tol, max_memory, show, as_json):
     """Relaxation spectrum: leading eigenvalues of P in every momentum sector.
 
     The chain of a ring commutes with rotations, so P splits into momentum
@@ -94,7 +96,7 @@ def spectrum(length_text, cars, density, model, params, vmax, p, update, count, 
     """
     from markov.ring import Ring
     from markov.spectrum import relaxation_spectrum
-    from markov.validate import ensure_int, ensure_tol
+    from markov.validate import ensure_int, ensure_max_memory, ensure_tol
 
     from ..relaxation import fit_power_law
 
@@ -114,6 +116,8 @@ def spectrum(length_text, cars, density, model, params, vmax, p, update, count, 
     show = ensure_int("--show", show, 0)
     tol = ensure_tol(tol, "--tol")
     sectors = _sectors(sector_text)
+    max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
+    limit = None if max_memory is None else max_memory * 2**30
     m = build_model(model, params, vmax=vmax, p=p)
     rings = []
     for L in lengths:
@@ -124,7 +128,7 @@ def spectrum(length_text, cars, density, model, params, vmax, p, update, count, 
             for k in sectors:
                 ensure_int("--sector", k, 0, ring.length - 1)
     results = [relaxation_spectrum(ring, count=count, sectors=sectors, tol=tol,
-                                   operator=operator) for ring in rings]
+                                   operator=operator, max_memory=limit) for ring in rings]
     fit = None
     taus = [s.relaxation_time for s in results]
     if len(rings) > 1 and all(math.isfinite(t) and t > 0 for t in taus):
