@@ -764,6 +764,7 @@ class FactoredOperator(ChainOperator):
         (self.rule, self._perm, self._offsets0, self._links, self._offsets_last,
          self.level_sizes, self._shifts) = _levels
         self._buffers = (np.empty(max(self.level_sizes)), np.empty(max(self.level_sizes)))
+        self._complex_buffers = None   # sector_apply's, made on first use
         self.derivative_split = None   # set by derivative_apply
         self._split = None             # (dweight, operator with rows split by it)
 
@@ -951,18 +952,22 @@ class FactoredOperator(ChainOperator):
     def _product(self, x: np.ndarray, out: np.ndarray) -> None:
         self._through_levels(x, out, fused=True)
 
-    def _through_levels(self, x: np.ndarray, out: np.ndarray, fused: bool) -> None:
+    def _through_levels(self, x: np.ndarray, out: np.ndarray, fused: bool,
+                        buffers: tuple | None = None) -> None:
         """Level 0 to level ``N``; ``fused``: summed into the states (``x P``), else
-        ``out`` gets the last level's words in the order of :attr:`_offsets_last`."""
+        ``out`` gets the last level's words in the order of :attr:`_offsets_last`.
+        The kernels take complex vectors as they take real ones (``buffers`` then
+        complex too): the levels' weights are real."""
         rule = self.rule
+        buffers = self._buffers if buffers is None else buffers
         which = 0  # ping-pong between the two level buffers
-        z = self._buffers[0][:self.level_sizes[0]]
+        z = buffers[0][:self.level_sizes[0]]
         _gather_states(x, self._perm, self._offsets0, z)
         if rule.nasch_form:
             p, q = rule.brake_weights
             for a, b in self._links[:-1]:
                 which ^= 1
-                parents, z = z, self._buffers[which][:a.shape[0]]
+                parents, z = z, buffers[which][:a.shape[0]]
                 _gather_level(a, b, parents, p, q, z)
             a, b = self._links[-1]
             if fused:
@@ -972,7 +977,7 @@ class FactoredOperator(ChainOperator):
             return
         for indptr, parent, slot in self._links[:-1]:
             which ^= 1
-            parents, z = z, self._buffers[which][:indptr.shape[0] - 1]
+            parents, z = z, buffers[which][:indptr.shape[0] - 1]
             _gather_rows(indptr, parent, slot, rule.weight, parents, z)
         indptr, parent, slot = self._links[-1]
         if fused:
@@ -987,7 +992,7 @@ class FactoredOperator(ChainOperator):
         ``s`` of ``c`` that are ``c'`` moved ``r`` cells forward
         (:func:`markov._kernels.canonical_shift`).  The levels are real: the
         phase of a state's frame enters at level 0, that of each moved word at
-        the end, and the real and imaginary parts go through the levels apart.
+        the end; the complex vector goes through the same (real-weighted) kernels.
 
         Parameters
         ----------
@@ -1007,21 +1012,24 @@ class FactoredOperator(ChainOperator):
         phase = np.exp(2j * np.pi * (int(k) % length) * np.arange(length) / length)
         state_shift, word_shift = self._shifts
         x = np.asarray(x, dtype=np.complex128) * phase[state_shift]
-        words = self.level_sizes[-1]
-        values = np.empty((2, words))
-        self._through_levels(np.ascontiguousarray(x.real), values[0], fused=False)
-        self._through_levels(np.ascontiguousarray(x.imag), values[1], fused=False)
+        if self._complex_buffers is None:
+            size = max(self.level_sizes)
+            self._complex_buffers = (np.empty(size, np.complex128),
+                                     np.empty(size, np.complex128),
+                                     np.empty(self.level_sizes[-1], np.complex128))
+        values = self._complex_buffers[2]
+        self._through_levels(x, values, fused=False, buffers=self._complex_buffers[:2])
         out = np.empty(self.n, np.complex128)
-        _phase_segments(values[0], values[1], self._offsets_last, word_shift, phase, out)
+        _phase_segments(values, self._offsets_last, word_shift, phase, out)
         self.products += 1
         return out
 
 
 @njit(cache=True, parallel=True)
-def _phase_segments(re, im, offsets, shift, phase, out):
-    """``out[s] = sum over the words k moving onto s of phase[shift[k]] (re[k] + i im[k])``."""
+def _phase_segments(values, offsets, shift, phase, out):
+    """``out[s] = sum over the words k moving onto s of phase[shift[k]] values[k]``."""
     for s in prange(out.shape[0]):
         acc = 0j
         for k in range(offsets[s], offsets[s + 1]):
-            acc += phase[shift[k]] * (re[k] + 1j * im[k])
+            acc += phase[shift[k]] * values[k]
         out[s] = acc
