@@ -1,4 +1,4 @@
-"""Garden of Eden (GoE) configurations of traffic rings: parallel and random-sequential update.
+r"""Garden of Eden (GoE) configurations of traffic rings: parallel and random-sequential update.
 
 A configuration is *GoE* when no configuration reaches it in one step with
 positive probability.  Only the support of the rule matters (which new

@@ -825,6 +825,13 @@ class SimulationResult:
         work = self.cars * (self.steps + self.warmup) * self.replicas
         return work / self.seconds if self.seconds else math.inf
 
+    @property
+    def tau_int_is_bound(self) -> bool:
+        """True when :attr:`tau_int` is one block: the blocks are uncorrelated and
+        the flux's own time (often a few steps, :mod:`markov.correlations`) is
+        only bounded by the block length."""
+        return self.tau_int <= 1.05 * self.steps / max(self.batches, 1)
+
     def to_dict(self) -> dict:
         """JSON-ready summary (the fields of ``nasch simulate --json``).
 
@@ -833,6 +840,7 @@ class SimulationResult:
         dict
         """
         d = asdict(self)
+        d["tau_int_is_bound"] = self.tau_int_is_bound
         d["p"] = None if self.p is None else float(self.p)
         d["density"] = self.density
         d["c_v"] = self.c_v.tolist()

@@ -611,3 +611,19 @@ def test_vmax1_sequential_updates_on_a_large_ring_match_the_tasep_closed_forms(u
     r = simulate(Ring(L, N, 1, p, update), steps=10_000, seed=1, replicas=2)
     assert r.reliable, r.warning
     assert abs(r.flux - want) < 5 * r.flux_error < 0.005
+
+
+def test_tau_int_of_uncorrelated_blocks_is_flagged_as_a_bound():
+    """L = 12: the flux forgets in about 2 steps (exact, markov.correlations), far
+    below the ~100-step blocks of a long run: the reported tau_int is then one
+    block, a bound, and says so."""
+    from markov.correlations import autocorrelation_time
+
+    ring = Ring(12, 6, 2, 0.5)
+    r = simulate(ring, steps=100_000, seed=3)
+    exact = autocorrelation_time(ring, "flux")
+    assert exact < 3
+    assert r.tau_int_is_bound and r.to_dict()["tau_int_is_bound"]
+    assert r.tau_int >= exact
+    big = simulate(Ring(2000, 600, 2, 0.5), steps=20_000, seed=1)
+    assert not big.tau_int_is_bound      # 20-step blocks resolve its 60-70 steps

@@ -82,7 +82,9 @@ def simulate(length, density, cars, vmax, p, model, params, steps, warmup, repli
             else f"automatic warm-up, at most {r.warmup_used} steps cut")
     click.echo(f"  {r.replicas} x {r.steps} steps ({warm}) in {r.batches} blocks,"
                f" {r.seconds:.2f} s, {r.car_updates_per_s:.3g} car updates/s")
-    click.echo(f"  tau_int        {r.tau_int:.3g} steps; {r.measured_steps} steps kept in all"
+    tau = (f"<= {r.tau_int:.3g} steps (one block: the blocks are uncorrelated)"
+           if r.tau_int_is_bound else f"{r.tau_int:.3g} steps")
+    click.echo(f"  tau_int        {tau}; {r.measured_steps} steps kept in all"
                f" (after the warm-up cut)")
     bar = "1 sigma" if r.reliable else "NOT an honest bar, see the warning"
     click.echo(f"  flux           {r.flux:.8f} +- {r.flux_error:.2g} ({bar})")
