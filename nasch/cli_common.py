@@ -10,6 +10,7 @@ import errno
 import functools
 import importlib
 import json
+import os
 import signal
 import sys
 
@@ -217,6 +218,20 @@ def _report_output_error(exc: OSError) -> None:
         pass
 
 
+#: Set when a Ctrl-C landed inside numba's or llvmlite's compiler.
+_interrupted_compile = [False]
+
+
+def _in_compiler(frame) -> bool:
+    """True when ``frame`` or a caller of it runs numba's or llvmlite's Python code."""
+    while frame is not None:
+        name = frame.f_code.co_filename
+        if f"{os.sep}numba{os.sep}" in name or f"{os.sep}llvmlite{os.sep}" in name:
+            return True
+        frame = frame.f_back
+    return False
+
+
 def _caused_by_interrupt(exc: BaseException) -> bool:
     """True when a KeyboardInterrupt is in the chain of causes and contexts of ``exc``."""
     chain = set()
@@ -263,6 +278,20 @@ def run_console(group: click.Group) -> None:
         # SIGINT at exit instead of exiting with 130.  Running a string through
         # exec() again clears that flag.
         exec("")
+        if _interrupted_compile[0]:
+            # An interrupted LLVM compile can leave llvmlite's objects in a state
+            # whose teardown at interpreter exit crashes ("free(): double free",
+            # SIGABRT). The command has cleaned up: run the exit handlers, flush,
+            # and leave without the teardown.
+            import atexit
+
+            atexit._run_exitfuncs()
+            for stream in (sys.stdout, sys.stderr):
+                try:
+                    stream.flush()
+                except (OSError, ValueError):
+                    pass
+            os._exit(code)
     sys.exit(code)
 
 
@@ -323,6 +352,8 @@ class NaschGroup(click.Group):
 
         def on_sigint(signum, frame):
             seen.append(signum)
+            if _in_compiler(frame):
+                _interrupted_compile[0] = True
             # The interrupt can land inside numba's compiler (the first run of a
             # fresh install); llvmlite's finalisers and ctypes callbacks then
             # report "Exception ignored in ..." blocks on the way out.  The
@@ -367,6 +398,7 @@ class NaschGroup(click.Group):
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         _interrupt_reported[0] = False
+        _interrupted_compile[0] = False
         try:
             code = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
             sys.stdout.flush()   # a write error of buffered output surfaces here, not at exit
