@@ -614,8 +614,9 @@ def relaxation_figure(data: dict, spectrum=None, width: float = 9.6, height: flo
                 mfc="white", color=f"C{i % 10}", label=f"$p = {curve['p']:g}$, sector 0")
     ax.set_xlabel("density $c = N/L$")
     ax.set_ylabel(r"relaxation time $\tau = -1/\ln|\lambda_2|$ (steps)")
-    ax.set_title(f"exact, NaSch $v_\\mathrm{{max}} = {data['vmax']}$, L = {data['length']}",
-                 fontsize=9)
+    name = "NaSch" if data["model"]["name"] == "nasch" else data["model"]["name"]
+    ax.set_title(f"exact, {name} $v_\\mathrm{{max}} = {data['vmax']}$, L = {data['length']},"
+                 f" {data['update']}", fontsize=9)
     ax.set_xlim(0, 1)
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.25, lw=0.5)

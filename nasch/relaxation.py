@@ -86,26 +86,33 @@ def relaxation_scan(rings, count: int = 2, sectors="all", tol: float = 1e-10,
 
 
 def relaxation_curves(length: int, ps: Sequence[float], vmax: int = 2,
-                      cars: Sequence[int] | None = None) -> dict:
-    """``tau`` against density on one ring, for several braking probabilities (NaSch).
+                      cars: Sequence[int] | None = None, model=None,
+                      update: str = "parallel") -> dict:
+    """``tau`` against density on one ring, for several values of the model's ``p``.
 
     Parameters
     ----------
     length : int
         Ring length ``L``.
     ps : sequence of float
-        Braking probabilities, each in ``(0, 1)``.
+        Values of the parameter ``p`` (NaSch's braking probability, or the
+        ``p`` of ``model``), each in ``(0, 1)``.
     vmax : int
+        Maximal velocity of the default NaSch model (ignored with ``model``).
     cars : sequence of int, optional
         Car numbers (default ``1 .. L - 1``).
+    model : markov.rule.Model, optional
+        Any model with a parameter ``p`` (default NaSch at ``vmax``).
+    update : str
+        Update order.
 
     Returns
     -------
     dict
-        ``length``, ``vmax``, ``cars``, ``density`` and, per ``p``, the
-        relaxation times (``tau``: every sector; ``tau_sector0``: the
-        translation-invariant sector alone), their sectors and the slowest
-        eigenvalues.
+        ``length``, ``vmax``, ``model`` (its description), ``update``,
+        ``cars``, ``density`` and, per ``p``, the relaxation times (``tau``:
+        every sector; ``tau_sector0``: the translation-invariant sector
+        alone), their sectors and the slowest eigenvalues.
 
     Examples
     --------
@@ -114,19 +121,28 @@ def relaxation_curves(length: int, ps: Sequence[float], vmax: int = 2,
     6.952119
     """
     from markov.ring import Ring
+    from markov.rule import load_model
     from markov.validate import ensure_int
 
     length = ensure_int("length L", length, 2)
     cars = list(range(1, length)) if cars is None else [ensure_int("cars", n, 1, length - 1)
                                                         for n in cars]
+    model = load_model("nasch", {"vmax": vmax}) if model is None else model
+    if "p" not in model.params:
+        raise InvalidParameterError(
+            f"rule {model.name} has no parameter p to vary (its parameters:"
+            f" {', '.join(model.params)})")
     curves = []
     for p in ps:
         if not 0 < float(p) < 1:
             raise InvalidParameterError(f"p must lie strictly between 0 and 1, got {p}")
-        spectra = relaxation_scan([Ring(length, n, vmax, float(p)) for n in cars], count=1)
+        m = model.with_params(p=float(p))
+        spectra = relaxation_scan([Ring(length, n, update=update, model=m) for n in cars],
+                                  count=1)
         curves.append({"p": float(p), "tau": [s.relaxation_time for s in spectra],
                        "tau_sector0": [s.sector_relaxation_time(0) for s in spectra],
                        "sector": [s.second.sector for s in spectra],
                        "eigenvalue": [s.second.value for s in spectra]})
-    return {"length": length, "vmax": vmax, "cars": cars,
-            "density": [n / length for n in cars], "curves": curves}
+    return {"length": length, "vmax": model.vmax, "model": model.describe(),
+            "update": update, "cars": cars, "density": [n / length for n in cars],
+            "curves": curves}

@@ -124,3 +124,18 @@ def test_plot_relaxation(tmp_path):
     assert bad.exit_code == 2 and "tau.png" in bad.output
     bad = run("plot", "relaxation", "-L", "5", "--p", "1", "-o", str(out))
     assert bad.exit_code == 2
+    bad = run("plot", "relaxation", "-L", "5", "--model", "kkw", "-o", str(out))
+    assert bad.exit_code == 2 and "no parameter p" in bad.output
+
+
+def test_curves_of_another_model_and_update():
+    """VDR under random-sequential update: the curve's first point is the spectrum
+    of that very ring."""
+    from markov.rule import load_model
+
+    m = load_model("vdr", {"vmax": 2, "p0": 0.75})
+    d = relaxation_curves(6, [0.2], model=m, update="random-sequential", cars=[2, 3])
+    assert d["model"]["name"] == "vdr" and d["update"] == "random-sequential"
+    direct = relaxation_spectrum(Ring(6, 2, update="random-sequential",
+                                      model=m.with_params(p=0.2)), count=1)
+    assert d["curves"][0]["tau"][0] == pytest.approx(direct.relaxation_time, rel=1e-12)

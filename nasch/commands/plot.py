@@ -227,9 +227,12 @@ def models(models_text, vmax, params, update, length, densities, steps, replicas
 @plot.command(short_help="Exact relaxation time against density, and a spectrum.")
 @click.option("--length", "-L", type=int, default=12, show_default=True,
               help="Ring length of the tau(c) curves.")
+@model_options
 @click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity.")
 @click.option("--p", "p_text", default="0.25,0.5,0.75", show_default=True,
-              help="Braking probabilities, one curve each.")
+              help="Values of the model's p (NaSch: braking probability), one curve each.")
+@click.option("--update", type=click.Choice(_UPDATES), default="parallel", show_default=True,
+              help="Update order.")
 @click.option("--spectrum-cars", type=int, default=None,
               help="Cars of the ring whose spectrum is drawn (default L/2; 0: no panel).")
 @click.option("--count", type=int, default=6, show_default=True,
@@ -238,10 +241,11 @@ def models(models_text, vmax, params, update, length, densities, steps, replicas
               help="Figure file, .png or .pdf.")
 @quiet_option
 @handle_errors
-def relaxation(length, vmax, p_text, spectrum_cars, count, output):
+def relaxation(length, model, params, vmax, p_text, update, spectrum_cars, count, output):
     """Relaxation time tau = -1/ln|lambda_2| against density, exactly, for several p.
 
-    Left: per p over N = 1..L-1 on a ring of L cells (NaSch), the slowest
+    Left: per p over N = 1..L-1 on a ring of L cells (any model with a
+    parameter p, --model; NaSch by default), the slowest
     eigenvalue of all sectors (solid; usually k = 1, a density wave drifting
     round the ring) and of sector 0 alone (dashed: what the flux and other
     translation-invariant observables see from a translation-invariant start,
@@ -251,6 +255,7 @@ def relaxation(length, vmax, p_text, spectrum_cars, count, output):
     \b
     Example:
       nasch plot relaxation -L 12 --vmax 2 --p 0.25,0.5,0.75 --output tau.png
+      nasch plot relaxation -L 10 --model vdr --param p0=0.75 --p 0.1,0.3 -o vdr.png
     """
     from markov.files import check_output_path
     from markov.ring import Ring
@@ -270,7 +275,15 @@ def relaxation(length, vmax, p_text, spectrum_cars, count, output):
     count = ensure_int("--count", count, 1, 50)
     cars = length // 2 if spectrum_cars is None else ensure_int("--spectrum-cars",
                                                                 spectrum_cars, 0, length - 1)
-    data = relaxation_curves(length, ps, vmax=vmax)
-    spec = relaxation_spectrum(Ring(length, cars, vmax, ps[0]), count=count) if cars else None
+    from ..model_options import build_model
+
+    m = build_model(model, params, vmax=vmax)
+    if "p" not in m.params:
+        raise InvalidParameterError(f"rule {m.name} has no parameter p to vary (its parameters:"
+                                    f" {', '.join(m.params)})")
+    m.with_params(p=ps[0])   # the values, checked before the work
+    data = relaxation_curves(length, ps, model=m, update=update)
+    spec = relaxation_spectrum(Ring(length, cars, update=update, model=m.with_params(p=ps[0])),
+                               count=count) if cars else None
     save_figure(relaxation_figure(data, spec), output)
     click.echo(f"wrote {output}", err=True)
