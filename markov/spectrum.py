@@ -316,7 +316,8 @@ class _SectorOperator(spla.LinearOperator):
         return self.op.sector_apply(self.full, self.k)[self.states]
 
 
-def sector_operator(ring: Ring, keys: np.ndarray, k: int, factored=None):
+def sector_operator(ring: Ring, keys: np.ndarray, k: int, factored=None,
+                    _rows: _ShiftedRows | None = None, _sizes: np.ndarray | None = None):
     """``A_k = P_k^T`` as a ``LinearOperator`` (``A_k @ x`` is ``x P_k``), and its states.
 
     Parameters
@@ -334,9 +335,9 @@ def sector_operator(ring: Ring, keys: np.ndarray, k: int, factored=None):
     states : (m,) int64 array
     """
     if factored is not None:
-        states = sector_states(ring, keys, k)
+        states = sector_states(ring, keys, k, _sizes)
         return _SectorOperator(factored, k, states), states
-    Pk, states = sector_matrix(ring, keys, k)
+    Pk, states = sector_matrix(ring, keys, k, _rows, _sizes)
     return spla.aslinearoperator(Pk.T.tocsr()), states
 
 
@@ -355,23 +356,27 @@ def _parse_sectors(ring: Ring, sectors) -> list[int]:
     return out
 
 
-def _leading(apply_t, m: int, count: int, tol: float, maxiter: int, dense):
-    """The ``count`` eigenvalues of largest modulus of ``A`` (``apply_t``) with residuals."""
+def _ncv(count: int) -> int:
+    """ARPACK's Krylov vectors for ``count`` eigenvalues."""
+    return max(2 * count + 1, count + 20)
+
+
+def _leading(A, count: int, tol: float, maxiter: int):
+    """The ``count`` eigenvalues of largest modulus of the operator ``A``, with residuals."""
+    m = A.shape[0]
     if m <= DENSE_SECTOR_STATES or count >= m - 1:
         from threadpoolctl import threadpool_limits
 
-        M = dense()
+        M = A.matmat(np.eye(m, dtype=np.complex128))
         # one BLAS thread: on these small matrices threads only contend (10x slower
         # on a loaded 2-core machine)
         with threadpool_limits(limits=1, user_api="blas"):
             vals, vecs = np.linalg.eig(M)
     else:
-        A = spla.LinearOperator((m, m), dtype=np.complex128, matvec=apply_t)
         v0 = np.random.default_rng(12345).standard_normal(m) + 0j
-        ncv = min(m, max(2 * count + 1, count + 20))
         try:
             vals, vecs = spla.eigs(A, k=count, which="LM", tol=tol, maxiter=maxiter, v0=v0,
-                                   ncv=ncv)
+                                   ncv=min(m, _ncv(count)))
         except spla.ArpackNoConvergence as exc:
             raise ConvergenceError(
                 f"ARPACK found {len(exc.eigenvalues)} of {count} eigenvalues in {maxiter}"
@@ -380,7 +385,7 @@ def _leading(apply_t, m: int, count: int, tol: float, maxiter: int, dense):
     out = []
     for i in order:
         v = vecs[:, i]
-        r = apply_t(v) - vals[i] * v
+        r = A.matvec(v) - vals[i] * v
         out.append((complex(vals[i]), float(np.linalg.norm(r) / np.linalg.norm(v))))
     return out
 
@@ -396,8 +401,7 @@ def _check_memory(ring: Ring, keys: np.ndarray, free: bool, count: int, limit: f
     from .transition import successor_counts
 
     n = len(keys)
-    ncv = max(2 * count + 3, count + 21)
-    vectors = 16 * n * (ncv + 4)      # ARPACK's complex basis and work vectors
+    vectors = 16 * n * (_ncv(count + 1) + 4)    # ARPACK's complex basis and work vectors
     if free:
         from ._factored import link_bytes_per_word
 
@@ -507,24 +511,10 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
         if m == 0:
             continue
         want = min(count + (k == 0), m)
-        if factored is not None:
-            A = _SectorOperator(factored, k, states)
-            apply_t = A.matvec
-
-            def dense(A=A, m=m):
-                return np.column_stack([A.matvec(e) for e in np.eye(m, dtype=np.complex128)])
-        else:
-            Pk, _ = sector_matrix(ring, keys, k, rows, sizes)
-            AT = Pk.T.tocsr()
-
-            def apply_t(v, AT=AT):
-                return AT @ v
-
-            def dense(Pk=Pk):
-                return Pk.T.toarray()
+        A, _ = sector_operator(ring, keys, k, factored, _rows=rows, _sizes=sizes)
         if m > DENSE_SECTOR_STATES and want < m - 1:
             route = "matrix-free" if factored is not None else "matrix"
-        pairs = _leading(apply_t, m, want, tol, maxiter, dense)
+        pairs = _leading(A, want, tol, maxiter)
         if k == 0:   # drop the stationary eigenvalue
             drop = int(np.argmin([abs(v - 1) for v, _ in pairs]))
             pairs = pairs[:drop] + pairs[drop + 1:]
