@@ -432,7 +432,8 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
     tol : float
         ARPACK's relative accuracy of the eigenvalues.
     keys : (n,) int64 array, optional
-        The canonical keys of the recurrent class, if already found.
+        The canonical keys of the recurrent class, if already found (one
+        closed class: the caller vouches for it).
     operator : {"auto", "matrix", "matrix-free"}
         ``auto``: the factored operator for parallel rings above
         :data:`FACTORED_SECTOR_STATES` states, else sector matrices.
@@ -475,7 +476,12 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
 
     limit = memory_limit(max_memory)
     if keys is None:
-        keys = RingChain(ring, max_memory=max_memory).keys
+        chain = RingChain(ring, max_memory=max_memory)
+        keys = chain.keys
+        if chain.unverified:
+            # a large chain of a model not proven irreducible: the stationary solve
+            # checks that it is one closed class (and refuses otherwise)
+            chain.solution()
     keys = np.ascontiguousarray(keys, dtype=np.int64)
     n = len(keys)
     if ring.trivial:
