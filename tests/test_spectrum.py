@@ -206,3 +206,18 @@ def test_sectors_against_the_naive_chain(name, params, update, L, N):
         powers = [P @ M for P, M in zip(powers, mats)]
         total = sum(np.trace(P) for P in powers)
         assert abs(total - np.trace(power)) < 1e-10 * max(1.0, abs(np.trace(power)))
+
+
+def test_unverified_chain_is_checked_before_its_spectrum(monkeypatch):
+    """Above SPLIT_MAX_STATES a chain not proven irreducible is taken as one class to be
+    verified: the spectrum verifies it first (cruise control at low density has
+    several closed classes and is refused; VDR has one and is solved)."""
+    import markov.chain
+    from markov.errors import NoUniqueStationaryStateError
+
+    monkeypatch.setattr(markov.chain, "SPLIT_MAX_STATES", 5)
+    cc = Ring(12, 3, model=load_model("cc", {"vmax": 2, "p": 0.2}))
+    with pytest.raises(NoUniqueStationaryStateError):
+        relaxation_spectrum(cc, count=1)
+    vdr = Ring(8, 3, model=load_model("vdr", {"vmax": 2, "p": 0.2, "p0": 0.6}))
+    assert relaxation_spectrum(vdr, count=1).relaxation_time > 0
