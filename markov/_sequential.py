@@ -24,7 +24,7 @@ import numpy as np
 from numba import njit, prange
 
 from ._chain_operator import ChainOperator
-from ._kernels import canonical, shift_bits, successor_row
+from ._kernels import canonical, canonical_shift, shift_bits, successor_row
 from .encoding import powers
 from .errors import InvalidParameterError
 from .ring import PARALLEL, RANDOM_SEQUENTIAL, Ring
@@ -210,6 +210,33 @@ def successor_keys(ring: Ring, keys: np.ndarray, lump: bool) -> tuple[np.ndarray
 
 
 @njit(cache=True, parallel=True)
+def _apply_rows_sector(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, phase,
+                       count, new_velocity, weight, weight_id, horizon, bad):
+    """:func:`_apply_rows` in a momentum sector: each entry times ``phase[r]``, ``r`` the
+    shift of its successor from the canonical one (complex ``x`` and ``acc``)."""
+    n = keys.shape[0]
+    nblocks = (n + _BLOCK - 1) // _BLOCK
+    inv = 1.0 / length
+    for blk in prange(nblocks):
+        t = numba.get_thread_id()
+        pos, vel, rows, digit, succ, w, ids, mult = _row_buffers(length, new_velocity.shape[3])
+        row = acc[t]
+        for i in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
+            xi = x[i]
+            if xi == 0.0:
+                continue
+            m = successor_row(keys[i], length, vmax, pw, 1, count, new_velocity, weight,
+                              weight_id, horizon, pos, vel, rows, digit, succ, w, ids, mult)
+            for j in range(m):
+                target, r = canonical_shift(succ[j], length, pw, bits)
+                col = _rank(tkeys, tvals, hbits, target)
+                if col < 0:
+                    bad[t] += 1
+                else:
+                    row[col] += xi * (mult[j] * w[j] * inv) * phase[r]
+
+
+@njit(cache=True, parallel=True)
 def _sum_rows(acc, out):
     """``out = acc.sum(axis=0)``, threaded, and clear ``acc`` for the next product."""
     nt, n = acc.shape
@@ -308,3 +335,38 @@ class SequentialOperator(ChainOperator):
         if self._bad.sum():
             raise RuntimeError(f"{int(self._bad.sum())} successors lie outside the state set:"
                                " it is not closed")
+
+    def sector_apply(self, x: np.ndarray, k: int) -> np.ndarray:
+        """``x P_k``: the sub-step chain in momentum sector ``k`` (:mod:`markov.spectrum`).
+
+        Every entry ``P(c, s)`` is multiplied by ``exp(2 pi i k r / L)``, ``s``
+        being its canonical class moved ``r`` cells forward
+        (:func:`markov._kernels.canonical_shift`).
+
+        Parameters
+        ----------
+        x : (n,) complex array
+            A row vector on the (lumped) states, zero on the classes whose
+            orbit does not carry sector ``k``.
+        k : int
+            The sector, ``0 <= k < L``.
+
+        Returns
+        -------
+        (n,) complex128 array
+        """
+        if not self.lump:
+            raise InvalidParameterError("momentum sectors need the lumped chain")
+        r, idx = self.ring, self.index
+        phase = np.exp(2j * np.pi * (int(k) % r.length) * np.arange(r.length) / r.length)
+        x = np.ascontiguousarray(x, dtype=np.complex128)
+        threads = numba.get_num_threads()
+        acc = np.zeros((threads, self.n), np.complex128)
+        bad = np.zeros(threads, dtype=np.int64)
+        _apply_rows_sector(idx.keys, idx.tkeys, idx.tvals, np.int64(idx.hbits), x, acc,
+                           r.length, r.vmax, self._pw, self._bits, phase, *self._rule, bad)
+        if bad.sum():
+            raise RuntimeError(f"{int(bad.sum())} successors lie outside the state set:"
+                               " it is not closed")
+        self.products += 1
+        return acc.sum(axis=0)

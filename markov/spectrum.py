@@ -19,9 +19,12 @@ complex conjugate of ``P_k``: sectors above ``L/2`` are computed from their
 mirror.
 
 The leading eigenvalues are found by ARPACK (``scipy.sparse.linalg.eigs``,
-largest modulus) on the sector matrix, or, for parallel update, on the
-factored operator with the two phases
-(:meth:`markov._factored.FactoredOperator.sector_apply`); small sectors densely.
+largest modulus) on the sector matrix, or matrix-free: for parallel update on
+the factored operator with the two phases
+(:meth:`markov._factored.FactoredOperator.sector_apply`), for random-sequential
+update on the row operator with the phase of each successor
+(:meth:`markov._sequential.SequentialOperator.sector_apply`); small sectors
+densely.
 Each eigenvalue carries its residual ``||x P_k - lambda x|| / ||x||``.  The
 relaxation time is ``tau = -1 / ln |lambda_2|`` for the eigenvalue of largest
 modulus after the stationary 1 (in steps; sub-steps for random-sequential
@@ -41,7 +44,7 @@ from numba import njit
 from ._kernels import canonical_shift, orbit_size, shift_bits
 from .encoding import powers
 from .errors import ConvergenceError, InvalidParameterError
-from .ring import PARALLEL, Ring
+from .ring import ORDERED_SEQUENTIAL, PARALLEL, RANDOM_SEQUENTIAL, Ring
 from .transition import successors
 from .validate import ensure_int
 
@@ -304,7 +307,7 @@ def sector_matrix(ring: Ring, keys: np.ndarray, k: int, _rows: _ShiftedRows | No
 
 
 class _SectorOperator(spla.LinearOperator):
-    """``x -> x P_k`` on the classes of sector ``k`` through the factored operator."""
+    """``x -> x P_k`` on the classes of sector ``k`` through a matrix-free operator."""
 
     def __init__(self, op, k: int, states: np.ndarray):
         self.op, self.k, self.states = op, k, states
@@ -316,7 +319,7 @@ class _SectorOperator(spla.LinearOperator):
         return self.op.sector_apply(self.full, self.k)[self.states]
 
 
-def sector_operator(ring: Ring, keys: np.ndarray, k: int, factored=None,
+def sector_operator(ring: Ring, keys: np.ndarray, k: int, free=None,
                     _rows: _ShiftedRows | None = None, _sizes: np.ndarray | None = None):
     """``A_k = P_k^T`` as a ``LinearOperator`` (``A_k @ x`` is ``x P_k``), and its states.
 
@@ -325,18 +328,19 @@ def sector_operator(ring: Ring, keys: np.ndarray, k: int, factored=None,
     ring : Ring
     keys : (n,) int64 array, sorted canonical keys of the recurrent class
     k : int
-    factored : FactoredOperator, optional
-        Built with ``shifts=True`` (parallel update): the product goes through
-        its levels; otherwise the sector matrix is assembled.
+    free : FactoredOperator or SequentialOperator, optional
+        A matrix-free operator of the chain (the factored one built with
+        ``shifts=True``): the product goes through its ``sector_apply``;
+        otherwise the sector matrix is assembled.
 
     Returns
     -------
     A_k : LinearOperator (complex)
     states : (m,) int64 array
     """
-    if factored is not None:
+    if free is not None:
         states = sector_states(ring, keys, k, _sizes)
-        return _SectorOperator(factored, k, states), states
+        return _SectorOperator(free, k, states), states
     Pk, states = sector_matrix(ring, keys, k, _rows, _sizes)
     return spla.aslinearoperator(Pk.T.tocsr()), states
 
@@ -395,6 +399,15 @@ def _leading(A, count: int, tol: float, maxiter: int):
 _ROW_BYTES = 8 + 8 + 2 + 8 + 2 * (16 + 4)
 
 
+def _fits(ring: Ring, keys: np.ndarray, count: int, limit: float) -> bool:
+    """Whether the sector-matrix route fits in ``limit`` bytes."""
+    try:
+        _check_memory(ring, keys, False, count, limit)
+    except MemoryError:
+        return False
+    return True
+
+
 def _check_memory(ring: Ring, keys: np.ndarray, free: bool, count: int, limit: float) -> None:
     """Refuse, before building, a route whose arrays would not fit in ``limit`` bytes."""
     from . import memory
@@ -402,12 +415,19 @@ def _check_memory(ring: Ring, keys: np.ndarray, free: bool, count: int, limit: f
 
     n = len(keys)
     vectors = 16 * n * (_ncv(count + 1) + 4)    # ARPACK's complex basis and work vectors
-    if free:
+    if free and ring.update == PARALLEL:
         from ._factored import link_bytes_per_word
 
         need = n * memory.factored_bytes_per_state(
             "power", link_bytes=link_bytes_per_word(ring)) + 4 * n + vectors
         memory.check_fits(f"the factored sector operator on {n:,} classes", need, limit)
+        return
+    if free:
+        import numba
+
+        # keys, the rank hash table (at most half full), a complex accumulator per thread
+        need = n * (8 + 48 + 16 * numba.get_num_threads()) + vectors
+        memory.check_fits(f"the row sector operator on {n:,} classes", need, limit)
         return
     entries = int(successor_counts(ring, keys).sum())
     memory.check_fits(f"the sector matrices ({entries:,} transitions on {n:,} classes)",
@@ -435,8 +455,10 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
         The canonical keys of the recurrent class, if already found (one
         closed class: the caller vouches for it).
     operator : {"auto", "matrix", "matrix-free"}
-        ``auto``: the factored operator for parallel rings above
-        :data:`FACTORED_SECTOR_STATES` states, else sector matrices.
+        ``auto``: sector matrices, but matrix-free for parallel rings above
+        :data:`FACTORED_SECTOR_STATES` states and for random-sequential rings
+        whose matrices do not fit (the row operator is about 7x slower);
+        ordered-sequential update has only the matrices.
     maxiter : int
         ARPACK restarts.
     max_memory : float, optional
@@ -490,16 +512,25 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
                         time.perf_counter() - start, notes=("a single configuration",))
     free = operator == "matrix-free" or (operator == "auto" and ring.update == PARALLEL
                                          and n > FACTORED_SECTOR_STATES)
-    if free and ring.update != PARALLEL:
-        raise InvalidParameterError("the matrix-free sector operator is for parallel update;"
-                                    " use operator='matrix'")
+    if operator == "auto" and ring.update == RANDOM_SEQUENTIAL and not _fits(ring, keys, count,
+                                                                           limit):
+        # the row operator regenerates every row per product (7x slower than the
+        # matrix at L = 12): only where the sector matrices do not fit
+        free = True
+    if free and ring.update == ORDERED_SEQUENTIAL:
+        raise InvalidParameterError("no matrix-free sector operator for ordered-sequential"
+                                    " update; use operator='matrix'")
     _check_memory(ring, keys, free, count, limit)
     sizes = orbit_sizes(ring, keys)
-    factored = rows = None
-    if free:
+    free_op = rows = None
+    if free and ring.update == PARALLEL:
         from ._factored import FactoredOperator
 
-        factored = FactoredOperator(ring, keys, lump=True, shifts=True)
+        free_op = FactoredOperator(ring, keys, lump=True, shifts=True)
+    elif free:
+        from ._sequential import SequentialOperator
+
+        free_op = SequentialOperator(ring, keys, lump=True)
     else:
         rows = _shifted_rows(ring, keys)
     # sectors above L/2 are the complex conjugates of their mirror L - k
@@ -517,9 +548,9 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
         if m == 0:
             continue
         want = min(count + (k == 0), m)
-        A, _ = sector_operator(ring, keys, k, factored, _rows=rows, _sizes=sizes)
+        A, _ = sector_operator(ring, keys, k, free_op, _rows=rows, _sizes=sizes)
         if m > DENSE_SECTOR_STATES and want < m - 1:
-            route = "matrix-free" if factored is not None else "matrix"
+            route = "matrix-free" if free_op is not None else "matrix"
         pairs = _leading(A, want, tol, maxiter)
         if k == 0:   # drop the stationary eigenvalue
             drop = int(np.argmin([abs(v - 1) for v, _ in pairs]))
@@ -530,6 +561,6 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
                 found.append(Eigenvalue(value if kk == k else value.conjugate(), kk, res))
     bar.close()
     found.sort(key=lambda e: (-round(abs(e.value), 12), e.sector, np.angle(e.value)))
-    products = factored.products if factored is not None else 0
+    products = free_op.products if free_op is not None else 0
     return Spectrum(ring, tuple(found), dict(sorted(sector_sizes.items())), route,
                     time.perf_counter() - start, products)

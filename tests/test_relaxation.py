@@ -104,8 +104,8 @@ def test_spectrum_cli_several_lengths_fit_and_text():
     (["-L", "8", "-N", "4"], "--p"),
     (["-L", "14", "-N", "7", "--p", "0.5", "--operator", "matrix", "--max-memory", "0.001"],
      "memory limit"),
-    (["-L", "8", "-N", "4", "--p", "0.5", "--update", "random-sequential",
-      "--operator", "matrix-free"], "parallel"),
+    (["-L", "8", "-N", "4", "--p", "0.5", "--update", "ordered-sequential",
+      "--operator", "matrix-free"], "ordered-sequential"),
 ])
 def test_spectrum_cli_bad_input(args, words):
     res = run("spectrum", *args)

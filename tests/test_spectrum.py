@@ -119,7 +119,7 @@ def test_factored_sector_operator_equals_the_sector_matrix(ring):
     op = FactoredOperator(ring, keys, lump=True, shifts=True)
     rng = np.random.default_rng(3)
     for k in range(ring.length):
-        A, states = sector_operator(ring, keys, k, factored=op)
+        A, states = sector_operator(ring, keys, k, free=op)
         Pk, states_m = sector_matrix(ring, keys, k)
         assert np.array_equal(states, states_m)
         x = rng.standard_normal(len(states)) + 1j * rng.standard_normal(len(states))
@@ -170,7 +170,7 @@ def test_bad_input():
         with pytest.raises(InvalidParameterError):
             relaxation_spectrum(ring, **bad)
     with pytest.raises(InvalidParameterError):
-        relaxation_spectrum(Ring(8, 4, 2, 0.5, update="random-sequential"),
+        relaxation_spectrum(Ring(8, 4, 2, 0.5, update="ordered-sequential"),
                             operator="matrix-free")
 
 
@@ -221,3 +221,33 @@ def test_unverified_chain_is_checked_before_its_spectrum(monkeypatch):
         relaxation_spectrum(cc, count=1)
     vdr = Ring(8, 3, model=load_model("vdr", {"vmax": 2, "p": 0.2, "p0": 0.6}))
     assert relaxation_spectrum(vdr, count=1).relaxation_time > 0
+
+
+@pytest.mark.parametrize("ring", [Ring(9, 4, 2, 0.5, update="random-sequential"),
+                                  Ring(8, 3, update="random-sequential",
+                                       model=load_model("kkw", {"vmax": 2}))], ids=repr)
+def test_row_sector_operator_equals_the_sector_matrix(ring):
+    """Random-sequential update, matrix-free: the row operator with the phase of each
+    successor, in every sector, and the spectrum it gives."""
+    from markov._sequential import SequentialOperator
+
+    keys = RingChain(ring).keys
+    op = SequentialOperator(ring, keys, lump=True)
+    rng = np.random.default_rng(5)
+    for k in range(ring.length):
+        A, states = sector_operator(ring, keys, k, free=op)
+        Pk, _ = sector_matrix(ring, keys, k)
+        x = rng.standard_normal(len(states)) + 1j * rng.standard_normal(len(states))
+        assert np.abs(A.matvec(x) - Pk.T @ x).max() < 1e-13
+    free = relaxation_spectrum(ring, count=2, operator="matrix-free")
+    matrix = relaxation_spectrum(ring, count=2, operator="matrix")
+    assert abs(abs(free.second.value) - abs(matrix.second.value)) < 1e-10
+
+
+def test_random_sequential_goes_matrix_free_only_when_the_matrices_do_not_fit(monkeypatch):
+    import markov.spectrum as spectrum
+
+    ring = Ring(9, 4, 2, 0.5, update="random-sequential")
+    assert relaxation_spectrum(ring, count=1).operator == "matrix"
+    monkeypatch.setattr(spectrum, "_fits", lambda *args: False)
+    assert relaxation_spectrum(ring, count=1).operator == "matrix-free"
