@@ -66,7 +66,8 @@ def _sectors(text: str):
 @click.option("--sector", "sector_text", default="all", show_default=True,
               metavar="all|k[,k...]", help="Momentum sectors k = 0..L-1.")
 @click.option("--operator", type=click.Choice(OPERATORS), default="auto", show_default=True,
-              help="Sector matrices, or the factored operator (parallel update).")
+              help="Sector matrices, or matrix-free (parallel: the factored operator;"
+                   " random-sequential: the row operator).")
 @click.option("--tol", type=float, default=1e-10, show_default=True,
               help="ARPACK's relative accuracy of the eigenvalues.")
 @click.option("--max-memory", type=float, default=None,
