@@ -90,6 +90,7 @@ def closed_classes(ring: Ring, keys: np.ndarray, lump: bool,
     from scipy.sparse.csgraph import connected_components
 
     from ._sequential import successor_keys
+    from .transition import state_indices
 
     keys = np.ascontiguousarray(keys, dtype=np.int64)
     n = len(keys)
@@ -102,10 +103,7 @@ def closed_classes(ring: Ring, keys: np.ndarray, lump: bool,
     if n == 1:
         return [keys]
     indptr, succ = successor_keys(ring, keys, lump)
-    col = np.searchsorted(keys, succ)
-    col[col == n] = 0
-    if not np.array_equal(keys[col], succ):
-        raise RuntimeError("a successor lies outside the state set: it is not closed")
+    col = state_indices(keys, succ)
     graph = sp.csr_array((np.ones(len(col), np.int8), col.astype(np.int32), indptr),
                          shape=(n, n))
     _, label = connected_components(graph, directed=True, connection="strong")

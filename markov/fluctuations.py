@@ -61,7 +61,7 @@ from .errors import ConvergenceError, InvalidParameterError
 from .fundamental import solve_fundamental
 from .observables import velocity_counts
 from .ring import RANDOM_SEQUENTIAL, Ring
-from .transition import successors
+from .transition import state_indices, successors
 from .validate import ensure_int, ensure_real
 
 __all__ = ["CurrentFluctuations", "SCGF", "current_fluctuations", "current_variance",
@@ -145,10 +145,7 @@ def _transition_moves(sc: StationaryChain, keep: bool):
         moved = (_position_sum(ring, rows.keys) - _position_sum(ring, chunk)[local]) % ring.length
         target = canonical_keys(rows.keys, ring.length, ring.vmax) if sc.chain.lump \
             else rows.keys
-        col = np.searchsorted(keys, target)
-        col[col == n] = 0
-        if not np.array_equal(keys[col], target):
-            raise RuntimeError("a successor lies outside the state set: it is not closed")
+        col = state_indices(keys, target)
         pm = prob * moved
         a[start:start + len(chunk)] = np.bincount(local, pm, len(chunk))
         a2[start:start + len(chunk)] = np.bincount(local, pm * moved, len(chunk))

@@ -47,7 +47,7 @@ from .errors import InvalidParameterError
 from .fundamental import solve_fundamental
 from .ring import ORDERED_SEQUENTIAL, PARALLEL, Ring
 from .rule import Model, RuleTable, cached_table, tabulate
-from .transition import successor_counts, successors
+from .transition import state_indices, successor_counts, successors
 
 __all__ = ["Sensitivity", "WeightDerivatives", "weight_derivatives", "sensitivity",
            "derivative_product", "ROUTES", "CENTRAL_STEP"]
@@ -316,10 +316,7 @@ def _rows_product(ring: Ring, keys: np.ndarray, lump: bool, x: np.ndarray,
         stop = max(start + 1, int(np.searchsorted(ends, (ends[start - 1] if start else 0)
                                                   + _ENTRIES_PER_CHUNK, side="right")))
         rows = successors(ring, keys[start:stop], lump, table=table)
-        col = np.searchsorted(keys, rows.keys)
-        col[col == n] = 0
-        if not np.array_equal(keys[col], rows.keys):
-            raise RuntimeError("a successor lies outside the state set: it is not closed")
+        col = state_indices(keys, rows.keys)
         dprob = rows.probabilities() * (rows.ids @ ratio)
         # every row of dP sums to zero (the rows of P sum to one at every value)
         lengths = np.diff(rows.indptr)

@@ -45,7 +45,7 @@ from ._kernels import canonical_shift, orbit_size, shift_bits
 from .encoding import powers
 from .errors import ConvergenceError, InvalidParameterError
 from .ring import ORDERED_SEQUENTIAL, PARALLEL, RANDOM_SEQUENTIAL, Ring
-from .transition import successors
+from .transition import state_indices, successors
 from .validate import ensure_int
 
 __all__ = ["Eigenvalue", "Spectrum", "orbit_sizes", "sector_states", "sector_matrix",
@@ -252,10 +252,7 @@ def _shifted_rows(ring: Ring, keys: np.ndarray) -> _ShiftedRows:
         succ = rows.keys.copy()
         shift = np.empty(len(succ), np.int16)
         _shift_keys(succ, ring.length, pw, bits, shift)
-        col = np.searchsorted(keys, succ)
-        col[col == n] = 0
-        if not np.array_equal(keys[col], succ):
-            raise RuntimeError("a successor lies outside the state set: it is not closed")
+        col = state_indices(keys, succ)
         row = np.repeat(np.arange(start, start + len(rows.indptr) - 1), np.diff(rows.indptr))
         parts.append((row, col, shift, rows.probabilities()))
     return _ShiftedRows(*(np.concatenate([p[i] for p in parts]) for i in range(4)))

@@ -34,7 +34,8 @@ from .encoding import powers
 from .progress import progress_bar
 from .ring import PARALLEL, RANDOM_SEQUENTIAL, Ring
 
-__all__ = ["SuccessorRows", "successor_counts", "successors", "transition_matrix"]
+__all__ = ["SuccessorRows", "successor_counts", "successors", "state_indices",
+           "transition_matrix"]
 
 _CHUNK = 1 << 15
 
@@ -170,6 +171,36 @@ def successors(ring: Ring, keys: np.ndarray, lump: bool, table=None) -> Successo
     return SuccessorRows(indptr, *out, norm)
 
 
+def state_indices(keys: np.ndarray, successors: np.ndarray) -> np.ndarray:
+    """The index of every successor key among the sorted state keys.
+
+    Parameters
+    ----------
+    keys : (n,) int64 array, sorted
+    successors : (m,) int64 array
+
+    Returns
+    -------
+    (m,) int64 array
+
+    Raises
+    ------
+    RuntimeError
+        If a successor is not among ``keys`` (the set is not closed): a bug,
+        not bad input.
+
+    Examples
+    --------
+    >>> state_indices(np.array([3, 5, 9]), np.array([9, 3, 9])).tolist()
+    [2, 0, 2]
+    """
+    col = np.searchsorted(keys, successors)
+    col[col == len(keys)] = 0
+    if len(successors) and (len(keys) == 0 or not np.array_equal(keys[col], successors)):
+        raise RuntimeError("a successor lies outside the state set: it is not closed")
+    return col
+
+
 def transition_matrix(ring: Ring, keys: np.ndarray, lump: bool) -> sp.csr_array:
     """Row-stochastic transition matrix on the sorted state keys ``keys``.
 
@@ -200,10 +231,7 @@ def transition_matrix(ring: Ring, keys: np.ndarray, lump: bool) -> sp.csr_array:
     with progress_bar(n, "transition matrix", "state") as bar:
         for start in range(0, n, _CHUNK):
             rows = successors(ring, keys[start:start + _CHUNK], lump)
-            col = np.searchsorted(keys, rows.keys)
-            col[col == n] = 0
-            if not np.array_equal(keys[col], rows.keys):
-                raise RuntimeError("a successor lies outside the state set: it is not closed")
+            col = state_indices(keys, rows.keys)
             indptrs.append(rows.indptr[1:] + (indptrs[-1][-1] if indptrs else 0))
             cols.append(col)
             vals.append(rows.probabilities())
