@@ -21,21 +21,12 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .errors import ConvergenceError, InvalidParameterError
+from .solvers import _product_of
 
 __all__ = ["solve_fundamental", "DENSE_FUNDAMENTAL_LIMIT"]
 
 #: Chains up to this many states are solved densely (LAPACK).
 DENSE_FUNDAMENTAL_LIMIT = 2_000
-
-
-def _row_product(P):
-    if sp.issparse(P):
-        PT = P.T.tocsr()
-        return lambda v: PT @ v
-    if isinstance(P, spla.LinearOperator):
-        return P.matvec
-    raise InvalidParameterError(
-        f"the chain must be a sparse matrix P or a LinearOperator for P^T, got {type(P).__name__}")
 
 
 def solve_fundamental(P, pi: np.ndarray, h: np.ndarray, tol: float = 1e-12,
@@ -90,7 +81,7 @@ def solve_fundamental(P, pi: np.ndarray, h: np.ndarray, tol: float = 1e-12,
     if abs(h.sum()) > 1e-9 * scale:
         raise InvalidParameterError(f"the right-hand side must sum to zero, got {h.sum():.3e}")
     h = h - pi * h.sum()       # remove the rounding: the solution then sums to zero
-    product = _row_product(P)
+    product, _ = _product_of(P)
     if n <= DENSE_FUNDAMENTAL_LIMIT:
         PT = P.T.toarray() if sp.issparse(P) else np.column_stack(
             [product(e) for e in np.eye(n)])
