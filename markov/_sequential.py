@@ -32,6 +32,7 @@ from .ring import PARALLEL, RANDOM_SEQUENTIAL, Ring
 __all__ = ["KeyIndex", "SequentialOperator", "successor_keys"]
 
 _BLOCK = 2048  # states per prange task: small enough to balance two threads
+_NO_PHASE = np.empty(0, np.float64)   # the plain product: no momentum-sector phase
 
 
 _HASH_MULT = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: 2**64 / golden ratio
@@ -133,12 +134,18 @@ def _row_buffers(length, width):
 
 
 @njit(cache=True, parallel=True)
-def _apply_rows(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, lump, count,
+def _apply_rows(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, lump, phase, count,
                 new_velocity, weight, weight_id, horizon, bad):
-    """``acc[thread] += x_i P[i, :]``; the entries' weights are divided by ``L`` (the draw)."""
+    """``acc[thread] += x_i P[i, :]``; the entries' weights are divided by ``L`` (the draw).
+
+    With a non-empty ``phase`` (momentum sector ``k``: ``phase[r] = exp(2 pi i k r / L)``,
+    ``x`` and ``acc`` complex) each entry is multiplied by ``phase[r]``, ``r`` the shift
+    of its successor from the canonical one.
+    """
     n = keys.shape[0]
     nblocks = (n + _BLOCK - 1) // _BLOCK
     inv = 1.0 / length
+    sector = phase.shape[0] > 0
     for blk in prange(nblocks):
         t = numba.get_thread_id()
         pos, vel, rows, digit, succ, w, ids, mult = _row_buffers(length, new_velocity.shape[3])
@@ -150,12 +157,17 @@ def _apply_rows(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, lump,
             m = successor_row(keys[i], length, vmax, pw, 1, count, new_velocity, weight,
                               weight_id, horizon, pos, vel, rows, digit, succ, w, ids, mult)
             for j in range(m):
-                target = canonical(succ[j], length, pw, bits) if lump else succ[j]
+                if sector:
+                    target, r = canonical_shift(succ[j], length, pw, bits)
+                    value = xi * (mult[j] * w[j] * inv) * phase[r]
+                else:
+                    target = canonical(succ[j], length, pw, bits) if lump else succ[j]
+                    value = xi * mult[j] * w[j] * inv
                 col = _rank(tkeys, tvals, hbits, target)
                 if col < 0:
                     bad[t] += 1
                 else:
-                    row[col] += xi * mult[j] * w[j] * inv
+                    row[col] += value
 
 
 @njit(cache=True, parallel=True)
@@ -207,33 +219,6 @@ def successor_keys(ring: Ring, keys: np.ndarray, lump: bool) -> tuple[np.ndarray
                     shift_bits(ring.vmax), bool(lump), ring.update_code,
                     int(counts.max(initial=1)), *ring.kernel_rule(), out)
     return indptr, out
-
-
-@njit(cache=True, parallel=True)
-def _apply_rows_sector(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, phase,
-                       count, new_velocity, weight, weight_id, horizon, bad):
-    """:func:`_apply_rows` in a momentum sector: each entry times ``phase[r]``, ``r`` the
-    shift of its successor from the canonical one (complex ``x`` and ``acc``)."""
-    n = keys.shape[0]
-    nblocks = (n + _BLOCK - 1) // _BLOCK
-    inv = 1.0 / length
-    for blk in prange(nblocks):
-        t = numba.get_thread_id()
-        pos, vel, rows, digit, succ, w, ids, mult = _row_buffers(length, new_velocity.shape[3])
-        row = acc[t]
-        for i in range(blk * _BLOCK, min(n, (blk + 1) * _BLOCK)):
-            xi = x[i]
-            if xi == 0.0:
-                continue
-            m = successor_row(keys[i], length, vmax, pw, 1, count, new_velocity, weight,
-                              weight_id, horizon, pos, vel, rows, digit, succ, w, ids, mult)
-            for j in range(m):
-                target, r = canonical_shift(succ[j], length, pw, bits)
-                col = _rank(tkeys, tvals, hbits, target)
-                if col < 0:
-                    bad[t] += 1
-                else:
-                    row[col] += xi * (mult[j] * w[j] * inv) * phase[r]
 
 
 @njit(cache=True, parallel=True)
@@ -330,7 +315,8 @@ class SequentialOperator(ChainOperator):
             self._acc = np.zeros((self.threads, self.n))
             self._bad = np.zeros(self.threads, dtype=np.int64)
         _apply_rows(idx.keys, idx.tkeys, idx.tvals, np.int64(idx.hbits), x, self._acc,
-                    r.length, r.vmax, self._pw, self._bits, self.lump, *self._rule, self._bad)
+                    r.length, r.vmax, self._pw, self._bits, self.lump, _NO_PHASE, *self._rule,
+                    self._bad)
         _sum_rows(self._acc, out)
         if self._bad.sum():
             raise RuntimeError(f"{int(self._bad.sum())} successors lie outside the state set:"
@@ -363,8 +349,8 @@ class SequentialOperator(ChainOperator):
         threads = numba.get_num_threads()
         acc = np.zeros((threads, self.n), np.complex128)
         bad = np.zeros(threads, dtype=np.int64)
-        _apply_rows_sector(idx.keys, idx.tkeys, idx.tvals, np.int64(idx.hbits), x, acc,
-                           r.length, r.vmax, self._pw, self._bits, phase, *self._rule, bad)
+        _apply_rows(idx.keys, idx.tkeys, idx.tvals, np.int64(idx.hbits), x, acc, r.length,
+                    r.vmax, self._pw, self._bits, True, phase, *self._rule, bad)
         if bad.sum():
             raise RuntimeError(f"{int(bad.sum())} successors lie outside the state set:"
                                " it is not closed")
