@@ -8,27 +8,16 @@ import click
 from markov.choices import OPERATORS
 from markov.errors import InvalidParameterError
 
-from ..cli_common import emit_json, handle_errors, quiet_option
+from ..cli_common import emit_json, handle_errors, number_list, quiet_option
 from ..model_options import build_model, model_options
 
 __all__ = ["spectrum"]
 
 
-def _integer(text: str):
-    text = text.strip()
-    try:
-        return int(text)
-    except ValueError:
-        return text      # ensure_int names the option and the value
-
-
 def _lengths(text: str) -> list[int]:
     from markov.validate import ensure_int
 
-    items = [t.strip() for t in str(text).split(",") if t.strip()]
-    if not items:
-        raise InvalidParameterError("--length needs at least one ring length")
-    lengths = [ensure_int("--length", _integer(t), 2) for t in items]
+    lengths = [ensure_int("--length", L, 2) for L in number_list("--length", text, int)]
     if len(set(lengths)) < len(lengths):
         raise InvalidParameterError(f"--length names a ring twice: {text}")
     return sorted(lengths)
@@ -39,11 +28,7 @@ def _sectors(text: str):
         return "all"
     from markov.validate import ensure_int
 
-    try:
-        return [ensure_int("--sector", _integer(t), 0) for t in text.split(",") if t.strip()]
-    except InvalidParameterError:
-        raise InvalidParameterError(
-            f"--sector must be 'all' or comma-separated integers, got {text!r}") from None
+    return [ensure_int("--sector", k, 0) for k in number_list("--sector", text, int)]
 
 
 @click.command()
