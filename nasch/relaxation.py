@@ -132,11 +132,12 @@ def relaxation_curves(length: int, ps: Sequence[float], vmax: int = 2,
         raise InvalidParameterError(
             f"rule {model.name} has no parameter p to vary (its parameters:"
             f" {', '.join(model.params)})")
-    curves = []
-    for p in ps:
+    for p in ps:   # every value before the work
         if not 0 < float(p) < 1:
             raise InvalidParameterError(f"p must lie strictly between 0 and 1, got {p}")
-        m = model.with_params(p=float(p))
+    models = [model.with_params(p=float(p)) for p in ps]
+    curves = []
+    for p, m in zip(ps, models):
         spectra = relaxation_scan([Ring(length, n, update=update, model=m) for n in cars],
                                   count=1)
         curves.append({"p": float(p), "tau": [s.relaxation_time for s in spectra],

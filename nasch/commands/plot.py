@@ -278,11 +278,7 @@ def relaxation(length, model, params, vmax, p_text, update, spectrum_cars, count
     from ..model_options import build_model
 
     m = build_model(model, params, vmax=vmax)
-    if "p" not in m.params:
-        raise InvalidParameterError(f"rule {m.name} has no parameter p to vary (its parameters:"
-                                    f" {', '.join(m.params)})")
-    m.with_params(p=ps[0])   # the values, checked before the work
-    data = relaxation_curves(length, ps, model=m, update=update)
+    data = relaxation_curves(length, ps, model=m, update=update)   # checks m has a p first
     spec = relaxation_spectrum(Ring(length, cars, update=update, model=m.with_params(p=ps[0])),
                                count=count) if cars else None
     save_figure(relaxation_figure(data, spec), output)
