@@ -78,6 +78,13 @@ class Eigenvalue:
                 "sector": int(self.sector), "residual": float(self.residual)}
 
 
+def _relaxation_time(modulus: float) -> float:
+    """``-1 / ln |lambda|``: 0 for ``lambda = 0``, ``inf`` for ``|lambda| = 1``."""
+    if modulus == 0:
+        return 0.0
+    return math.inf if modulus >= 1 - 1e-12 else -1.0 / math.log(modulus)
+
+
 @dataclass(frozen=True)
 class Spectrum:
     """Leading eigenvalues of a ring's chain, the stationary eigenvalue 1 excluded.
@@ -112,12 +119,7 @@ class Spectrum:
         """``-1 / ln |lambda_2|`` in steps: ``inf`` for ``|lambda_2| = 1`` (a periodic
         or deterministic chain), 0 when nothing is left after one step."""
         lam = self.second
-        if lam is None or abs(lam.value) == 0:
-            return 0.0
-        modulus = abs(lam.value)
-        if modulus >= 1 - 1e-12:
-            return math.inf
-        return -1.0 / math.log(modulus)
+        return 0.0 if lam is None else _relaxation_time(abs(lam.value))
 
     def sector_relaxation_time(self, k: int) -> float:
         """``-1 / ln |lambda|`` of the slowest eigenvalue of sector ``k`` alone.
@@ -137,12 +139,7 @@ class Spectrum:
             ``nan`` when the sector was not computed or holds no eigenvalue.
         """
         values = [abs(e.value) for e in self.eigenvalues if e.sector == k]
-        if not values:
-            return math.nan
-        top = max(values)
-        if top == 0:
-            return 0.0
-        return math.inf if top >= 1 - 1e-12 else -1.0 / math.log(top)
+        return _relaxation_time(max(values)) if values else math.nan
 
     @property
     def oscillation(self) -> float:
