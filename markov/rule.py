@@ -65,6 +65,7 @@ from types import MappingProxyType
 from typing import Any, Callable
 
 from .errors import InvalidParameterError
+from .rule_guard import RuleCaller, where
 from .validate import ensure_int
 
 __all__ = ["ModelSpec", "Model", "RuleTable", "rule", "tabulate", "cached_table",
@@ -75,8 +76,9 @@ __all__ = ["ModelSpec", "Model", "RuleTable", "rule", "tabulate", "cached_table"
 #: longer changes (a rule that still does must declare a larger horizon).
 HORIZON_PROBE = 3
 
-#: Most calls of the rule :func:`tabulate` makes (a few seconds of Python):
-#: a rule with horizon vmax fits up to vmax = 65 (300,000 calls, about 5 s).
+#: Most ``(v, gap, v_ahead)`` cells :func:`tabulate` evaluates, each called twice
+#: (:class:`markov.rule_guard.RuleCaller`): a rule with horizon vmax fits up to
+#: vmax = 64 (NaSch's table 2.7 s here, 2026-12-02, 2-core VM).
 MAX_RULE_CALLS = 300_000
 
 #: Absolute tolerance of the numeric "weights sum to one" check.
@@ -471,18 +473,7 @@ def available_models() -> list[dict]:
 
 
 def _where(model: Model, v: int, gap: int, a: int) -> str:
-    return f"rule {model.name} at (v={v}, gap={gap}, v_ahead={a})"
-
-
-def _call(model: Model, params: Mapping, v: int, gap: int, a: int) -> list:
-    try:
-        outcomes = list(model.spec.function(v, gap, a, params))
-        return [(u, w) for u, w in outcomes]
-    except InvalidParameterError:
-        raise
-    except Exception as exc:
-        raise InvalidParameterError(
-            f"{_where(model, v, gap, a)} raised {type(exc).__name__}: {exc}") from None
+    return where(model.name, v, gap, a)
 
 
 def _merge(model: Model, outcomes, v: int, gap: int, a: int, symbolic: bool) -> list:
@@ -646,9 +637,11 @@ def tabulate(model: Model, max_gap: int | None = None, symbolic: bool = False) -
     ------
     InvalidParameterError
         A weight that is not a finite number >= 0, weights not summing to one,
-        a new velocity outside ``0..min(gap, vmax)``, an exception inside the
-        rule, or a rule that still changes above its horizon; the message names
-        the rule and ``(v, gap, v_ahead)``.
+        a new velocity outside ``0..min(gap, vmax)``, a rule that is not a
+        function of its arguments, raises, exits, does not return or reads an
+        undeclared parameter (:mod:`markov.rule_guard`), or a rule that still
+        changes above its horizon; the message names the rule and
+        ``(v, gap, v_ahead)``.
 
     Examples
     --------
@@ -672,20 +665,22 @@ def tabulate(model: Model, max_gap: int | None = None, symbolic: bool = False) -
     params = _symbol_params(model) if symbolic else model.params
     values = dict(model.values)
     rows: dict[tuple[int, int, int], list] = {}
-    for v in range(vmax + 1):
-        for a in range(vmax + 1):
-            for g in range(min(max_gap, horizon) + 1):
-                rows[v, g, a] = _merge(model, _call(model, params, v, g, a), v, g, a, symbolic)
-            top = rows[v, horizon, a] if horizon <= max_gap else _merge(
-                model, _call(model, params, v, horizon, a), v, horizon, a, symbolic)
-            for g in range(horizon + 1, horizon + 1 + HORIZON_PROBE):
-                row = _merge(model, _call(model, params, v, g, a), v, g, a, symbolic)
-                if not _same(row, top, symbolic):
-                    raise InvalidParameterError(
-                        f"{_where(model, v, g, a)} differs from gap = {horizon}, the rule's "
-                        "horizon: declare a larger horizon (ModelSpec(horizon=...))")
-            for g in range(horizon + 1, max_gap + 1):
-                rows[v, g, a] = top
+    with RuleCaller(model.spec.function, model.name, params) as call:
+        for v in range(vmax + 1):
+            for a in range(vmax + 1):
+                for g in range(min(max_gap, horizon) + 1):
+                    rows[v, g, a] = _merge(model, call(v, g, a), v, g, a, symbolic)
+                top = rows[v, horizon, a] if horizon <= max_gap else _merge(
+                    model, call(v, horizon, a), v, horizon, a, symbolic)
+                for g in range(horizon + 1, horizon + 1 + HORIZON_PROBE):
+                    row = _merge(model, call(v, g, a), v, g, a, symbolic)
+                    if not _same(row, top, symbolic):
+                        raise InvalidParameterError(
+                            f"{_where(model, v, g, a)} differs from gap = {horizon}, the"
+                            " rule's horizon: declare a larger horizon"
+                            " (ModelSpec(horizon=...))")
+                for g in range(horizon + 1, max_gap + 1):
+                    rows[v, g, a] = top
     width = max(len(r) for r in rows.values())
     shape = (vmax + 1, max_gap + 1, vmax + 1)
     count = np.zeros(shape, np.int64)
@@ -755,5 +750,5 @@ def symbolic_outcomes(model: Model, v: int, gap: int, v_ahead: int) -> tuple:
     >>> symbolic_outcomes(load_model("nasch", {"vmax": 2}), 1, 5, 0)
     ((1, p), (2, 1 - p))
     """
-    return tuple(_merge(model, _call(model, _symbol_params(model), v, gap, v_ahead),
-                        v, gap, v_ahead, True))
+    with RuleCaller(model.spec.function, model.name, _symbol_params(model)) as call:
+        return tuple(_merge(model, call(v, gap, v_ahead), v, gap, v_ahead, True))

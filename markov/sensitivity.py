@@ -47,6 +47,7 @@ from .errors import InvalidParameterError
 from .fundamental import solve_fundamental
 from .ring import ORDERED_SEQUENTIAL, PARALLEL, Ring
 from .rule import Model, RuleTable, cached_table, tabulate
+from .rule_guard import RuleCaller
 from .transition import state_indices, successor_counts, successors
 
 __all__ = ["Sensitivity", "WeightDerivatives", "weight_derivatives", "sensitivity",
@@ -196,27 +197,29 @@ def _symbolic_derivatives(model: Model, parameter: str, table: RuleTable) -> np.
         return known[expr]
 
     out = np.zeros_like(table.weight)
-    for v, g, a in _cells(table):
-        try:
-            merged: dict[int, Any] = {}
-            for u, w in spec.function(v, g, a, params):
-                merged[int(u)] = merged[int(u)] + w if int(u) in merged else sympy.sympify(w)
-            for k in range(int(table.count[v, g, a])):
-                w = merged.pop(int(table.new_velocity[v, g, a, k]))
-                value, out[v, g, a, k] = value_and_derivative(w)
-                if abs(value - table.weight[v, g, a, k]) > 1e-12:
-                    raise _NotSymbolic("the symbolic weights are not the table's")
-        except _NotSymbolic:
-            raise
-        except Exception as exc:   # the rule cannot take symbols: the central difference
-            raise _NotSymbolic(f"{type(exc).__name__}: {exc}") from None
-        for u, w in merged.items():   # weight 0 at these values, maybe not identically
-            if x in sympy.simplify(w).free_symbols:
-                raise InvalidParameterError(
-                    f"{parameter} = {float(model.params[parameter]):g}: the weight {w} of"
-                    f" velocity {u} (rule {model.name} at v={v}, gap={g}, v_ahead={a}) is 0"
-                    f" here and changes with {parameter}: the support of the chain changes,"
-                    " there is no derivative")
+    with RuleCaller(spec.function, spec.name, params) as call:
+        for v, g, a in _cells(table):
+            try:
+                merged: dict[int, Any] = {}
+                for u, w in call(v, g, a):
+                    merged[int(u)] = merged[int(u)] + w if int(u) in merged \
+                        else sympy.sympify(w)
+                for k in range(int(table.count[v, g, a])):
+                    w = merged.pop(int(table.new_velocity[v, g, a, k]))
+                    value, out[v, g, a, k] = value_and_derivative(w)
+                    if abs(value - table.weight[v, g, a, k]) > 1e-12:
+                        raise _NotSymbolic("the symbolic weights are not the table's")
+            except _NotSymbolic:
+                raise
+            except Exception as exc:   # the rule cannot take symbols: the central difference
+                raise _NotSymbolic(f"{type(exc).__name__}: {exc}") from None
+            for u, w in merged.items():   # weight 0 at these values, maybe not identically
+                if x in sympy.simplify(w).free_symbols:
+                    raise InvalidParameterError(
+                        f"{parameter} = {float(model.params[parameter]):g}: the weight {w} of"
+                        f" velocity {u} (rule {model.name} at v={v}, gap={g}, v_ahead={a}) is"
+                        f" 0 here and changes with {parameter}: the support of the chain"
+                        " changes, there is no derivative")
     return out
 
 
