@@ -8,7 +8,7 @@ one-call entry point used by the CLI.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -18,6 +18,8 @@ import scipy.sparse as sp
 
 from . import memory, observables
 from .choices import OPERATORS, PRODUCT_METHODS
+from .classes import (ALL_CONFIGURATIONS, FROM_COMPACT_JAM, FROM_START, PROVEN, ClassCensus,
+                      known_irreducible, search_all_fits)
 from .errors import InvalidParameterError, NoUniqueStationaryStateError
 from .ring import ORDERED_SEQUENTIAL, PARALLEL, Ring
 from .statespace import count_all, recurrent_keys
@@ -27,7 +29,7 @@ from .transition import successor_counts, transition_matrix
 from .validate import ensure_chain_arguments, format_count
 
 __all__ = ["RingChain", "Solution", "ClassSolution", "solve", "solve_classes", "load_solution",
-           "representable", "known_irreducible", "min_p", "MIN_P"]
+           "ClassSolutions", "representable", "min_p", "MIN_P"]
 
 # OPERATORS (markov.choices): how ``x -> x P`` is applied (see
 # RingChain.operator_kind for ``auto``): ``matrix`` the assembled CSR matrix
@@ -122,24 +124,6 @@ def _ensure_representable(ring: Ring) -> None:
                 f" 1 - {smallest:.2g}")
 
 
-def known_irreducible(ring: Ring) -> bool:
-    """Whether everything reachable from the compact jam is one closed class, proven.
-
-    NaSch with ``0 < p < 1``: every configuration reaches the compact jam.
-    Every other chain is split by :func:`markov.classes.closed_classes`, or,
-    when too large for that, verified after solving (:attr:`RingChain.classes`).
-
-    Parameters
-    ----------
-    ring : Ring
-
-    Returns
-    -------
-    bool
-    """
-    return ring.trivial or (ring.is_nasch and 0 < ring.p < 1)
-
-
 def _start_key(ring: Ring, start, lump: bool) -> int | None:
     """The key of a start configuration given as text (``"2..1.0"``), or ``None``."""
     if start is None:
@@ -159,27 +143,6 @@ def _start_key(ring: Ring, start, lump: bool) -> int | None:
     if lump:
         key = int(canonical_keys(np.array([key], dtype=np.int64), ring.length, ring.vmax)[0])
     return key
-
-
-def describe_classes(ring: Ring, classes: list[np.ndarray]) -> str:
-    """One line: how many closed classes, their sizes and a configuration of each.
-
-    Parameters
-    ----------
-    ring : Ring
-    classes : list of int64 arrays
-
-    Returns
-    -------
-    str
-    """
-    from .encoding import decode, to_text
-
-    shown = ", ".join(f"{len(c):,} state{'s' if len(c) > 1 else ''}"
-                      f" ({to_text(decode(int(c[0]), ring.length, ring.vmax))})"
-                      for c in classes[:5])
-    more = f" and {len(classes) - 5} more" if len(classes) > 5 else ""
-    return f"{len(classes)} closed classes: {shown}{more}"
 
 
 def representable(ring: Ring) -> bool:
@@ -263,10 +226,14 @@ class RingChain:
         self.build_seconds = 0.0
         # True while the reachable set stands for one class that is not yet checked
         self.unverified = False
+        #: How the closed classes were found (:class:`markov.classes.ClassCensus`),
+        #: set with :attr:`classes`
+        self.census: ClassCensus | None = None
 
     @classmethod
     def on_class(cls, ring: Ring, keys: np.ndarray, lump: bool = True,
-                 max_memory: float | None = None, operator: str = "matrix") -> "RingChain":
+                 max_memory: float | None = None, operator: str = "matrix",
+                 census: ClassCensus | None = None) -> "RingChain":
         """The chain on a closed class given by its keys, without the search.
 
         Parameters
@@ -279,6 +246,8 @@ class RingChain:
         max_memory : float, optional
             Bytes allowed.
         operator : {"auto", "matrix", "matrix-free"}
+        census : ClassCensus, optional
+            How the class was found (its solution reports it).
 
         Returns
         -------
@@ -294,6 +263,7 @@ class RingChain:
         keys = np.ascontiguousarray(keys, dtype=np.int64)
         chain.__dict__["reachable"] = keys
         chain.__dict__["classes"] = [keys]
+        chain.census = census
         return chain
 
     def with_p(self, p) -> "RingChain":
@@ -371,26 +341,38 @@ class RingChain:
 
     @cached_property
     def classes(self) -> list[np.ndarray]:
-        """The closed classes reachable from the start (:func:`markov.classes.closed_classes`).
+        """The closed classes of the chain (:func:`markov.classes.closed_classes`).
 
-        One class, all of :attr:`reachable`, where that is proven
-        (:func:`known_irreducible`); otherwise the support graph is split.
-        Above :data:`SPLIT_MAX_STATES` states, or where the support graph does
-        not fit in memory, :attr:`reachable` is taken as one class *to be verified*:
-        :meth:`solution` checks that the most probable state of its answer,
-        which is recurrent, reaches every state (one more search), and
-        refuses otherwise.
+        Without a start: one class, all of :attr:`reachable`, where that is
+        proven (:func:`markov.classes.known_irreducible`); otherwise every
+        configuration is searched where that fits
+        (:func:`markov.classes.search_all_fits`), and where it does not, the
+        classes the compact jam reaches (others may exist: :attr:`census`
+        says so).  With a start: the classes it reaches.  Above
+        :data:`SPLIT_MAX_STATES` states, or where the support graph does not
+        fit in memory, :attr:`reachable` is taken as one class *to be
+        verified*: :meth:`solution` checks that the most probable state of its
+        answer, which is recurrent, reaches every state (one more search),
+        and refuses otherwise.
         """
-        if known_irreducible(self.ring) and self.start is None:
-            return [self.reachable]
         from .classes import closed_classes, support_graph_bytes
+        from .statespace import count_all
 
+        configurations = count_all(self.ring)
+        if self.start is None and known_irreducible(self.ring):
+            self.census = ClassCensus(1, PROVEN, configurations)
+            return [self.reachable]
+        if self.start is None and search_all_fits(self.ring, self.lump, self.max_memory):
+            return self._all_classes()
+        start = time.perf_counter()
+        scope = FROM_START if self.start is not None else FROM_COMPACT_JAM
         n = len(self.reachable)
         if n > SPLIT_MAX_STATES or support_graph_bytes(self.ring, n) > self.limit:
             self.unverified = True
+            self.census = ClassCensus(1, scope, configurations)
             return [self.reachable]
-        start = time.perf_counter()
         classes = closed_classes(self.ring, self.reachable, self.lump, self.max_memory)
+        self.census = ClassCensus(len(classes), scope, configurations)
         self.build_seconds += time.perf_counter() - start
         return classes
 
@@ -423,18 +405,65 @@ class RingChain:
         Raises
         ------
         NoUniqueStationaryStateError
-            When several closed classes are reachable from the start (each has
-            its own stationary state: :func:`solve_classes`).
+            When the chain has several closed classes (:attr:`classes`; each
+            has its own stationary state): the error carries them solved
+            (:meth:`class_solutions`).
         """
         classes = self.classes
         if len(classes) > 1:
-            r = self.ring
-            raise NoUniqueStationaryStateError(
-                f"the chain of {r.model.name} (L={r.length}, N={r.cars}) has no unique"
-                f" stationary state: from the {'start' if self.start is not None else 'compact jam'}"
-                f" it reaches {describe_classes(r, classes)}; solve each with"
-                " solve_classes (nasch solve --classes)")
+            solved = self.class_solutions()
+            raise NoUniqueStationaryStateError(solved.refusal(), classes=solved)
         return classes[0]
+
+    def search_all_configurations(self) -> None:
+        """Take the closed classes over every configuration of the ring, searched
+        even where one class is proven (:func:`markov.classes.all_configurations_classes`).
+
+        Raises
+        ------
+        StateSpaceTooLargeError
+            When the configurations or their support graph do not fit.
+        """
+        self.__dict__["classes"] = self._all_classes()
+        self.__dict__.pop("keys", None)
+
+    def _all_classes(self) -> list[np.ndarray]:
+        from .classes import all_configurations_classes
+        from .statespace import count_all
+
+        start = time.perf_counter()
+        classes = all_configurations_classes(self.ring, self.lump, self.max_memory)
+        self.build_seconds += time.perf_counter() - start
+        self.census = ClassCensus(len(classes), ALL_CONFIGURATIONS, count_all(self.ring))
+        return classes
+
+    def class_solutions(self, tol: float = DEFAULT_TOL) -> "ClassSolutions":
+        """Each closed class of :attr:`classes` solved on its own.
+
+        Parameters
+        ----------
+        tol : float
+
+        Returns
+        -------
+        ClassSolutions
+        """
+        from .encoding import decode, to_text
+
+        classes = self.classes
+        reached = classes if self.census.scope != ALL_CONFIGURATIONS else None
+        if reached is None:   # which classes the compact jam reaches: one more search
+            reached = [c for c in classes if np.isin(c[:1], self.reachable).any()]
+        firsts = {int(c[0]) for c in reached}
+        out = []
+        for keys in classes:
+            sol = RingChain.on_class(self.ring, keys, self.lump, self.max_memory,
+                                     self.operator, census=self.census).solution(tol=tol)
+            out.append(ClassSolution(to_text(decode(int(keys[0]), self.ring.length,
+                                                    self.ring.vmax)),
+                                     int(keys[0]) in firsts, sol))
+        return ClassSolutions(self.ring, tuple(out), self.census,
+                              "start" if self.start is not None else "compact jam")
 
     @property
     def n_states(self) -> int:
@@ -643,10 +672,10 @@ class RingChain:
             self._verify_one_class(result.pi)
         if matrix:
             return Solution(self.ring, self.keys, result, self.matrix.nnz, self.build_seconds,
-                            self.lump, "matrix")
+                            self.lump, "matrix", census=self.census)
         levels = tuple(P.level_sizes) if parallel_free else None
         return Solution(self.ring, self.keys, result, None, self.build_seconds, self.lump,
-                        "matrix-free", levels)
+                        "matrix-free", levels, census=self.census)
 
 
 @dataclass(frozen=True)
@@ -670,6 +699,9 @@ class Solution:
     level_sizes : tuple of int or None
         Words per level ``0..N`` of the factored operator (parallel update,
         matrix-free), else ``None``.
+    census : ClassCensus or None
+        How the uniqueness of this closed class is known
+        (:class:`markov.classes.ClassCensus`); ``None`` for a loaded file.
     """
 
     ring: Ring
@@ -680,6 +712,7 @@ class Solution:
     lumped: bool
     operator: str = "matrix"
     level_sizes: tuple | None = None
+    census: ClassCensus | None = None
 
     @property
     def pi(self) -> np.ndarray:
@@ -756,6 +789,7 @@ class Solution:
             "gap_distribution": self.gap_distribution.tolist() if r.cars else [],
             "build_seconds": self.build_seconds, "solve_seconds": self.result.seconds,
             "seconds": self.build_seconds + self.result.seconds,
+            "closed_classes": self.census.to_dict() if self.census else None,
         }
 
     # -- the vector itself (markov.storage)
@@ -809,7 +843,7 @@ class Solution:
 def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFAULT_TOL,
           max_memory: float | None = None, operator: str = "auto",
           state_bound: Callable[[Ring, bool], int | None] | None = None) -> Solution:
-    """Exact stationary state of a NaSch ring.
+    """Exact stationary state of a ring (any model and update).
 
     Parameters
     ----------
@@ -839,7 +873,10 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     Raises
     ------
     NoUniqueStationaryStateError
-        For ``p = 0`` or ``p = 1`` with ``0 < N < L``.
+        When the ring has several closed classes (NaSch at ``p = 0`` or ``1``,
+        fi and cc at some densities, ...): the message groups them by flux
+        and says what they share; its ``classes`` attribute holds each class
+        solved (:class:`ClassSolutions`), as :func:`solve_classes` gives them.
     StateSpaceTooLargeError
         When the chain would not fit in ``max_memory``.
     InvalidParameterError
@@ -892,20 +929,152 @@ class ClassSolution:
         return d
 
 
+#: Two classes' values of an observable that differ by less than this are the same.
+COMMON_TOL = 1e-12
+
+#: The observables :meth:`ClassSolutions.common` compares, with their names in to_dict.
+_OBSERVABLES = ("flux", "mean_velocity", "c_v", "gap_distribution")
+
+
+@dataclass(frozen=True)
+class ClassSolutions(Sequence):
+    """Every closed class of a ring solved: a reducible chain answered in full.
+
+    A sequence of :class:`ClassSolution` (ordered by the classes' smallest
+    keys), with how the classes were found and what they share.
+
+    Attributes
+    ----------
+    ring : Ring
+    classes : tuple of ClassSolution
+    census : ClassCensus
+        How many classes there are, and whether that is every class of the ring.
+    origin : str
+        What ``from_start`` refers to: ``"compact jam"`` or ``"start"``.
+    """
+
+    ring: Ring
+    classes: tuple
+    census: ClassCensus
+    origin: str = "compact jam"
+
+    def __getitem__(self, i):
+        return self.classes[i]
+
+    def __len__(self) -> int:
+        return len(self.classes)
+
+    def common(self, tol: float = COMMON_TOL) -> dict:
+        """The observables that are the same in every class, name -> value.
+
+        ``flux``, ``mean_velocity``, ``c_v`` and ``gap_distribution``, each
+        kept when all classes agree within ``tol`` (the value is the first
+        class's).  An observable that differs is left out: no class speaks
+        for the others.
+
+        Parameters
+        ----------
+        tol : float
+
+        Returns
+        -------
+        dict
+
+        Examples
+        --------
+        NaSch at ``p = 0``: every class carries ``min(vmax c, 1 - c)``, but
+        not the same velocities.
+
+        >>> sorted(solve_classes(Ring(10, 5, 2, 0.0)).common())
+        ['flux', 'mean_velocity']
+        """
+        dicts = [c.solution.to_dict() for c in self.classes]
+        out = {}
+        for name in _OBSERVABLES:
+            values = [np.asarray(d[name], dtype=float) for d in dicts]
+            if all(v.shape == values[0].shape and np.allclose(v, values[0], rtol=0, atol=tol)
+                   for v in values):
+                out[name] = dicts[0][name]
+        return out
+
+    def flux_groups(self, most: int = 6) -> str:
+        """The classes grouped by flux: ``"0 in 19 classes (e.g. 000.....); 0.25 in 4 (...)"``.
+
+        Parameters
+        ----------
+        most : int
+            Groups shown; the rest are counted.
+
+        Returns
+        -------
+        str
+        """
+        groups: dict[float, list[ClassSolution]] = {}
+        for c in self.classes:
+            groups.setdefault(round(c.solution.flux, 12), []).append(c)
+        shown = "; ".join(
+            f"{flux:.12g} in {len(members)} class{'es' if len(members) > 1 else ''}"
+            f" (e.g. {members[0].representative})"
+            for flux, members in sorted(groups.items())[:most])
+        if len(groups) > most:
+            shown += f"; and {len(groups) - most} more fluxes"
+        return shown
+
+    def summary(self) -> str:
+        """One line: the classes grouped by their flux, and what they share.
+
+        Returns
+        -------
+        str
+        """
+        shown = self.flux_groups()
+        common = [n for n in self.common() if n != "mean_velocity"]
+        same = (f"; the same in every class: {', '.join(common)}" if common
+                else "; no observable is the same in every class")
+        return f"{self.census.note()}: flux {shown}{same}"
+
+    def refusal(self) -> str:
+        """The one-line refusal of a single answer for this ring.
+
+        Returns
+        -------
+        str
+        """
+        r = self.ring
+        params = " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
+                          for k, v in r.model.params.items())
+        return (f"the chain of {r.model.name} {params} (L={r.length}, N={r.cars}, {r.update})"
+                f" has no unique stationary state: {self.summary()}; solve each with"
+                " solve_classes (nasch solve --classes)")
+
+    def to_dict(self) -> dict:
+        """JSON-ready: ``closed_classes`` (the census), ``common``, ``classes``.
+
+        Returns
+        -------
+        dict
+        """
+        return {"closed_classes": self.census.to_dict(), "common": self.common(),
+                "classes": [c.to_dict() for c in self.classes], "origin": self.origin}
+
+
 def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
                   lump: bool = True, tol: float = DEFAULT_TOL,
-                  max_memory: float | None = None) -> list[ClassSolution]:
+                  max_memory: float | None = None) -> ClassSolutions:
     """The stationary state of each closed class: a reducible chain answered in full.
 
     Parameters
     ----------
     ring : Ring
     every : bool
-        Find every closed class of the ring, over all configurations (small
-        rings: :func:`markov.classes.all_configurations_classes`); else the
-        classes reachable from ``start``.
+        Search every configuration of the ring for closed classes, even where
+        one class is proven (small rings:
+        :func:`markov.classes.all_configurations_classes`).
     start : str, optional
-        Start configuration in text notation (default the compact jam).
+        Start configuration in text notation: the classes it reaches.  Without
+        it (and without ``every``), the ring's classes as :class:`RingChain`
+        finds them: one where proven, every configuration searched where that
+        fits, else those the compact jam reaches (``census`` says which).
     lump : bool
     tol : float
     max_memory : float, optional
@@ -913,8 +1082,10 @@ def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
 
     Returns
     -------
-    list of ClassSolution
-        Ordered by the classes' smallest keys.
+    ClassSolutions
+        A sequence of :class:`ClassSolution`, ordered by the classes' smallest
+        keys; ``.census`` and ``.common()`` say how many there are and what
+        they share.
 
     Examples
     --------
@@ -923,21 +1094,12 @@ def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
     >>> [round(c.solution.flux, 12) for c in solve_classes(Ring(7, 3, 2, 0.0), every=True)]
     [0.571428571429]
     """
-    from .classes import all_configurations_classes
-    from .encoding import decode, to_text
-
     ensure_chain_arguments(_ensure_ring(ring), tol=tol, max_memory=max_memory)
     _ensure_representable(ring)
     chain = RingChain(ring, lump=lump, max_memory=max_memory, operator="matrix", start=start)
-    reachable = chain.classes
-    classes = all_configurations_classes(ring, lump, max_memory) if every else reachable
-    firsts = {int(c[0]) for c in reachable}
-    out = []
-    for keys in classes:
-        sol = RingChain.on_class(ring, keys, lump, max_memory).solution(tol=tol)
-        out.append(ClassSolution(to_text(decode(int(keys[0]), ring.length, ring.vmax)),
-                                 int(keys[0]) in firsts, sol))
-    return out
+    if every:
+        chain.search_all_configurations()
+    return chain.class_solutions(tol)
 
 
 def load_solution(path) -> Solution:

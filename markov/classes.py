@@ -21,13 +21,176 @@ model's rule table: an outcome of weight 0 is no edge.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .errors import StateSpaceTooLargeError
 from .memory import gib, memory_limit
 from .ring import Ring
 
-__all__ = ["closed_classes", "all_configurations_classes", "support_graph_bytes"]
+__all__ = ["closed_classes", "all_configurations_classes", "support_graph_bytes",
+           "known_irreducible", "contains_nasch_support", "search_all_fits", "ClassCensus",
+           "SEARCH_ALL_MAX_EDGES", "PROVEN", "ALL_CONFIGURATIONS", "FROM_COMPACT_JAM",
+           "FROM_START"]
+
+#: Every configuration of a ring whose single class is not proven is searched for
+#: closed classes up to this many edges of the support graph (lumped
+#: configurations times successors each): about 250 MB and a few seconds.
+SEARCH_ALL_MAX_EDGES = 10_000_000
+
+# How the closed classes of a chain were found (ClassCensus.scope)
+PROVEN = "proven"                          # one class, by an argument (known_irreducible)
+ALL_CONFIGURATIONS = "all configurations"  # every configuration searched
+FROM_COMPACT_JAM = "from the compact jam"  # only what the compact jam reaches
+FROM_START = "from the start"              # only what a given start reaches
+
+
+@dataclass(frozen=True)
+class ClassCensus:
+    """How many closed classes a chain has, and how far that was searched.
+
+    Attributes
+    ----------
+    count : int
+        Closed classes found.
+    scope : str
+        :data:`PROVEN` (one class by an argument: :func:`known_irreducible`),
+        :data:`ALL_CONFIGURATIONS` (every configuration searched),
+        :data:`FROM_COMPACT_JAM` (only the classes the compact jam reaches:
+        others may exist, the ring was too large to search) or
+        :data:`FROM_START` (the classes a given start configuration reaches).
+    configurations : int
+        Configurations of the ring (rotation classes when lumped are fewer).
+    """
+
+    count: int
+    scope: str
+    configurations: int
+
+    @property
+    def complete(self) -> bool:
+        """Whether every closed class of the ring is among those counted."""
+        return self.scope in (PROVEN, ALL_CONFIGURATIONS)
+
+    def note(self) -> str:
+        """One line: how many closed classes, and how that is known.
+
+        Returns
+        -------
+        str
+
+        Examples
+        --------
+        >>> ClassCensus(1, FROM_COMPACT_JAM, 10**11).note()
+        'one closed class reached from the compact jam; the other 1e+11 configurations were not searched for other classes'
+        """
+        what = "one closed class" if self.count == 1 else f"{self.count} closed classes"
+        if self.scope == PROVEN:
+            return f"{what} (proven: every configuration reaches the compact jam)"
+        if self.scope == ALL_CONFIGURATIONS:
+            return f"{what} (all {self.configurations:,} configurations searched)"
+        if self.scope == FROM_START:
+            return f"{what} reached from the start configuration (the class it falls into)"
+        return (f"{what} reached from the compact jam; the other {self.configurations:.3g}"
+                " configurations were not searched for other classes")
+
+    def to_dict(self) -> dict:
+        """JSON-ready: ``count``, ``scope``, ``complete``, ``configurations``.
+
+        Returns
+        -------
+        dict
+        """
+        return {"count": self.count, "scope": self.scope, "complete": self.complete,
+                "configurations": self.configurations}
+
+
+def contains_nasch_support(ring: Ring) -> bool:
+    """Whether every outcome NaSch with ``0 < p < 1`` allows, the ring's rule allows too.
+
+    NaSch's outcomes at ``(v, gap)`` are ``u - 1`` and ``u`` for
+    ``u = min(v + 1, vmax, gap) > 0``, else ``0``.  A rule whose support
+    contains them at every ``(v, gap, v_ahead)`` has every transition of
+    NaSch's chain (under each update: a step is made of the cars' outcomes),
+    so every configuration reaches what NaSch's chain reaches from it.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    bool
+
+    Examples
+    --------
+    >>> from markov.rule import load_model
+    >>> contains_nasch_support(Ring(8, 4, model=load_model("vdr", {"p0": 0.75})))
+    True
+    >>> contains_nasch_support(Ring(8, 4, model=load_model("fi")))
+    False
+    """
+    table = ring.table()
+    vmax = ring.vmax
+    for v in range(vmax + 1):
+        for gap in range(max(table.max_gap, vmax) + 1):
+            u = min(v + 1, vmax, gap)
+            need = {u - 1, u} if u else {0}
+            for a in range(vmax + 1):
+                if not need <= set(table.support(v, gap, a)):
+                    return False
+    return True
+
+
+def known_irreducible(ring: Ring) -> bool:
+    """Whether the ring's chain has one closed class, proven (no search needed).
+
+    NaSch with ``0 < p < 1``: every configuration reaches the compact jam
+    (with ``N = 1``: the car at its top speed), so every closed class holds
+    it and there is one.  The same holds for every rule whose support
+    contains NaSch's (:func:`contains_nasch_support`; vdr, tt, bjh with their
+    probabilities in ``(0, 1)``): each of NaSch's paths is one of its paths.
+    Every other chain is searched (:class:`markov.chain.RingChain`).
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    bool
+    """
+    if ring.trivial:
+        return True
+    if ring.is_nasch:
+        return 0 < ring.p < 1
+    return contains_nasch_support(ring)
+
+
+def search_all_fits(ring: Ring, lump: bool, max_memory: float | None = None) -> bool:
+    """Whether every configuration may be searched for closed classes here.
+
+    Within :data:`SEARCH_ALL_MAX_EDGES` edges of the support graph and the
+    memory limit.
+
+    Parameters
+    ----------
+    ring : Ring
+    lump : bool
+    max_memory : float, optional
+        Bytes allowed.
+
+    Returns
+    -------
+    bool
+    """
+    from .memory import expected_row_length
+    from .statespace import count_all
+
+    states = count_all(ring) / (ring.length if lump else 1)
+    return (states * expected_row_length(ring) <= SEARCH_ALL_MAX_EDGES
+            and support_graph_bytes(ring, int(states)) <= memory_limit(max_memory))
 
 #: Bytes per edge of the support graph (int64 successor key, int32 column,
 #: int64 row index of the COO build) and per state.
@@ -149,7 +312,8 @@ def all_configurations_classes(ring: Ring, lump: bool = True,
     from .statespace import all_keys, count_all
 
     limit = memory_limit(max_memory)
-    need = support_graph_bytes(ring, count_all(ring))
+    # lumped, about one state per L configurations (all_keys checks its own arrays)
+    need = support_graph_bytes(ring, count_all(ring) // (ring.length if lump else 1))
     if need > limit:
         raise StateSpaceTooLargeError(
             f"{count_all(ring):,} configurations (L={ring.length}, N={ring.cars},"

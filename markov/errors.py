@@ -45,7 +45,18 @@ class CorruptFileError(InvalidParameterError):
 
 
 class NoUniqueStationaryStateError(NaschError, ValueError):
-    """The chain has more than one stationary distribution (``p = 0`` or ``p = 1``)."""
+    """The chain has more than one stationary distribution (several closed classes).
+
+    Attributes
+    ----------
+    classes : markov.chain.ClassSolutions or None
+        Each closed class solved, where they were (:func:`markov.chain.solve_classes`):
+        ``classes.common()`` holds what is the same in all of them.
+    """
+
+    def __init__(self, message: str, classes=None):
+        super().__init__(message)
+        self.classes = classes
 
 
 class StateSpaceTooLargeError(NaschError, MemoryError):

@@ -165,7 +165,11 @@ def ensure_open_unit(name: str, value, reason: str = ""):
 
 
 def ensure_open_probability(value, name: str = "p") -> float:
-    """A braking probability strictly inside ``(0, 1)``, where the stationary state is unique.
+    """A braking probability strictly inside ``(0, 1)``, as the approximations need it.
+
+    The exact chain takes ``p = 0`` and ``1`` (several closed classes, each
+    answered: :func:`markov.chain.solve_classes`); the approximations' fixed
+    points and the sweeps that compare with them do not.
 
     Parameters
     ----------
@@ -184,12 +188,13 @@ def ensure_open_probability(value, name: str = "p") -> float:
     >>> ensure_open_probability(0.0)
     Traceback (most recent call last):
     ...
-    markov.errors.InvalidParameterError: p must lie strictly between 0 and 1 (p = 0 or 1 has no unique stationary state), got 0.0
+    markov.errors.InvalidParameterError: p must lie strictly between 0 and 1 (the approximations need it; the exact chain at p = 0 or 1: nasch solve, nasch table), got 0.0
     """
     if not isinstance(value, numbers.Real) or isinstance(value, bool):
         raise InvalidParameterError(f"{name} must be a number strictly between 0 and 1,"
                                     f" got {value!r}")
-    return ensure_open_unit(name, value, "p = 0 or 1 has no unique stationary state")
+    return ensure_open_unit(name, value, "the approximations need it; the exact chain at"
+                                         " p = 0 or 1: nasch solve, nasch table")
 
 
 def ensure_tol(tol, name: str = "tol") -> float:

@@ -64,21 +64,26 @@ def number_list(name: str, text: str, kind: type = float) -> list:
     return values
 
 
-def ensure_probabilities(values: list[float], name: str = "--p") -> list[float]:
-    """Braking probabilities of a sweep, each strictly inside ``(0, 1)``.
+def ensure_probabilities(values: list[float], name: str = "--p",
+                         closed: bool = False) -> list[float]:
+    """Braking probabilities of a sweep, each strictly inside ``(0, 1)`` (or in ``[0, 1]``).
 
     Parameters
     ----------
     values : list of float
     name : str
         The option, for the message.
+    closed : bool
+        Accept 0 and 1 (the exact chain answers them, class by class).
 
     Returns
     -------
     list of float
     """
-    from markov.validate import ensure_open_probability
+    from markov.validate import ensure_open_probability, ensure_real
 
+    if closed:
+        return [ensure_real(name, p, 0.0, 1.0) for p in values]
     return [ensure_open_probability(p, name) for p in values]
 
 

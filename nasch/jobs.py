@@ -126,13 +126,20 @@ class MonteCarloJob(NamedTuple):
 
 
 class ExactResult(NamedTuple):
-    """What an :class:`ExactJob` gives; ``error`` holds the refusal of a ring left out."""
+    """What an :class:`ExactJob` gives; ``error`` holds the refusal of a ring left out.
+
+    A ring with several closed classes whose flux is the same in every one
+    gives that flux, with ``classes`` > 1 and ``note`` saying so (``c_v`` only
+    where it is common too); where the flux differs, a NaN flux and ``error``.
+    """
 
     flux: float
     c_v: tuple
     states: int
     residual: float
     error: str | None = None
+    classes: int = 1
+    note: str | None = None
 
 
 class MonteCarloResult(NamedTuple):
@@ -254,9 +261,26 @@ def run_job(job: ExactJob | MonteCarloJob) -> ExactResult | MonteCarloResult:
     try:
         sol = solve(job_ring(job), state_bound=recurrent_class_bound)
     except NoUniqueStationaryStateError as exc:
-        return ExactResult(float("nan"), (), 0, float("nan"), str(exc))
+        return _several_classes(exc)
     return ExactResult(float(sol.flux), tuple(float(x) for x in sol.c_v), int(sol.n_states),
                        float(sol.residual))
+
+
+def _several_classes(exc: NoUniqueStationaryStateError) -> ExactResult:
+    """The result of a ring with several closed classes: what they share, said so."""
+    classes = exc.classes
+    if classes is None:   # not split (too large): no class speaks for the others
+        return ExactResult(float("nan"), (), 0, float("nan"), str(exc))
+    common = classes.common()
+    states = sum(c.solution.n_states for c in classes)
+    residual = max(c.solution.residual for c in classes)
+    if "flux" not in common:
+        return ExactResult(float("nan"), (), states, residual,
+                           f"{classes.census.note()}, flux {classes.flux_groups(3)}",
+                           len(classes))
+    return ExactResult(float(common["flux"]), tuple(common.get("c_v", ())), states, residual,
+                       None, len(classes),
+                       f"{classes.census.note()}, the same flux in every one")
 
 
 def run_job_keep_going(job: ExactJob | MonteCarloJob) -> ExactResult | MonteCarloResult:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 import textwrap
 import warnings
 from dataclasses import dataclass, field
@@ -30,7 +31,7 @@ import numpy as np
 from markov.errors import InvalidParameterError, NaschError
 from markov.ring import PARALLEL, UPDATES, Ring
 from markov.rule import Model
-from markov.validate import ensure_int, ensure_open_probability
+from markov.validate import ensure_int, ensure_real
 from symbolic import supported
 
 from .extrapolate import extrapolate
@@ -113,6 +114,7 @@ class FluxRow:
     mc_reliable: bool | None = None
     mc_warning: str | None = None
     note: str | None = None
+    closed_classes: int = 1
 
     def to_dict(self) -> dict:
         """The row as in ``nasch table --format json``: one key per approximation.
@@ -126,7 +128,8 @@ class FluxRow:
                 "c_v": None if self.c_v is None else list(self.c_v), "states": self.states,
                 **self.approximations, "mc_flux": self.mc_flux, "mc_error": self.mc_error,
                 "mc_length": self.mc_length, "mc_reliable": self.mc_reliable,
-                "mc_warning": self.mc_warning, "note": self.note}
+                "mc_warning": self.mc_warning, "note": self.note,
+                "closed_classes": self.closed_classes}
 
 
 # --- the table ---------------------------------------------------------------------
@@ -239,7 +242,9 @@ class FluxTable(RenderedTable):
                 exact = plus_minus(r.flux, r.flux_error, latex)
             else:
                 L, N = str(r.length), str(r.cars)
-                exact = "reducible" if r.note else f"{r.flux:.6f}"
+                exact = ("reducible" if not math.isfinite(r.flux)
+                         else f"{r.flux:.6f} ({r.closed_classes} classes)"
+                         if r.closed_classes > 1 else f"{r.flux:.6f}")
             row = ["--" if r.p is None else f"{r.p:g}", L, N, f"{r.density:.4f}", exact]
             row += ["--" if r.approximations[m] is None else f"{r.approximations[m]:.6f}"
                     for m in self.methods]
@@ -335,7 +340,7 @@ class FluxTable(RenderedTable):
 def _table_models(vmax, p, model: Model | None, update: str) -> list[Model]:
     """One model per ``p`` of the sweep: NaSch (``vmax``, ``p``), or ``model`` with its ``p`` set."""
     ps = None if p is None else sorted(
-        {ensure_open_probability(float(x)) for x in ([p] if np.ndim(p) == 0 else p)})
+        {ensure_real("p", x, 0.0, 1.0) for x in ([p] if np.ndim(p) == 0 else p)})
     if model is None:
         if vmax is None or not ps:
             raise InvalidParameterError("a flux table needs vmax and p, or a model")
@@ -472,11 +477,12 @@ def flux_table(vmax: int | None = None, p=None, lengths: Sequence[int] | None = 
                 except NaschError as exc:   # refused for this model: said, never guessed
                     approx[method, m, c] = None
                     refused.setdefault(method, str(exc))
+    said: dict[tuple[str, str], list[str]] = {}   # one note per reason, naming its methods
     for method, reason in refused.items():
-        if all(approx[method, m, c] is None for m in models for c in fractions):
-            notes.append(f"{_LABELS[method]} left out: {reason}")
-        else:
-            notes.append(f"{_LABELS[method]} -- where refused: {reason}")
+        where = "left out" if all(approx[method, m, c] is None for m in models
+                                  for c in fractions) else "-- where refused"
+        said.setdefault((where, reason), []).append(_LABELS[method])
+    notes += [f"{', '.join(labels)} {where}: {reason}" for (where, reason), labels in said.items()]
     methods = tuple(x for x in methods if x not in refused
                     or any(approx[x, m, c] is not None for m in models for c in fractions))
 
@@ -503,11 +509,13 @@ def flux_table(vmax: int | None = None, p=None, lengths: Sequence[int] | None = 
                             mc_reliable=r_mc.reliable, mc_warning=r_mc.warning) if r_mc else {}
             for L, N in group:
                 e = exact[(L, N, m)]
-                if e.error:   # several closed classes: no flux of an arbitrary one
-                    notes.append(f"reducible: L = {L}, N = {N}: {e.error}")
+                # several closed classes: the flux where every class has it, else none
+                note = e.error or e.note
+                if note:
+                    notes.append(f"L = {L}, N = {N}: {note}")
                 rows.append(FluxRow("exact", p_, L, N, N / L, e.flux, 0.0,
-                                    None if e.error else e.c_v, e.states or None, cells,
-                                    **mc_cells, note=e.error))
+                                    e.c_v if e.c_v else None, e.states or None, cells,
+                                    **mc_cells, note=note, closed_classes=e.classes))
             fit = [(L, exact[(L, N, m)].flux) for L, N in group if not exact[(L, N, m)].error]
             if extrapolation and len(fit) >= order + 1:
                 ex = extrapolate([L for L, _ in fit], [f for _, f in fit], order=order)

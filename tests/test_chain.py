@@ -7,7 +7,8 @@ import pytest
 
 import naive
 from reference import vmax1_infinite_flux
-from markov import Ring, RingChain, SOLVERS, StateSpaceTooLargeError, solve
+from markov import (NoUniqueStationaryStateError, Ring, RingChain, SOLVERS,
+                    StateSpaceTooLargeError, solve)
 from markov.statespace import all_keys, count_all, recurrent_keys
 from markov.encoding import decode, encode
 from markov.transition import transition_matrix
@@ -138,11 +139,16 @@ def test_empty_and_full_rings_are_exact(N, p, update):
 
 
 @pytest.mark.parametrize("p, flux", [(0.0, 0.5), (1.0, 0.0)])
-def test_deterministic_limits_solve_the_class_of_the_compact_jam(p, flux):
-    # p = 0: the jam runs into a periodic orbit with J = min(vmax c, 1 - c);
-    # p = 1: every car brakes back to rest, the jam is absorbing
-    sol = solve(Ring(8, 4, 2, p))
-    assert abs(sol.flux - flux) < 1e-14 and sol.residual < 1e-12
+def test_deterministic_limits_are_several_classes_with_one_flux(p, flux):
+    # p = 0: every configuration runs into a periodic orbit with J = min(vmax c, 1 - c);
+    # p = 1: every car brakes back to rest, each stopped configuration is absorbing.
+    # No class is the answer: the refusal names them all and what they share
+    with pytest.raises(NoUniqueStationaryStateError, match="configurations searched") as err:
+        solve(Ring(8, 4, 2, p))
+    classes = err.value.classes
+    assert len(classes) > 1 and classes.census.complete
+    assert abs(classes.common()["flux"] - flux) < 1e-14
+    assert all(c.solution.residual < 1e-12 for c in classes)
 
 
 def test_memory_guard_refuses_with_the_number():

@@ -107,8 +107,15 @@ def test_solve_any_model_records_it_and_matches_the_api():
 
 def test_solve_classes_and_start_configuration():
     args = ["solve", "-L", "12", "-N", "3", "--model", "cc", "--p", "0.2"]
-    refused = CliRunner().invoke(main, args)
-    assert refused.exit_code == 2 and "4 closed classes" in refused.output
+    # several classes: each one listed, and the flux they share said once
+    several = CliRunner().invoke(main, args)
+    assert several.exit_code == 0 and "4 closed classes" in several.output
+    assert "the same in every class: flux 0.5, mean velocity 2, c_v" in several.output
+    data = json.loads(CliRunner().invoke(main, args + ["--json"]).output)
+    assert data["closed_classes"]["count"] == 4 and data["flux"] == 0.5
+    # what needs one stationary state is refused, in one line
+    top = CliRunner().invoke(main, args + ["--top", "2"])
+    assert top.exit_code == 2 and "no unique stationary state" in top.output
     out = CliRunner().invoke(main, args + ["--classes", "--json"])
     classes = json.loads(out.output)["classes"]
     assert [c["states"] for c in classes] == [1, 1, 1, 1]

@@ -97,9 +97,25 @@ def test_nasch_at_p0_every_class_has_the_deterministic_flux(vmax):
                 assert abs(c.solution.flux - min(vmax * N, L - N) / L) < 1e-12, (L, N, c)
 
 
-def test_nasch_at_p1_the_jam_is_absorbing():
-    sol = solve(Ring(8, 3, 2, 1.0))
-    assert sol.n_states == 1 and sol.flux == 0.0
+def test_nasch_at_p1_every_stopped_configuration_is_absorbing():
+    # p = 1: a standing car stays, a car at v = 1 keeps v = 1 while its gap is >= 2.
+    # L = 8, N = 3: no moving class (gaps >= 2 need 9 cells); the C(8, 3)/8 = 7
+    # rotation classes of stopped cars are absorbing: flux 0 and c_0 = 3/8 in each
+    with pytest.raises(NoUniqueStationaryStateError, match="7 closed classes") as err:
+        solve(Ring(8, 3, 2, 1.0))
+    classes = err.value.classes
+    assert len(classes) == 7 and all(c.solution.n_states == 1 for c in classes)
+    assert classes.census.complete and classes.common()["flux"] == 0.0
+    assert np.allclose(classes.common()["c_v"], [3 / 8, 0, 0])
+    # L = 12: 19 necklaces of stopped cars ((220 + 4 + 4)/12) and 4 of moving cars
+    # (gaps >= 2 summing to 9: the 10 compositions of 3 into 3 parts, (10 + 2)/3);
+    # the moving ones flow at 3/12: the flux is not one number
+    with pytest.raises(NoUniqueStationaryStateError, match="23 closed classes") as err:
+        solve(Ring(12, 3, 2, 1.0))
+    classes = err.value.classes
+    assert sorted(round(c.solution.flux, 12) for c in classes) == [0.0] * 19 + [0.25] * 4
+    assert "flux" not in classes.common()
+    assert "flux 0 in 19 classes" in str(err.value) and "0.25 in 4 classes" in str(err.value)
 
 
 def test_cruise_control_classes_and_start_configuration():
@@ -206,15 +222,47 @@ def test_transition_matrix_equals_the_naive_chain_entry_by_entry(name, update):
 def test_a_chain_too_large_to_split_is_verified_by_a_second_search(monkeypatch):
     # pretend the support graph does not fit: the reachable set is solved as one
     # class and checked by a search from the answer's most probable state
+    import markov.chain
     import markov.classes
 
-    vdr = Ring(10, 4, model=_model("vdr", 2))
-    exact = solve(vdr).flux
+    kkw = Ring(10, 4, model=_model("kkw", 2))   # one class, not proven (all searched)
+    exact = solve(kkw).flux
     monkeypatch.setattr(markov.classes, "support_graph_bytes", lambda ring, n: float("inf"))
-    chain = RingChain(vdr, operator="matrix-free")
+    monkeypatch.setattr(markov.chain, "search_all_fits", lambda ring, lump, limit: False)
+    chain = RingChain(kkw, operator="matrix-free")
     assert chain.classes == [chain.reachable] and chain.unverified
     sol = chain.solution(method="bicgstab", tol=1e-12)
     assert not chain.unverified and abs(sol.flux - exact) < 1e-10
+    # the answer says that only the compact jam's classes were searched
+    assert sol.census.scope == "from the compact jam" and not sol.census.complete
+    assert "were not searched for other classes" in sol.census.note()
     with pytest.raises(NoUniqueStationaryStateError, match="not one closed class"):
         RingChain(Ring(12, 3, model=load_model("cc", {"vmax": 2, "p": 0.2})),
                   operator="matrix-free").solution(method="power", tol=1e-10)
+
+
+@pytest.mark.parametrize("update", ["parallel", "random-sequential", "ordered-sequential"])
+@pytest.mark.parametrize("name, vmax", [("nasch", 2), ("vdr", 2), ("tt", 1), ("tt", 2),
+                                        ("bjh", 2), ("fi", 1), ("kkw", 1), ("vdr", 3)])
+def test_a_rule_containing_nasch_support_has_one_class_over_all_configurations(
+        name, vmax, update):
+    # known_irreducible's argument (every NaSch path is a path of the rule), checked by
+    # searching every configuration of small rings
+    from markov.classes import all_configurations_classes, known_irreducible
+
+    model = _model(name, vmax)
+    for L, N in ((5, 1), (6, 2), (7, 3), (6, 4), (7, 6)):
+        ring = Ring(L, N, update=update, model=model)
+        assert known_irreducible(ring)
+        assert len(all_configurations_classes(ring, lump=True)) == 1, (L, N)
+
+
+def test_rules_without_nasch_support_are_searched_and_some_have_several_classes():
+    from markov.classes import known_irreducible
+
+    for name, (L, N) in (("fi", (8, 5)), ("cc", (12, 3))):
+        ring = Ring(L, N, model=_model(name, 2))
+        assert not known_irreducible(ring)
+        with pytest.raises(NoUniqueStationaryStateError, match="configurations searched"):
+            solve(ring)
+    assert not known_irreducible(Ring(8, 4, 2, 0.0)) and not known_irreducible(Ring(8, 4, 2, 1.0))

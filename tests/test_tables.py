@@ -123,7 +123,7 @@ def test_table_points_and_mc_ring():
     assert mc_ring(Fraction(1, 3), 1000) == (1002, 334)
 
 
-@pytest.mark.parametrize("kwargs", [dict(p=0.0), dict(p=[0.5, 1.0]), dict(mc_steps=5),
+@pytest.mark.parametrize("kwargs", [dict(p=-0.1), dict(p=[0.5, 1.5]), dict(mc_steps=5),
                                     dict(methods=("nope",)), dict(update="sideways")])
 def test_bad_table_arguments(kwargs):
     args = dict(vmax=1, p=0.5, lengths=[6], mc_steps=0, serial=True)
@@ -171,7 +171,27 @@ def test_cli_table_to_file_and_stdout(tmp_path):
     md = runner.invoke(main, ["table", "--vmax", "2", "--p", "0.5", "--lengths", "8",
                               "--cars", "2,4", "--mc-steps", "0", "--format", "md"])
     assert md.exit_code == 0 and md.output.count("\n| 0.5 |") == 2
-    bad = runner.invoke(main, ["table", "--p", "1", "--lengths", "8"])
+    bad = runner.invoke(main, ["table", "--p", "1.5", "--lengths", "8"])
     assert bad.exit_code == 2 and bad.output.startswith("error:")
     bad = runner.invoke(main, ["table", "--lengths", "8,x"])
     assert bad.exit_code == 2 and "integers" in bad.output
+
+
+def test_deterministic_limits_print_the_flux_every_class_has_and_say_so():
+    # p = 0: every closed class carries min(vmax c, 1 - c) (checked class by class in
+    # tests/test_model_chain.py); the table prints it with the number of classes
+    t = flux_table(2, 0.0, [8, 10, 12], densities=[0.5], mc_steps=0, serial=True)
+    exact = [r for r in t.rows if r.kind == "exact"]
+    assert [r.flux for r in exact] == pytest.approx([0.5] * 3, abs=1e-14)
+    assert [r.closed_classes for r in exact] == [3, 5, 10]
+    assert "0.500000 (10 classes)" in t.to_text()
+    assert any(n.startswith("L = 12, N = 6: 10 closed classes (all 673,596 configurations")
+               for n in t.notes)
+    # p = 1 at c = 1/4: stopped classes (flux 0) beside moving ones (flux 1/4)
+    t = flux_table(2, 1.0, [12], densities=[0.25], mc_steps=0, serial=True,
+                   extrapolation=False)
+    row = t.rows[0]
+    assert math.isnan(row.flux) and row.closed_classes == 23 and "reducible" in t.to_text()
+    assert "flux 0 in 19 classes" in row.note and "0.25 in 4 classes" in row.note
+    # the approximations cannot take p = 0 and are left out in one note
+    assert sum("left out" in n for n in t.notes) == 1

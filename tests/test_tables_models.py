@@ -111,6 +111,15 @@ def test_p_sweep_of_the_models_p_and_refusals():
         flux_table(p=[0.1, 0.2], model=load_model("kkw", {}), lengths=[8], mc_steps=0)
 
 
+def test_cruise_control_prints_the_flux_every_class_has():
+    # cc at c = 1/4: every closed class is free flow at vmax (flux 2 c = 0.5)
+    t = flux_table(model=load_model("cc", {"vmax": 2, "p": 0.5}), lengths=[8, 12],
+                   densities=[0.25], mc_steps=0, serial=True, extrapolation=False, methods=())
+    assert [(r.flux, r.closed_classes) for r in t.rows] == [(0.5, 2), (0.5, 4)]
+    assert all("the same flux in every one" in r.note for r in t.rows)
+    assert "0.500000 (4 classes)" in t.to_text()
+
+
 def test_reducible_ring_gets_a_note_not_a_number(monkeypatch):
     import markov.chain
 

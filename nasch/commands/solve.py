@@ -27,8 +27,8 @@ __all__ = ["solve"]
               help="Start configuration ('.' empty, digit = velocity) instead of the"
                    " compact jam: the closed class it falls into is solved.")
 @click.option("--classes", "every_class", is_flag=True,
-              help="Every closed class over all configurations, each solved (small rings;"
-                   " reducible chains, p = 0 or 1).")
+              help="Search every configuration for closed classes, even where one is proven,"
+                   " and solve each (small rings).")
 @click.option("--method", type=click.Choice(METHODS), default="auto", show_default=True,
               help="Stationary solver; direct and eigs need the matrix, aggregation"
                    " parallel update.")
@@ -71,8 +71,13 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
 
     Any shipped model (nasch models) or a rule of your own
     (--model FILE.py:FUNCTION, docs/models.md).  A chain with several closed
-    classes is refused with their sizes; --start solves the class a start
-    configuration falls into, --classes every class.
+    classes (p = 0 or 1, fi and cc at some densities) is answered class by
+    class: how many there are, what is the same in all of them (the flux,
+    ...), and each class; options that need one stationary state (--top,
+    --save, --sensitivity, ...) are then refused.  Where one class is not
+    proven, every configuration is searched if that fits, and the output
+    says how far the search went.  --start solves the class a start
+    configuration falls into, --classes searches every configuration.
 
     --sensitivity p adds d flux / d p (and d c_v / d p), exact: one more
     linear solve with the chain's operator and the exact derivative of P
@@ -89,6 +94,7 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
     """
     # every check before the work: the solver's own up-front checks, then the options
     from markov.chain import RingChain
+    from markov.errors import NoUniqueStationaryStateError
     from markov.files import check_output_path
     from markov.goe_census import recurrent_class_bound
     from markov.ring import Ring
@@ -112,6 +118,9 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
         save = check_output_path(save, suffixes=(".npz",))
     names = _sensitivity_names(ring, sensitivity, every_class)
     limit = None if max_memory is None else max_memory * 2**30
+    one_state = [flag for flag, given in (("--top", top is not None), ("--save", save),
+                                          ("--sensitivity", names), ("--fluctuations", fluctuations),
+                                          ("--autocorrelation", lags is not None)) if given]
     if every_class or start is not None:
         from markov.chain import solve_classes
 
@@ -126,7 +135,13 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
         # markov.chain.solve, keeping the chain: a sensitivity reuses its operator
         chain = RingChain(ring, lump=not no_lump, max_memory=limit, operator=operator,
                           state_bound=recurrent_class_bound)
-        sol = chain.solution(method=method, tol=tol)
+        try:
+            sol = chain.solution(method=method, tol=tol)
+        except NoUniqueStationaryStateError as exc:
+            if exc.classes is None or one_state:
+                raise   # one line: the classes, and why there is no one answer
+            _echo_classes(ring, exc.classes, as_json, start)
+            return
     data = sol.to_dict()
     derivatives = _sensitivities(ring if chain is None else chain, sol, names, tol)
     for name, d in derivatives.items():
@@ -160,6 +175,8 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
         click.echo(f"  mean velocity  {data['mean_velocity']:.15g}")
     for v, c in enumerate(data["c_v"]):
         click.echo(f"  c_{v}            {c:.15g}")
+    if sol.census is not None and sol.census.scope != "proven":
+        click.echo(f"  classes        {sol.census.note()}")
     for name, d in derivatives.items():
         click.echo(f"  dflux/d{name} = {d.dflux:.15g}  (residual {d.residual:.1e},"
                    f" {d.derivative} weights, {d.route} route, {d.seconds:.3f} s)")
@@ -200,6 +217,9 @@ def _sensitivities(system, sol, names, tol) -> dict:
     # the solve for dpi targets the stationary solve's tolerance, at most 1e-12
     return {name: sensitivity(system, name, solution=sol, tol=min(tol, 1e-12))
             for name in names}
+#: Closed classes listed one per line (--json has all of them).
+MAX_LISTED = 20
+
 #: Largest T of --autocorrelation (T products x P).
 MAX_CLI_LAGS = 100_000
 
@@ -258,18 +278,29 @@ def _params(ring) -> str:
 
 
 def _echo_classes(ring, classes, as_json: bool, start) -> None:
+    """Every closed class with its observables, and what is the same in all of them."""
     origin = "the start" if start is not None else "the compact jam"
+    common = classes.common()
     if as_json:
-        emit_json({"classes": [c.to_dict() for c in classes], "start": start})
+        emit_json({**classes.to_dict(), **common, "start": start})
         return
     click.echo(f"{_title(ring)} L={ring.length} N={ring.cars} (c={ring.density:.4g})"
-               f" {_params(ring)} update={ring.update}: {len(classes)} closed"
-               f" class{'es' if len(classes) > 1 else ''}")
-    for i, c in enumerate(classes, 1):
+               f" {_params(ring)} update={ring.update}: {classes.census.note()}")
+    if len(classes) > 1:
+        shared = [f"{name.replace('_', ' ')} {common[name]:.15g}"
+                  for name in ("flux", "mean_velocity") if name in common]
+        shared += [name for name in ("c_v", "gap_distribution") if name in common]
+        click.echo("  the same in every class: " + ", ".join(shared) if shared
+                   else "  no observable is the same in every class: each class below")
+    if "flux" not in common:
+        click.echo(f"  fluxes: {classes.flux_groups()}")
+    for i, c in enumerate(classes[:MAX_LISTED], 1):
         sol = c.solution
         cv = " ".join(f"{x:.6g}" for x in sol.c_v)
         click.echo(f"  {i}. {c.representative}  states {sol.n_states:,}  flux {sol.flux:.15g}"
                    f"  c_v {cv}{'  (reached from ' + origin + ')' if c.from_start else ''}")
+    if len(classes) > MAX_LISTED:
+        click.echo(f"  ... and {len(classes) - MAX_LISTED:,} more classes (--json lists all)")
 
 
 def _echo_top(rows: list[dict], lumped: bool, n_states: int) -> None:

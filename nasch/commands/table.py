@@ -87,7 +87,7 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
     ps = (number_list("--p", p_text) if p_text is not None
           else [0.5] if nasch and "p" not in param_names(params) else None)
     if ps is not None:
-        ensure_probabilities(ps)
+        ensure_probabilities(ps, closed=True)
     # --vmax and the first --p set the model (checked against --param); the
     # table sweeps the model's p over the rest
     the_model = build_model(model, params, vmax=2 if nasch and vmax is None and
