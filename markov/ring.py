@@ -52,10 +52,12 @@ class Ring:
         Number of cells ``L >= 1``.
     cars : int
         Number of cars ``0 <= N <= L``.
-    vmax : int
-        Maximal velocity ``>= 1``.
-    p : float or fractions.Fraction
-        Braking probability in ``[0, 1]`` (a ``Fraction`` keeps it exact).
+    vmax : int, optional
+        Maximal velocity ``>= 1`` (NaSch's default: 2).
+    p : float or fractions.Fraction, optional
+        Braking probability in ``[0, 1]`` (a ``Fraction`` keeps it exact;
+        NaSch's default: 0.5).  Every command and the API take the same
+        defaults: those the model declares (``nasch models``).
     update : {"parallel", "random-sequential", "ordered-sequential"}
         Update order (ordered-sequential: backward, from a start car drawn
         uniformly each step; docs/models.md).
@@ -69,6 +71,8 @@ class Ring:
     --------
     >>> Ring(length=3, cars=1, vmax=1, p=0.5).density
     0.3333333333333333
+    >>> Ring(12, 6)       # the model's defaults
+    Ring(length=12, cars=6, vmax=2, p=0.5, update='parallel')
     >>> r = Ring(10, 4, model=load_model("vdr", {"vmax": 2, "p": 0.1, "p0": 0.5}))
     >>> r.vmax, r.p, r.model.name
     (2, 0.1, 'vdr')
@@ -88,11 +92,13 @@ class Ring:
             raise InvalidParameterError(
                 f"number of cars N must satisfy 0 <= N <= L = {length}, got N = {cars}")
         model = self.model
-        if model is None:
-            if self.vmax is None or self.p is None:
-                raise InvalidParameterError("a ring needs vmax and p, or a model")
-            vmax = _ensure_int("vmax", self.vmax, 1)
-            model = load_model(NASCH, {"vmax": vmax, "p": _ensure_probability(self.p)})
+        if model is None:   # NaSch; what is not given takes its defaults (vmax 2, p 0.5)
+            given = {}
+            if self.vmax is not None:
+                given["vmax"] = _ensure_int("vmax", self.vmax, 1)
+            if self.p is not None:
+                given["p"] = _ensure_probability(self.p)
+            model = load_model(NASCH, given)
         elif not isinstance(model, Model):
             raise InvalidParameterError(
                 f"model must be a markov.rule.Model (see load_model), got {type(model).__name__}")

@@ -131,3 +131,27 @@ def test_solve_ordered_sequential_update():
                                     "ordered-sequential", "--json"])
     assert out.exit_code == 0, out.output
     assert json.loads(out.output)["flux"] == solve(Ring(8, 3, 2, 0.5, "ordered-sequential")).flux
+
+
+def test_one_default_p_for_every_command_and_the_api():
+    # what is not given takes the model's declared default (nasch models: vmax 2, p 0.5),
+    # and the output says which values it used
+    from markov.rule import MODELS
+
+    defaults = MODELS["nasch"].parameters
+    assert (defaults["vmax"], defaults["p"]) == (2, 0.5)
+    assert Ring(8, 4) == Ring(8, 4, 2, 0.5) and Ring(8, 4, p=0.25).vmax == 2
+    runner = CliRunner()
+    for args in (["solve", "-L", "8", "-N", "4"], ["spectrum", "-L", "8", "-N", "4"],
+                 ["approx", "--method", "pmf", "-c", "0.25"]):
+        bare = runner.invoke(main, args + ["--json"])
+        full = runner.invoke(main, args + ["--vmax", "2", "--p", "0.5", "--json"])
+        assert bare.exit_code == 0, (args, bare.output)
+        a, b = json.loads(bare.output), json.loads(full.output)
+        for volatile in ("seconds", "build_seconds", "solve_seconds"):
+            a.pop(volatile, None), b.pop(volatile, None)
+        assert a == b, args
+    text = runner.invoke(main, ["solve", "-L", "8", "-N", "4"]).output
+    assert "vmax=2 p=0.5" in text.splitlines()[0]
+    text = runner.invoke(main, ["approx", "--method", "pmf", "-c", "0.25"]).output
+    assert "vmax=2 p=0.5" in text.splitlines()[0]

@@ -27,7 +27,7 @@ _METHOD_HELP = ("Approximation: mf, pmf, pmf2, cluster (with --order N; cluster2
 @click.option("--vmax", type=int, default=None,
               help="Maximal velocity >= 1 [default: 2, or the model's].")
 @click.option("--p", "p", type=float, default=None,
-              help="Braking probability, 0 < p < 1 (NaSch: required; a model: its p).")
+              help="Braking probability, 0 < p < 1, the model's p [its default; nasch: 0.5].")
 @click.option("--density", "-c", type=float, required=True, help="Car density, 0 < c < 1.")
 @model_options
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
@@ -49,13 +49,12 @@ def approx(method, order, vmax, p, density, model, params, as_json):
       nasch approx --method pmf --model vdr --param p0=0.5 -c 0.25
     """
     name = method_name(method, order)      # validates method and order before any work
+    # parameters not given take the model's defaults (nasch models lists them)
+    rule = build_model(model, params, vmax=vmax, p=p)
     if model == "nasch" and not params:
-        if p is None:
-            raise click.UsageError("--p is required for the NaSch model")
-        result = approximate(name, 2 if vmax is None else vmax, p, density)
+        result = approximate(name, rule.vmax, rule.params["p"], density)
         rule = None
     else:
-        rule = build_model(model, params, vmax=vmax, p=p)
         result = approximate(name, None, None, density, model=rule)
     if as_json:
         emit_json(result.to_dict())

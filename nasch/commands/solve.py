@@ -18,7 +18,7 @@ __all__ = ["solve"]
 @click.option("--vmax", type=int, default=None,
               help="Maximal velocity >= 1 (default: the model's, 2 for nasch).")
 @click.option("--p", "p", type=float, default=None,
-              help="Braking probability in [0, 1] (NaSch: required; a model: its p).")
+              help="Braking probability in [0, 1], the model's p [its default; nasch: 0.5].")
 @click.option("--update", type=click.Choice(["parallel", "random-sequential",
                                              "ordered-sequential"]),
               default="parallel", show_default=True,
@@ -100,9 +100,6 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
     from markov.ring import Ring
     from markov.validate import ensure_int, ensure_max_memory
 
-    if model == "nasch" and p is None and not any(
-            item.partition("=")[0].strip() == "p" for item in params):
-        raise click.UsageError("--p is required for the NaSch model")
     ring = Ring(length, cars, update=update, model=build_model(model, params, vmax=vmax, p=p))
     max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
     if every_class and (top is not None or save is not None):

@@ -42,7 +42,7 @@ def _sectors(text: str):
 @click.option("--vmax", type=int, default=None,
               help="Maximal velocity >= 1 (default: the model's, 2 for nasch).")
 @click.option("--p", "p", type=float, default=None,
-              help="Braking probability (NaSch: required; a model: its p).")
+              help="Braking probability in [0, 1], the model's p [its default; nasch: 0.5].")
 @click.option("--update", type=click.Choice(["parallel", "random-sequential",
                                              "ordered-sequential"]),
               default="parallel", show_default=True, help="Update order.")
@@ -87,9 +87,6 @@ def spectrum(length_text, cars, density, model, params, vmax, p, update, count, 
     from ..relaxation import fit_power_law
 
     lengths = _lengths(length_text)
-    if model == "nasch" and p is None and not any(
-            item.partition("=")[0].strip() == "p" for item in params):
-        raise click.UsageError("--p is required for the NaSch model")
     if cars is not None and density is not None:
         raise click.UsageError("give --cars or --density, not both")
     if cars is None and density is None:

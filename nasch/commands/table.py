@@ -8,7 +8,7 @@ from markov.errors import InvalidParameterError
 from ..cli_common import (ensure_dask_options, ensure_probabilities, handle_errors, number_list,
                           quiet_option)
 from ..formatting import format_for_path
-from ..model_options import build_model, model_options, param_names
+from ..model_options import build_model, model_options
 
 __all__ = ["table"]
 
@@ -83,16 +83,11 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
             click.echo(f"note: --workers {workers} capped at the {capped_workers(workers)}"
                        " usable cores (more processes than cores only add start-up time)",
                        err=True)
-    nasch = model == "nasch"
-    ps = (number_list("--p", p_text) if p_text is not None
-          else [0.5] if nasch and "p" not in param_names(params) else None)
-    if ps is not None:
-        ensure_probabilities(ps, closed=True)
-    # --vmax and the first --p set the model (checked against --param); the
-    # table sweeps the model's p over the rest
-    the_model = build_model(model, params, vmax=2 if nasch and vmax is None and
-                            "vmax" not in param_names(params) else vmax,
-                            p=None if ps is None else ps[0])
+    ps = None if p_text is None else ensure_probabilities(number_list("--p", p_text),
+                                                         closed=True)
+    # --vmax and the first --p set the model (checked against --param), the others
+    # take its defaults; the table sweeps the model's p over the rest
+    the_model = build_model(model, params, vmax=vmax, p=None if ps is None else ps[0])
     if ps is not None and len(ps) > 1 and "p" not in the_model.params:
         raise InvalidParameterError(
             f"model {the_model.name} has no parameter p (its parameters:"
