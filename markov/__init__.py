@@ -23,7 +23,8 @@ import os
 os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 __all__ = [
-    "Ring", "RingChain", "Solution", "solve", "load_solution", "stationary",
+    "Ring", "RingChain", "Solution", "solve", "solve_classes", "ClassSolutions", "to_frame",
+    "load_solution", "stationary", "Model", "load_model",
     "StationaryResult", "simulate", "SimulationResult", "SOLVERS", "METHODS", "OPERATORS",
     "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL",
     "NaschError", "InvalidParameterError", "CorruptFileError", "NoUniqueStationaryStateError",
@@ -34,7 +35,8 @@ __all__ = [
 _WHERE = {
     "Ring": "ring", "UPDATES": "ring", "PARALLEL": "ring", "RANDOM_SEQUENTIAL": "ring",
     "RingChain": "chain", "Solution": "chain", "solve": "chain",
-    "load_solution": "chain",
+    "solve_classes": "chain", "ClassSolutions": "chain", "to_frame": "chain",
+    "load_solution": "chain", "Model": "rule", "load_model": "rule",
     "stationary": "solvers", "StationaryResult": "solvers", "SOLVERS": "choices",
     "METHODS": "choices", "OPERATORS": "choices",
     "simulate": "montecarlo", "SimulationResult": "montecarlo",

@@ -29,7 +29,7 @@ from .transition import successor_counts, transition_matrix
 from .validate import ensure_chain_arguments, format_count
 
 __all__ = ["RingChain", "Solution", "ClassSolution", "solve", "solve_classes", "load_solution",
-           "ClassSolutions", "representable", "min_p", "MIN_P"]
+           "ClassSolutions", "to_frame", "representable", "min_p", "MIN_P"]
 
 # OPERATORS (markov.choices): how ``x -> x P`` is applied (see
 # RingChain.operator_kind for ``auto``): ``matrix`` the assembled CSR matrix
@@ -792,6 +792,37 @@ class Solution:
             "closed_classes": self.census.to_dict() if self.census else None,
         }
 
+    def to_record(self) -> dict:
+        """One flat row (column -> number or string), for a table of many solutions.
+
+        The model's name and every parameter (a column each), the ring, the
+        flux, mean velocity, ``c_0..c_vmax``, the solver's figures and the
+        closed-class census; :func:`to_frame` stacks them into a DataFrame.
+
+        Returns
+        -------
+        dict
+
+        Examples
+        --------
+        >>> rec = solve(Ring(6, 3, 1, 0.5)).to_record()
+        >>> [k for k in rec][:8]
+        ['model', 'vmax', 'p', 'update', 'length', 'cars', 'density', 'flux']
+        """
+        r = self.ring
+        census = self.census
+        return {"model": r.model.name,
+                **{k: (v if isinstance(v, (int, float)) else float(v))
+                   for k, v in r.model.params.items()},
+                "update": r.update, "length": r.length, "cars": r.cars, "density": r.density,
+                "flux": self.flux, "mean_velocity": self.mean_velocity,
+                **{f"c_{v}": float(x) for v, x in enumerate(self.c_v)},
+                "states": self.n_states, "residual": self.residual,
+                "method": self.result.method, "operator": self.operator,
+                "seconds": self.build_seconds + self.result.seconds,
+                "closed_classes": None if census is None else census.count,
+                "classes_searched": None if census is None else census.scope}
+
     # -- the vector itself (markov.storage)
 
     def save(self, path) -> Path:
@@ -1100,6 +1131,48 @@ def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
     if every:
         chain.search_all_configurations()
     return chain.class_solutions(tol)
+
+
+def to_frame(solutions):
+    """A pandas DataFrame with one row per solution (:meth:`Solution.to_record`).
+
+    Parameters
+    ----------
+    solutions : iterable of Solution, ClassSolution or ClassSolutions
+        Rings of any models (a parameter column is empty where a model has no
+        such parameter; ``c_v`` columns up to the largest ``vmax``).  A class
+        of a reducible ring is a row with its ``representative`` and
+        ``from_start``; a :class:`ClassSolutions` is one row per class.
+
+    Returns
+    -------
+    pandas.DataFrame
+
+    Examples
+    --------
+    >>> df = to_frame([solve(Ring(L, L // 2, 2, 0.5)) for L in (6, 8)])
+    >>> df[["length", "cars", "p"]].values.tolist()
+    [[6, 3, 0.5], [8, 4, 0.5]]
+    """
+    import pandas as pd
+
+    records = []
+    for item in solutions:
+        items = item.classes if isinstance(item, ClassSolutions) else (item,)
+        for x in items:
+            if isinstance(x, ClassSolution):
+                records.append({**x.solution.to_record(), "representative": x.representative,
+                                "from_start": x.from_start})
+            elif isinstance(x, Solution):
+                records.append(x.to_record())
+            else:
+                raise InvalidParameterError(
+                    f"to_frame takes solutions (Solution, ClassSolution, ClassSolutions),"
+                    f" got {type(x).__name__}")
+    columns: dict[str, None] = {}
+    for rec in records:   # the union of the columns, in the order met
+        columns.update(dict.fromkeys(rec))
+    return pd.DataFrame.from_records(records, columns=list(columns) or None)
 
 
 def load_solution(path) -> Solution:

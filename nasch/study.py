@@ -27,8 +27,6 @@ approximations run here, all densities of a ``(vmax, p, method)`` at once.
 """
 from __future__ import annotations
 
-import csv
-import io
 import math
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -43,7 +41,7 @@ from symbolic import APPROXIMATIONS, approximate, label, method_name, supported
 from .jobs import (ExactJob, job_cost, job_model,
                    monte_carlo_job, run_job_keep_going)
 from .rings import commensurate_lengths, density_fraction
-from .formatting import RenderedTable, csv_number, plus_minus
+from .formatting import RenderedTable, plus_minus
 
 __all__ = ["DEFAULT_DENSITIES", "DEFAULT_METHODS", "StudyRow", "StudyTable",
            "convergence_study", "deviation_figure"]
@@ -176,25 +174,20 @@ class StudyTable(RenderedTable):
                 "seconds": self.seconds,
                 "rows": [r.to_dict() for r in self.rows]}
 
-    def to_csv(self) -> str:
-        """The table as CSV, one line per row, numbers in full precision.
+    def records(self) -> list[dict]:
+        """One flat dict per row: the columns of the CSV and of :meth:`to_frame`.
 
         Returns
         -------
-        str
+        list of dict
         """
-        buf = io.StringIO()
-        w = csv.writer(buf, lineterminator="\n")
-        w.writerow(["vmax", "p", "density", "mc_length", "mc_flux", "mc_error", "exact_flux",
-                    "exact_error", "exact_lengths"] + list(self.methods)
-                   + ["best", "within_2sigma"])
-        for r in self.rows:
-            w.writerow([r.vmax, csv_number(r.p), csv_number(r.density), r.mc_length,
-                        csv_number(r.mc_flux), csv_number(r.mc_error), csv_number(r.exact_flux),
-                        csv_number(r.exact_error), " ".join(map(str, r.exact_lengths))]
-                       + [csv_number(r.approximations[m]) for m in self.methods]
-                       + [r.best or "", " ".join(r.within_2sigma)])
-        return buf.getvalue()
+        return [{"vmax": r.vmax, "p": r.p, "density": r.density, "mc_length": r.mc_length,
+                 "mc_flux": r.mc_flux, "mc_error": r.mc_error, "exact_flux": r.exact_flux,
+                 "exact_error": r.exact_error,
+                 "exact_lengths": " ".join(map(str, r.exact_lengths)),
+                 **{m: r.approximations[m] for m in self.methods},
+                 "best": r.best, "within_2sigma": " ".join(r.within_2sigma) or None}
+                for r in self.rows]
 
     def _cells(self, latex: bool) -> tuple[list[str], list[list[str]]]:
         head = ["vmax", "p", "c", "Monte Carlo", "exact L->inf"] + [label(m) for m in

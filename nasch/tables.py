@@ -16,8 +16,6 @@ Exports: :meth:`FluxTable.render` with ``fmt`` in :data:`nasch.formatting.FORMAT
 """
 from __future__ import annotations
 
-import csv
-import io
 import math
 import textwrap
 import warnings
@@ -35,7 +33,7 @@ from markov.validate import ensure_int, ensure_real
 from symbolic import supported
 
 from .extrapolate import extrapolate
-from .formatting import RenderedTable, csv_number, plus_minus
+from .formatting import RenderedTable, plus_minus
 from .jobs import (ExactJob, ensure_mc_steps, job_cost, job_model, monte_carlo_job,
                    preflight, run_job)
 from .rings import table_points
@@ -201,30 +199,30 @@ class FluxTable(RenderedTable):
                 "extrapolation_order": self.order, "notes": list(self.notes),
                 "rows": [r.to_dict() for r in self.rows]}
 
-    def to_csv(self) -> str:
-        """The table as CSV, one line per row, numbers in full precision.
+    def records(self) -> list[dict]:
+        """One flat dict per row: the columns of the CSV and of :meth:`to_frame`.
+
+        ``L`` is ``inf`` on an extrapolated row; ``c_v`` columns are empty
+        where a ring has no unique velocity distribution.
 
         Returns
         -------
-        str
+        list of dict
         """
-        buf = io.StringIO()
-        cols = (["kind", "p", "L", "N", "density", "flux_exact", "flux_exact_error"]
-                + [f"c_{v}" for v in range(self.vmax + 1)] + ["states"] + list(self.methods)
-                + ["mc_length", "mc_flux", "mc_error", "mc_reliable"])
-        w = csv.writer(buf, lineterminator="\n")
-        w.writerow(cols)
+        out = []
         for r in self.rows:
             c_v = r.c_v or [None] * (self.vmax + 1)
-            w.writerow([r.kind, csv_number(r.p), "inf" if r.length is None else r.length,
-                        "" if r.cars is None else r.cars, csv_number(r.density), csv_number(r.flux),
-                        csv_number(r.flux_error)] + [csv_number(x) for x in c_v]
-                       + ["" if r.states is None else r.states]
-                       + [csv_number(r.approximations[m]) for m in self.methods]
-                       + ["" if r.mc_length is None else r.mc_length, csv_number(r.mc_flux),
-                          csv_number(r.mc_error),
-                          "" if r.mc_reliable is None else str(r.mc_reliable).lower()])
-        return buf.getvalue()
+            row = {"kind": r.kind, "p": r.p,
+                   "L": float("inf") if r.length is None else r.length, "N": r.cars,
+                   "density": r.density, "flux_exact": r.flux,
+                   "flux_exact_error": r.flux_error,
+                   **{f"c_{v}": x for v, x in enumerate(c_v)}, "states": r.states,
+                   **{m: r.approximations[m] for m in self.methods},
+                   "mc_length": r.mc_length, "mc_flux": r.mc_flux, "mc_error": r.mc_error,
+                   "mc_reliable": r.mc_reliable, "closed_classes": r.closed_classes,
+                   "note": r.note}
+            out.append(row)
+        return out
 
     # -- human-readable
 
