@@ -56,7 +56,7 @@ _LAZY = {
              context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="nasch-exact")
 def main():
-    """Exact stationary states of the Nagel-Schreckenberg model on small rings.
+    """Exact stationary states of traffic cellular automata (NaSch and family) on small rings.
 
     \b
     Examples:
@@ -74,6 +74,8 @@ def main():
       nasch plot spacetime --model vdr -L 400 -c 0.2 --steps 300 -o st.png   space-time
       nasch plot models --models nasch,vdr,tt --vmax 2 -o fd.png   several models
       nasch study --vmax 2 --p 0.5 --density 0.25,0.5 --figure dev.png   which is best
+      nasch spectrum -L 12 -N 6 --vmax 2 --p 0.5          relaxation spectrum, tau
+      nasch solve -L 10 -N 5 --p 0                       several closed classes, each
     """
 
 

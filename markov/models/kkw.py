@@ -81,5 +81,5 @@ SPEC = ModelSpec(
                   "b": "deceleration noise: probability of one cell less"},
     reference="B. S. Kerner, S. L. Klenov, D. E. Wolf, J. Phys. A 35, 9971 (2002)",
     convention="D(v) = d + k v; gap > D: accelerate, else adapt to v_ahead; "
-               "then -1/0/+1 with b/1-a-b/a, clipped to 0..min(v+1, vmax, gap)",
+               "then w-1/w/w+1 with b/1-a-b/a, each outcome clipped to 0..min(v+1, vmax, gap)",
     horizon=_horizon, constraint=_constraint)
