@@ -83,7 +83,7 @@ class ClassCensus:
         Examples
         --------
         >>> ClassCensus(1, FROM_COMPACT_JAM, 10**11).note()
-        'one closed class reached from the compact jam; the other 1e+11 configurations were not searched for other classes'
+        "one closed class reached from the compact jam; the rest of the ring's 1e+11 configurations was not searched for other classes"
         """
         what = "one closed class" if self.count == 1 else f"{self.count} closed classes"
         if self.scope == PROVEN:
@@ -92,8 +92,8 @@ class ClassCensus:
             return f"{what} (all {self.configurations:,} configurations searched)"
         if self.scope == FROM_START:
             return f"{what} reached from the start configuration (the class it falls into)"
-        return (f"{what} reached from the compact jam; the other {self.configurations:.3g}"
-                " configurations were not searched for other classes")
+        return (f"{what} reached from the compact jam; the rest of the ring's"
+                f" {self.configurations:.3g} configurations was not searched for other classes")
 
     def to_dict(self) -> dict:
         """JSON-ready: ``count``, ``scope``, ``complete``, ``configurations``.

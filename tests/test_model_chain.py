@@ -235,7 +235,7 @@ def test_a_chain_too_large_to_split_is_verified_by_a_second_search(monkeypatch):
     assert not chain.unverified and abs(sol.flux - exact) < 1e-10
     # the answer says that only the compact jam's classes were searched
     assert sol.census.scope == "from the compact jam" and not sol.census.complete
-    assert "were not searched for other classes" in sol.census.note()
+    assert "was not searched for other classes" in sol.census.note()
     with pytest.raises(NoUniqueStationaryStateError, match="not one closed class"):
         RingChain(Ring(12, 3, model=load_model("cc", {"vmax": 2, "p": 0.2})),
                   operator="matrix-free").solution(method="power", tol=1e-10)
