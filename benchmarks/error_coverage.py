@@ -44,7 +44,7 @@ def measure(vmax: int, p: float, c: Fraction, budget: float, mc_length: int,
             mc_steps: int, seed: int) -> dict:
     """Exact rings within the budget, their extrapolation, and the reference."""
     from markov import Ring, solve
-    from markov.montecarlo import simulate
+    from markov.simulation.montecarlo import simulate
     from nasch.budget import lengths_within_budget
     from nasch.rings import mc_ring
     from symbolic import approximate

@@ -4,7 +4,7 @@ For every shipped model with its default parameters (all probabilities
 strictly inside (0, 1)) at vmax = 1, 2, 3: the elementary Garden of Eden
 patterns up to ``K`` cells (parallel update), beside NaSch's; and the census
 fraction (GoE configurations / all) on one ring per model and update, by
-brute force over all configurations (``markov.goe.goe_count``; for parallel
+brute force over all configurations (``markov.goe.configurations.goe_count``; for parallel
 update also ``goe_mask``, which must agree).
 
 Run: ``PYTHONPATH=. python benchmarks/goe_models.py [--cells K] [--out FILE]``
@@ -18,11 +18,11 @@ from pathlib import Path
 
 from markov.errors import StateSpaceTooLargeError
 from markov.files import write_atomic
-from markov.goe import goe_count, goe_mask
-from markov.goe_patterns import elementary_patterns
-from markov.ring import Ring
-from markov.rule import MODELS, load_model
-from markov.statespace import all_keys
+from markov.goe.configurations import goe_count, goe_mask
+from markov.goe.patterns import elementary_patterns
+from markov.model.ring import Ring
+from markov.model.load import MODELS, load_model
+from markov.chain.statespace import all_keys
 
 
 def pattern_rows(cells: int) -> list[str]:

@@ -12,7 +12,7 @@ Every case runs in a fresh subprocess, so its peak resident memory
   (a ``git worktree`` of ``--previous``, its ``auto`` path: the compact
   operator) and by this one, both to ``--agree-tol``, in the same run: the
   speed ratio and the flux and ``c_v`` differences.
-* **models**: every shipped model (:data:`markov.rule.MODELS`) at vmax = 2
+* **models**: every shipped model (:data:`markov.model.load.MODELS`) at vmax = 2
   and its default probabilities, N = L/2, L = 24 (L = 22 for a rule with
   three outcomes per car), matrix-free (the factored operator): its rows,
   NaSch form or general merge, links per state, seconds per product.
@@ -135,7 +135,7 @@ def work_previous(tree, L, N, vmax, p, tol=1e-10, max_memory_gib=20.0) -> dict:
 def work_model(name, L, N, vmax, tol=1e-10, max_memory_gib=20.0) -> dict:
     """A shipped model at its default probabilities: search, factored operator, solve."""
     from markov import Ring, RingChain, solve
-    from markov.rule import load_model
+    from markov.model.load import load_model
 
     _warm_up()
     model = load_model(name, {"vmax": vmax})
@@ -228,7 +228,7 @@ def work_quantecon(L, N, vmax, p, lump) -> dict:
     except ImportError:
         return {"note": "quantecon not installed (pip install -e '.[bench]')"}
     from markov import Ring, RingChain
-    from markov.observables import velocity_densities
+    from markov.solvers.observables import velocity_densities
 
     qe.MarkovChain(sp.csr_matrix(np.array([[0.5, 0.5], [0.25, 0.75]]))).stationary_distributions
     _warm_up()  # both sides with their compiled code loaded before timing
@@ -262,7 +262,7 @@ def work_storm(L, N, vmax, p, route) -> dict:
 def work_spectrum(L, N, vmax, p, count=2, sectors="all", tol=1e-10) -> dict:
     """The relaxation spectrum of every sector: search, factored operator with shifts, ARPACK."""
     from markov import Ring, RingChain
-    from markov.spectrum import relaxation_spectrum
+    from markov.analysis.spectrum import relaxation_spectrum
 
     _warm_up()
     relaxation_spectrum(Ring(12, 6, vmax, p), count=1, operator="matrix-free")  # kernels
@@ -508,7 +508,8 @@ def main(argv=None) -> None:
                             tree=str(tree), **half(L), **agree))
             record(run_case("previous", "ours", args.timeout, **half(L), **agree))
     if "models" in args.only:
-        from markov.rule import MODELS, load_model, tabulate
+        from markov.model.load import MODELS, load_model
+        from markov.model.table import tabulate
 
         for name in MODELS:
             outcomes = int(tabulate(load_model(name, {"vmax": 2})).count.max())

@@ -1,12 +1,12 @@
 """`make bench-mc-coverage`: does the Monte Carlo error bar cover the truth?
 
 Over a grid of points (update, L, vmax, c, p) and run lengths (time steps per
-replica, 32 to 8000), many seeds per point run :func:`markov.montecarlo.simulate`
+replica, 32 to 8000), many seeds per point run :func:`markov.simulation.montecarlo.simulate`
 with its defaults (automatic warm-up, two replicas from the two start
 configurations).  Each result is compared with a reference:
 
 * rings of L = 12: the exact stationary flux of the finite chain
-  (:func:`markov.chain.solve`);
+  (:func:`markov.solvers.ring_chain.solve`);
 * larger rings: one long run of the same ring (4 replicas of 100,000 steps
   after 20,000 warm-up steps; its own bar enters the comparison).
 
@@ -68,8 +68,8 @@ def grid() -> list[tuple]:
 
 def reference(update: str, L: int, vmax: int, N: int, p: float) -> tuple[float, float, str]:
     from markov import Ring
-    from markov.chain import solve
-    from markov.montecarlo import simulate
+    from markov.solvers.ring_chain import solve
+    from markov.simulation.montecarlo import simulate
 
     ring = Ring(L, N, vmax, p, update)
     if L <= 12:
@@ -81,7 +81,7 @@ def reference(update: str, L: int, vmax: int, N: int, p: float) -> tuple[float, 
 
 def measure(point: tuple, seeds: int) -> dict:
     from markov import Ring
-    from markov.montecarlo import simulate
+    from markov.simulation.montecarlo import simulate
 
     update, L, vmax, N, p = point
     ring = Ring(L, N, vmax, p, update)

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import time
 
-from markov.ring import Ring
-from markov.montecarlo import simulate
+from markov.model.ring import Ring
+from markov.simulation.montecarlo import simulate
 
 __all__ = ["benchmark_simulator", "CASES"]
 

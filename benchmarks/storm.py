@@ -19,7 +19,7 @@ routes to the model:
   of our unlumped chain (every configuration with a marked car, up to
   rotation), still with no lumping done by Storm.
 * ``matrix``: our unlumped transition matrix
-  (:func:`markov.transition.transition_matrix`) and the flux per state handed
+  (:func:`markov.chain.transition.transition_matrix`) and the flux per state handed
   to Storm as a UMB archive (Storm's binary explicit format: the CSR arrays
   written as they are).  The hand-over alone on L = 16 (18.4 M transitions):
   UMB 1.1 s, ``SparseMatrixBuilder.add_next_values`` 3.2 s, DRN text 27 s
@@ -264,14 +264,14 @@ def _umb_archive(path: Path, P, rewards: np.ndarray, init: int) -> None:
 def _our_matrix(L: int, N: int, vmax: int, p: float):
     """Our unlumped chain: transition matrix, flux per state, index of an initial state."""
     from markov import Ring
-    from markov.statespace import recurrent_keys
-    from markov.encoding import compact_jam_key
-    from markov.transition import transition_matrix
+    from markov.chain.statespace import recurrent_keys
+    from markov.chain.encoding import compact_jam_key
+    from markov.chain.transition import transition_matrix
 
     ring = Ring(L, N, vmax, p)
     keys = recurrent_keys(ring, lump=False)
     P = transition_matrix(ring, keys, lump=False)
-    # N = 1 starts elsewhere (markov.statespace): any state of the class will do
+    # N = 1 starts elsewhere (markov.chain.statespace): any state of the class will do
     init = int(np.searchsorted(keys, compact_jam_key(L, N, vmax))) if N > 1 else 0
     return P, flux_rewards(keys, L, vmax), init
 
@@ -325,8 +325,8 @@ def _matrix_model(L: int, N: int, vmax: int, p: float, handover: str):
 def _warm_up_markov() -> None:
     """Load our compiled kernels (numba cache) on a tiny ring, outside the timings."""
     from markov import Ring
-    from markov.statespace import recurrent_keys
-    from markov.transition import transition_matrix
+    from markov.chain.statespace import recurrent_keys
+    from markov.chain.transition import transition_matrix
 
     ring = Ring(6, 3, 2, 0.5)
     transition_matrix(ring, recurrent_keys(ring, lump=False), lump=False)

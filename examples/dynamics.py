@@ -17,11 +17,11 @@ import time
 import numpy as np
 
 from markov import Ring, RingChain
-from markov.correlations import autocorrelation_time
-from markov.fluctuations import current_fluctuations
-from markov.montecarlo import integrated_autocorrelation_time, trajectory
-from markov.sensitivity import sensitivity
-from markov.spectrum import relaxation_spectrum
+from markov.analysis.correlations import autocorrelation_time
+from markov.analysis.fluctuations import current_fluctuations
+from markov.simulation.montecarlo import integrated_autocorrelation_time, trajectory
+from markov.analysis.sensitivity import sensitivity
+from markov.analysis.spectrum import relaxation_spectrum
 
 
 def main(length: int = 14, cars: int = 7, vmax: int = 2, p: float = 0.5) -> None:

@@ -1,4 +1,4 @@
-"""Exact finite-ring machinery for the Nagel-Schreckenberg traffic automaton.
+"""Exact stationary states of traffic cellular automata: the library.
 
 Quick start
 -----------
@@ -7,9 +7,27 @@ Quick start
 >>> 0 < sol.flux < 0.5
 True
 
-The names below are loaded on first use (PEP 562), so ``import markov`` and
-the ``nasch`` command start without numpy, scipy or numba until a
-subcommand needs them.
+Everything public is here, at the front door (the names below are loaded on
+first use, PEP 562, so ``import markov`` and the ``nasch`` command start
+without numpy, scipy or numba until a subcommand needs them).  The library is
+laid out as its pipeline, each subpackage importing only those before it:
+
+========== ================================================================
+model/     the rule interface (``rule``, ``ModelSpec``), ``Model`` and
+           ``load_model``, the rule table, the shipped models, ``Ring``
+chain/     the states and their transitions: key encoding, the row
+           generator, the state-space search, transition rows, closed
+           classes, the factored and sequential matrix-free operators
+solvers/   stationary solvers, the fundamental solve, observables,
+           ``RingChain`` / ``Solution`` / ``solve``, the file of a solution
+analysis/  what a solved chain says about its dynamics: spectrum,
+           correlations, sensitivities, current fluctuations
+goe/       Garden of Eden patterns and census
+simulation/ Monte Carlo of large rings and its statistics
+========== ================================================================
+
+``errors``, ``validate``, ``choices``, ``memory``, ``progress`` and ``files``
+sit loose at the top: every subpackage may use them (docs/architecture.md).
 """
 from __future__ import annotations
 
@@ -23,33 +41,41 @@ import os
 os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 __all__ = [
-    "Ring", "RingChain", "Solution", "solve", "solve_classes", "ClassSolutions", "to_frame",
-    "load_solution", "stationary", "Model", "load_model",
-    "StationaryResult", "simulate", "SimulationResult", "SOLVERS", "METHODS", "OPERATORS",
-    "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL",
+    "Ring", "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL", "ORDERED_SEQUENTIAL",
+    "rule", "ModelSpec", "Model", "load_model", "MODELS", "available_models", "tabulate",
+    "RingChain", "Solution", "ClassSolution", "ClassSolutions", "solve", "solve_classes",
+    "to_frame", "load_solution", "stationary", "StationaryResult",
+    "SOLVERS", "METHODS", "OPERATORS",
+    "simulate", "SimulationResult",
     "NaschError", "InvalidParameterError", "CorruptFileError", "NoUniqueStationaryStateError",
     "StateSpaceTooLargeError", "ConvergenceError", "OutputError",
 ]
 
-# public name -> submodule that defines it
+# public name -> the module that defines it
 _WHERE = {
-    "Ring": "ring", "UPDATES": "ring", "PARALLEL": "ring", "RANDOM_SEQUENTIAL": "ring",
-    "RingChain": "chain", "Solution": "chain", "solve": "chain",
-    "solve_classes": "chain", "ClassSolutions": "chain", "to_frame": "chain",
-    "load_solution": "chain", "Model": "rule", "load_model": "rule",
-    "stationary": "solvers", "StationaryResult": "solvers", "SOLVERS": "choices",
-    "METHODS": "choices", "OPERATORS": "choices",
-    "simulate": "montecarlo", "SimulationResult": "montecarlo",
-    **{name: "errors" for name in ("NaschError", "InvalidParameterError", "CorruptFileError",
-                                    "NoUniqueStationaryStateError",
-                                    "StateSpaceTooLargeError", "ConvergenceError",
-                                    "OutputError")},
+    **{name: "markov.model.ring" for name in ("Ring", "UPDATES", "PARALLEL",
+                                             "RANDOM_SEQUENTIAL", "ORDERED_SEQUENTIAL")},
+    "rule": "markov.model.spec", "ModelSpec": "markov.model.spec",
+    **{name: "markov.model.load" for name in ("Model", "load_model", "MODELS",
+                                             "available_models")},
+    "tabulate": "markov.model.table",
+    **{name: "markov.solvers.ring_chain" for name in ("RingChain", "Solution", "ClassSolution",
+                                                   "ClassSolutions", "solve",
+                                                   "solve_classes", "to_frame",
+                                                   "load_solution")},
+    "stationary": "markov.solvers.stationary", "StationaryResult": "markov.solvers.stationary",
+    **{name: "markov.choices" for name in ("SOLVERS", "METHODS", "OPERATORS")},
+    "simulate": "markov.simulation.montecarlo", "SimulationResult": "markov.simulation.montecarlo",
+    **{name: "markov.errors" for name in ("NaschError", "InvalidParameterError",
+                                         "CorruptFileError", "NoUniqueStationaryStateError",
+                                         "StateSpaceTooLargeError", "ConvergenceError",
+                                         "OutputError")},
 }
 
 
 def __getattr__(name: str):
     if name in _WHERE:
-        value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+        value = getattr(importlib.import_module(_WHERE[name]), name)
         globals()[name] = value   # later look-ups skip this function
         return value
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -49,8 +49,8 @@ class NoUniqueStationaryStateError(NaschError, ValueError):
 
     Attributes
     ----------
-    classes : markov.chain.ClassSolutions or None
-        Each closed class solved, where they were (:func:`markov.chain.solve_classes`):
+    classes : markov.solvers.ring_chain.ClassSolutions or None
+        Each closed class solved, where they were (:func:`markov.solvers.ring_chain.solve_classes`):
         ``classes.common()`` holds what is the same in all of them.
     """
 

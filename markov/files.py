@@ -12,7 +12,7 @@ import tempfile
 from pathlib import Path
 from typing import Sequence
 
-from .errors import InvalidParameterError, OutputError
+from markov.errors import InvalidParameterError, OutputError
 
 __all__ = ["write_atomic", "write_bytes_atomic", "check_output_path"]
 

@@ -1,8 +1,8 @@
 """The memory model of the exact solver: bytes per state of each path and method.
 
 Every figure the memory guard and the choice of path use lives here, so that
-the refusal before enumeration (:func:`markov.statespace.recurrent_keys`), the
-choice of ``operator="auto"`` (:attr:`markov.chain.RingChain.operator_kind`)
+the refusal before enumeration (:func:`markov.chain.statespace.recurrent_keys`), the
+choice of ``operator="auto"`` (:attr:`markov.solvers.ring_chain.RingChain.operator_kind`)
 and ``docs/performance.md`` agree.  Figures are peak bytes of float64 vectors,
 int32/int64 index arrays and the state keys; the Python interpreter and the
 libraries (about 170 MB) come on top.
@@ -13,13 +13,13 @@ Paths
     the assembled CSR matrix: 12 bytes per stored nonzero, 40 while
     assembling (unsummed int64 successor, column and value lists).
 ``factored``
-    :class:`markov._factored.FactoredOperator` (parallel update): the level
+    :class:`markov.chain.factored.FactoredOperator` (parallel update): the level
     links (two int32 per word for NaSch, an int64 row pointer per word and an
     int32 parent and int16 outcome per link for other rules; words summed over the levels are 1.5 to 5.5
     times the states, :data:`LEVEL_WORDS_PER_STATE` is the bound used before
     the levels exist), the level-0 permutation and offsets, two level buffers.
 ``rows``
-    :class:`markov._sequential.SequentialOperator` (random-sequential update):
+    :class:`markov.chain.sequential.SequentialOperator` (random-sequential update):
     rows regenerated per product; a rank hash table and one accumulator per
     thread.
 """
@@ -27,8 +27,8 @@ from __future__ import annotations
 
 import os
 
-from .errors import StateSpaceTooLargeError
-from .choices import GMRES_RESTART
+from markov.choices import GMRES_RESTART
+from markov.errors import StateSpaceTooLargeError
 
 __all__ = ["DEFAULT_MEMORY_FRACTION", "LEVEL_WORDS_PER_STATE", "available_memory",
            "memory_limit", "solver_vectors", "search_bytes_per_state",
@@ -73,7 +73,7 @@ def memory_limit(max_memory: float | None) -> float:
     InvalidParameterError
         For a limit that is not a positive finite number.
     """
-    from .validate import ensure_max_memory
+    from markov.validate import ensure_max_memory
 
     max_memory = ensure_max_memory(max_memory)
     return DEFAULT_MEMORY_FRACTION * available_memory() if max_memory is None else max_memory
@@ -138,13 +138,13 @@ def factored_bytes_per_state(method: str, words_per_state: float = LEVEL_WORDS_P
         Stationary solver (its work vectors, :func:`solver_vectors`).
     words_per_state : float
         Words of levels ``1..N`` per state (after building: the measured
-        figure, :attr:`markov._factored.FactoredOperator.edges` / n).
+        figure, :attr:`markov.chain.factored.FactoredOperator.edges` / n).
     first_level : float
         Level-0 words per state (at most 1).
     link_bytes : float
         Bytes of links per word of levels ``1..N``: 8 for the NaSch form (two
         int32 parents), ``8 + 6 x`` parents per word for the CSR of any other
-        rule (:func:`markov._factored.link_bytes_per_word`).
+        rule (:func:`markov.chain.factored.link_bytes_per_word`).
 
     Returns
     -------

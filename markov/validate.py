@@ -10,10 +10,10 @@ import math
 import numbers
 from decimal import Decimal
 
-from .errors import InvalidParameterError
+from markov.errors import InvalidParameterError
 
 __all__ = ["ensure_int", "ensure_real", "ensure_open_unit", "ensure_open_probability",
-           "ensure_tol", "ensure_max_memory", "ensure_chain_arguments", "format_count",
+           "ensure_tol", "ensure_max_memory", "format_count",
            "TOL_RANGE"]
 
 #: Allowed residual targets ``||pi P - pi||_1`` of the iterative solvers.  Below
@@ -153,7 +153,7 @@ def ensure_open_unit(name: str, value, reason: str = ""):
         if not (math.isfinite(x) and 0 < x < 1):
             raise InvalidParameterError(f"{what}, got {value!r}")
         return x
-    import numpy as np   # array input: only the vectorised approximations pass one
+    import numpy as np  # array input: only the vectorised approximations pass one
 
     try:
         arr = np.asarray(value, dtype=float)
@@ -168,7 +168,7 @@ def ensure_open_probability(value, name: str = "p") -> float:
     """A braking probability strictly inside ``(0, 1)``, as the approximations need it.
 
     The exact chain takes ``p = 0`` and ``1`` (several closed classes, each
-    answered: :func:`markov.chain.solve_classes`); the approximations' fixed
+    answered: :func:`markov.solvers.ring_chain.solve_classes`); the approximations' fixed
     points and the sweeps that compare with them do not.
 
     Parameters
@@ -242,31 +242,6 @@ def ensure_max_memory(value, name: str = "max_memory", unit: str = "bytes") -> f
         return None
     x = ensure_real(f"{name} ({unit})", value, 0, low_open=True)
     return x
-
-
-def ensure_chain_arguments(ring, method: str | None = None, tol=None,
-                           max_memory=None) -> None:
-    """The exact solver's up-front checks: all instant, all before enumerating.
-
-    The ring must fit the 64-bit key (:func:`markov.encoding.check_encodable`),
-    ``method`` be a solver name, ``tol`` lie in :data:`TOL_RANGE` and
-    ``max_memory`` (bytes) be ``None`` or positive and finite.
-
-    Parameters
-    ----------
-    ring : Ring
-    method : str, optional
-    tol : float, optional
-    max_memory : float, optional
-    """
-    from .encoding import check_encodable
-    from .choices import METHODS
-    check_encodable(ring.length, ring.vmax)
-    if method is not None and method not in METHODS:
-        raise InvalidParameterError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
-    if tol is not None:
-        ensure_tol(tol)
-    ensure_max_memory(max_memory)
 
 
 def format_count(n) -> str:

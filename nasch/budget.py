@@ -5,7 +5,7 @@ in ``1/L`` (:mod:`nasch.extrapolate`), so the largest rings one can afford
 are worth most.  Which ones one can afford follows from the size of the
 recurrent class, known *before* enumerating it: the Garden of Eden transfer
 matrix counts the recurrent configurations exactly
-(:func:`markov.goe_census.recurrent_class_bound`, parallel update, vmax <= 5), and the
+(:func:`markov.goe.census.recurrent_class_bound`, parallel update, vmax <= 5), and the
 exact solver's cost is close to linear in that count.
 
 Cost model (seconds, one core; measured by ``make bench-large``, see
@@ -18,7 +18,7 @@ up to ``p = 0.3``, 60 at ``p = 0.5``, rising as ``p -> 1`` where the chain
 mixes slowly).  The
 model errs on the slow side: a ring it admits finishes within its budget.
 
-Other models (:mod:`markov.rule`): no transfer-matrix count exists, so the
+Other models (:mod:`markov.model`): no transfer-matrix count exists, so the
 states are bounded by every configuration over ``L`` and priced at NaSch's
 cost per state; the choice is conservative (vdr, BJH, CC at vmax 2, L = 16,
 N = 8: 17.8 s, 17.8 s, 31.3 s predicted against 0.77 s, 0.65 s, 1.65 s
@@ -31,7 +31,7 @@ import math
 import re
 
 from markov.errors import InvalidParameterError
-from markov.ring import NASCH, PARALLEL, Ring
+from markov.model.ring import NASCH, PARALLEL, Ring
 
 from .rings import density_fraction
 
@@ -115,15 +115,15 @@ def predicted_classes(length: int, cars: int, vmax: int, update: str = PARALLEL,
     ----------
     length, cars, vmax : int
     update : str
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         Default NaSch; given, its ``vmax`` is used.
 
     Returns
     -------
     int
     """
-    from markov.goe_census import recurrent_class_bound
-    from markov.statespace import count_all
+    from markov.goe.census import recurrent_class_bound
+    from markov.chain.statespace import count_all
 
     ring = _ring(length, cars, vmax, update, model)
     n = recurrent_class_bound(ring, lump=True)
@@ -132,9 +132,9 @@ def predicted_classes(length: int, cars: int, vmax: int, update: str = PARALLEL,
 
 def _products(p: float | None) -> float:
     """Products ``x P`` of the solver ``auto`` picks, measured at L = 22: aggregation
-    18-22 up to p = 0.3 (:data:`markov.chain.AGGREGATION_MAX_P`), BiCGSTAB 59 at
+    18-22 up to p = 0.3 (:data:`markov.solvers.ring_chain.AGGREGATION_MAX_P`), BiCGSTAB 59 at
     p = 0.5 and 179 at p = 0.9."""
-    from markov.chain import AGGREGATION_MAX_P
+    from markov.solvers.ring_chain import AGGREGATION_MAX_P
 
     if p is None:   # a model without p: the count of p = 0.5
         p = 0.5
@@ -156,7 +156,7 @@ def predicted_seconds(length: int, cars: int, vmax: int, p: float | None,
     length, cars, vmax : int
     p : float or None
     update : str
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         Default NaSch; given, ``vmax`` and ``p`` should be its own.
 
     Returns
@@ -181,14 +181,14 @@ def predicted_bytes(length: int, cars: int, vmax: int, p: float | None,
     length, cars, vmax : int
     p : float or None
     update : str
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
 
     Returns
     -------
     float
     """
     from markov import memory
-    from markov.chain import AGGREGATION_MAX_P
+    from markov.solvers.ring_chain import AGGREGATION_MAX_P
 
     if cars in (0, length):
         return 0.0
@@ -206,7 +206,7 @@ def _general(model) -> bool:
 
 def _solvable(length: int, cars: int, vmax: int, update: str, model=None) -> bool:
     """Whether the exact solver can represent the ring at all (64-bit keys and words)."""
-    from markov.chain import representable
+    from markov.solvers.ring_chain import representable
 
     return representable(_ring(length, cars, vmax, update, model))
 
@@ -236,7 +236,7 @@ def lengths_within_budget(vmax: int, p: float, density, budget: float, count: in
     max_memory : float, optional
         Bytes one ring may use; default 75 % of physical memory
         (:func:`markov.memory.memory_limit`).
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         Default NaSch (``vmax``, ``p``); given, ``vmax`` and ``p`` should be its own.
 
     Returns
@@ -306,7 +306,7 @@ def choose_lengths(vmax: int, p: float, density, budget: float | None = None, *,
         Order of the 1/L series the rings are for.
     update : str
     announce : bool
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         Default NaSch (``vmax``, ``p``); another model's rings come from the
         conservative cost model (:func:`predicted_seconds`), said in the line.
 

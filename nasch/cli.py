@@ -1,6 +1,6 @@
 """The ``nasch`` command line.
 
-Every subcommand validates through :class:`markov.ring.Ring` and friends;
+Every subcommand validates through :class:`markov.model.ring.Ring` and friends;
 errors of this package (:class:`markov.errors.NaschError`) and click's usage
 errors are printed as one line ``error: ...`` with exit status 2, never as a
 traceback; Ctrl-C gives one line and exit status 130.

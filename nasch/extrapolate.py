@@ -42,7 +42,7 @@ from typing import Sequence
 import numpy as np
 
 from markov.errors import InvalidParameterError
-from markov.ring import PARALLEL, Ring
+from markov.model.ring import PARALLEL, Ring
 
 from .rings import commensurate_lengths, density_fraction
 
@@ -215,7 +215,7 @@ def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int] | None = None
         Seconds for the exact rings instead of ``lengths``: the ``n_fit``
         (default ``order + 2``) largest rings of this density that fit
         (:func:`nasch.budget.lengths_within_budget`).
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         Another update rule; ``vmax`` and ``p`` then None or the model's own.
 
     Returns
@@ -229,7 +229,7 @@ def extrapolate_flux(vmax: int, p, density, lengths: Sequence[int] | None = None
     >>> abs(e.f_inf - approximate("pmf", 1, 0.5, 0.5).flux) < e.error
     True
     """
-    from markov.chain import solve
+    from markov.solvers.ring_chain import solve
 
     c = density_fraction(density)
     if budget is not None:

@@ -9,16 +9,16 @@ point, and fan them out through :func:`nasch.sweep.run_jobs`:
   :class:`ExactResult` (a NaN flux and the reason for a ring with several
   closed classes);
 * :class:`MonteCarloJob`: a simulation of a large ring at one density
-  (:func:`markov.montecarlo.simulate`), giving a :class:`MonteCarloResult`.
+  (:func:`markov.simulation.montecarlo.simulate`), giving a :class:`MonteCarloResult`.
 
 The seed of a Monte Carlo job depends only on the base seed and the point
 (density, model, update order) through :func:`point_seed`, so the
 same point gets the same simulation in a table, a figure and the study, on
 any worker and in any order.
 
-A job carries its model (:class:`markov.rule.Model`, picklable and hashable):
+A job carries its model (:class:`markov.model.load.Model`, picklable and hashable):
 a job is ``(length, cars, model, update, ...)``, and ``ExactJob(L, N, vmax, p)``
-the NaSch shorthand, as for :class:`markov.ring.Ring`.
+the NaSch shorthand, as for :class:`markov.model.ring.Ring`.
 """
 from __future__ import annotations
 
@@ -29,8 +29,8 @@ from typing import NamedTuple
 import numpy as np
 
 from markov.errors import InvalidParameterError, NaschError, NoUniqueStationaryStateError
-from markov.ring import PARALLEL, UPDATES, Ring
-from markov.rule import Model
+from markov.model.ring import PARALLEL, UPDATES, Ring
+from markov.model.load import Model
 from markov.validate import ensure_int
 
 from .rings import mc_ring
@@ -74,7 +74,7 @@ class _ExactFields(NamedTuple):
 class ExactJob(_ExactFields):
     """The exact stationary state of one ring: ``(length, cars, model, update)``.
 
-    Built like a :class:`markov.ring.Ring`: ``ExactJob(L, N, vmax, p)`` is the
+    Built like a :class:`markov.model.ring.Ring`: ``ExactJob(L, N, vmax, p)`` is the
     NaSch ring, ``ExactJob(L, N, update=..., model=m)`` any model.
     """
 
@@ -146,7 +146,7 @@ class MonteCarloResult(NamedTuple):
     """What a :class:`MonteCarloJob` gives: the flux, its 1-sigma error, whether it is honest.
 
     ``reliable`` False: the run was too short for its bar; ``warning`` says why
-    (:attr:`markov.montecarlo.SimulationResult.warning`).
+    (:attr:`markov.simulation.montecarlo.SimulationResult.warning`).
     """
 
     flux: float
@@ -178,7 +178,7 @@ def point_seed(seed: int, density: Fraction, model: Model, update: str = PARALLE
     Never of the worker, the order of completion, or which product (table,
     figure, study) asks.  A NaSch point is ``(density, vmax, p, update)`` (the
     seeds of every NaSch table and figure so far); any other model's point
-    adds its :meth:`markov.rule.Model.key`, so two models never share a seed.
+    adds its :meth:`markov.model.load.Model.key`, so two models never share a seed.
 
     Parameters
     ----------
@@ -249,14 +249,14 @@ def run_job(job: ExactJob | MonteCarloJob) -> ExactResult | MonteCarloResult:
     ExactResult or MonteCarloResult
     """
     if isinstance(job, MonteCarloJob):
-        from markov.montecarlo import simulate
+        from markov.simulation.montecarlo import simulate
 
         r = simulate(job_ring(job), steps=job.steps, warmup=job.warmup, seed=job.seed,
                      replicas=job.replicas)
         return MonteCarloResult(r.flux, r.flux_error, job.length, job.steps, job.replicas,
                                 r.reliable, r.warning)
-    from markov.chain import solve
-    from markov.goe_census import recurrent_class_bound
+    from markov.solvers.ring_chain import solve
+    from markov.goe.census import recurrent_class_bound
 
     try:
         sol = solve(job_ring(job), state_bound=recurrent_class_bound)
@@ -336,8 +336,8 @@ def preflight(jobs) -> None:
     ----------
     jobs : iterable of ExactJob or MonteCarloJob
     """
-    from markov.montecarlo import ensure_simulation_fits
-    from markov.validate import ensure_chain_arguments
+    from markov.simulation.montecarlo import ensure_simulation_fits
+    from markov.solvers.ring_chain import ensure_chain_arguments
 
     for job in jobs:
         if isinstance(job, ExactJob):
@@ -360,9 +360,9 @@ def ensure_mc_steps(mc_steps) -> int:
     Raises
     ------
     InvalidParameterError
-        Between 1 and :data:`markov.montecarlo.MIN_STEPS` - 1.
+        Between 1 and :data:`markov.simulation.montecarlo.MIN_STEPS` - 1.
     """
-    from markov.montecarlo import MIN_STEPS
+    from markov.simulation.montecarlo import MIN_STEPS
 
     mc_steps = ensure_int("mc_steps", mc_steps, 0)
     if 0 < mc_steps < MIN_STEPS:

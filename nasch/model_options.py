@@ -1,6 +1,6 @@
 """``--model`` and ``--param NAME=VALUE``: choosing the update rule on the command line.
 
-For any command that builds a :class:`markov.rule.Model`::
+For any command that builds a :class:`markov.model.load.Model`::
 
     @click.command()
     @model_options
@@ -116,7 +116,7 @@ def param_names(params) -> set:
 
 
 def build_model(model: str, params=(), vmax: int | None = None, p: float | None = None):
-    """The :class:`markov.rule.Model` of ``--model``/``--param``, with ``--vmax``/``--p``.
+    """The :class:`markov.model.load.Model` of ``--model``/``--param``, with ``--vmax``/``--p``.
 
     Parameters
     ----------
@@ -131,7 +131,7 @@ def build_model(model: str, params=(), vmax: int | None = None, p: float | None 
 
     Returns
     -------
-    markov.rule.Model
+    markov.model.load.Model
 
     Raises
     ------
@@ -145,7 +145,7 @@ def build_model(model: str, params=(), vmax: int | None = None, p: float | None 
     >>> m.name, m.vmax, m.params["p0"]
     ('vdr', 3, 0.75)
     """
-    from markov.rule import load_model
+    from markov.model.load import load_model
 
     values = dict(params) if isinstance(params, dict) else parse_params(params)
     for name, given in (("vmax", vmax), ("p", p)):

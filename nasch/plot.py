@@ -17,7 +17,7 @@ Fig. 2: for each braking probability ``p`` one panel shows, against the density 
 by the file's extension, atomically.
 
 Any model (issue 18): :func:`spacetime_figure` draws the space-time diagram
-of one Monte Carlo trajectory (:func:`markov.montecarlo.trajectory`; cells
+of one Monte Carlo trajectory (:func:`markov.simulation.montecarlo.trajectory`; cells
 across, time downwards, a pixel or more per cell); :func:`models_data` and
 :func:`models_figure` the Monte Carlo fundamental diagrams of several models
 on one large ring (runs without an honest error bar drawn hollow).
@@ -130,7 +130,7 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     >>> [round(float(x), 6) for x in d["exact"][6][1]]
     [0.083333, 0.145833, 0.171053, 0.145833, 0.083333]
     """
-    from markov.encoding import max_length
+    from markov.chain.encoding import max_length
     from markov.validate import ensure_int
 
     single = np.ndim(p) == 0
@@ -374,8 +374,8 @@ def spacetime_figure(occupancy: np.ndarray, ring, warmup: int, seed: int,
     Parameters
     ----------
     occupancy : (steps + 1, L) int array
-        :func:`markov.montecarlo.trajectory`: ``-1`` empty, else the velocity.
-    ring : markov.ring.Ring
+        :func:`markov.simulation.montecarlo.trajectory`: ``-1`` empty, else the velocity.
+    ring : markov.model.ring.Ring
         The system (for the title and the velocity scale).
     warmup : int
         Steps run before row 0 (the time axis starts there).
@@ -389,8 +389,8 @@ def spacetime_figure(occupancy: np.ndarray, ring, warmup: int, seed: int,
 
     Examples
     --------
-    >>> from markov.ring import Ring
-    >>> from markov.montecarlo import trajectory
+    >>> from markov.model.ring import Ring
+    >>> from markov.simulation.montecarlo import trajectory
     >>> ring = Ring(50, 10, 2, 0.5)
     >>> fig = spacetime_figure(trajectory(ring, 20, warmup=10), ring, 10, 0)
     >>> fig.axes[0].get_xlabel()
@@ -445,7 +445,7 @@ def models_data(models: Sequence, *, length: int = 1000, densities: int = 21,
 
     Parameters
     ----------
-    models : sequence of markov.rule.Model
+    models : sequence of markov.model.load.Model
         The models, parameters bound (their ``vmax`` may differ).
     length : int
         Ring length ``L``.
@@ -453,7 +453,7 @@ def models_data(models: Sequence, *, length: int = 1000, densities: int = 21,
         Densities ``k / (densities + 1)``, ``k = 1..densities``; ``N =
         round(c L)`` cars, and the density drawn is ``N / L``.
     steps : int
-        Recorded steps per run (at least :data:`markov.montecarlo.MIN_STEPS`);
+        Recorded steps per run (at least :data:`markov.simulation.montecarlo.MIN_STEPS`);
         the warm-up is cut from the data (MSER).
     update : str
     seed : int
@@ -474,14 +474,14 @@ def models_data(models: Sequence, *, length: int = 1000, densities: int = 21,
 
     Examples
     --------
-    >>> from markov.rule import load_model
+    >>> from markov import load_model
     >>> d = models_data([load_model("nasch", {"vmax": 1, "p": 0.5})], length=100,
     ...                 densities=3, steps=200)
     >>> d["models"][0]["c"].tolist()
     [0.25, 0.5, 0.75]
     """
-    from markov.montecarlo import MIN_STEPS, simulate
-    from markov.ring import Ring
+    from markov.simulation.montecarlo import MIN_STEPS, simulate
+    from markov.model.ring import Ring
     from markov.validate import ensure_int
 
     length = ensure_int("length L", length, 2)
@@ -528,7 +528,7 @@ def models_figure(data: dict, width: float = 6.4, height: float = 5.2):
 
     Examples
     --------
-    >>> from markov.rule import load_model
+    >>> from markov import load_model
     >>> d = models_data([load_model("nasch", {"vmax": 1, "p": 0.5})], length=100,
     ...                 densities=3, steps=200)
     >>> models_figure(d).axes[0].get_ylabel()
@@ -577,7 +577,7 @@ def relaxation_figure(data: dict, spectrum=None, width: float = 9.6, height: flo
     ----------
     data : dict
         From :func:`nasch.relaxation.relaxation_curves`.
-    spectrum : markov.spectrum.Spectrum, optional
+    spectrum : markov.analysis.spectrum.Spectrum, optional
         Drawn in the complex plane (one colour per momentum sector, the unit
         circle for reference); without it only the left panel is drawn.
     width, height : float

@@ -1,6 +1,6 @@
 """Relaxation times over several rings: ``tau(L)``, its power law ``L^z``, ``tau(c)`` curves.
 
-:func:`markov.spectrum.relaxation_spectrum` gives one ring's leading
+:func:`markov.analysis.spectrum.relaxation_spectrum` gives one ring's leading
 eigenvalues; this module runs it over rings and fits
 
 .. math:: \\tau(L) = A L^z
@@ -67,19 +67,19 @@ def fit_power_law(lengths: Sequence[int], taus: Sequence[float]) -> dict:
 
 def relaxation_scan(rings, count: int = 2, sectors="all", tol: float = 1e-10,
                     operator: str = "auto") -> list:
-    """:func:`markov.spectrum.relaxation_spectrum` of every ring, in order.
+    """:func:`markov.analysis.spectrum.relaxation_spectrum` of every ring, in order.
 
     Parameters
     ----------
-    rings : sequence of markov.ring.Ring
+    rings : sequence of markov.model.ring.Ring
     count, sectors, tol, operator
-        As for :func:`markov.spectrum.relaxation_spectrum`.
+        As for :func:`markov.analysis.spectrum.relaxation_spectrum`.
 
     Returns
     -------
-    list of markov.spectrum.Spectrum
+    list of markov.analysis.spectrum.Spectrum
     """
-    from markov.spectrum import relaxation_spectrum
+    from markov.analysis.spectrum import relaxation_spectrum
 
     return [relaxation_spectrum(r, count=count, sectors=sectors, tol=tol, operator=operator)
             for r in rings]
@@ -101,7 +101,7 @@ def relaxation_curves(length: int, ps: Sequence[float], vmax: int = 2,
         Maximal velocity of the default NaSch model (ignored with ``model``).
     cars : sequence of int, optional
         Car numbers (default ``1 .. L - 1``).
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         Any model with a parameter ``p`` (default NaSch at ``vmax``).
     update : str
         Update order.
@@ -120,8 +120,8 @@ def relaxation_curves(length: int, ps: Sequence[float], vmax: int = 2,
     >>> round(d["curves"][0]["tau"][0], 6)         # one car: -1/ln|p + q exp(2 pi i/6)|
     6.952119
     """
-    from markov.ring import Ring
-    from markov.rule import load_model
+    from markov.model.ring import Ring
+    from markov.model.load import load_model
     from markov.validate import ensure_int
 
     length = ensure_int("length L", length, 2)

@@ -8,12 +8,12 @@ For each point ``(vmax, p, c)`` of a grid:
 * Monte Carlo: ``mc_replicas`` runs of ``mc_steps`` steps (after as many
   warm-up steps) on a ring of at least ``mc_length`` cells with density exactly
   ``c`` (:class:`nasch.jobs.MonteCarloJob`), flux and 1-sigma error of
-  :func:`markov.montecarlo.simulate`; this is the reference;
+  :func:`markov.simulation.montecarlo.simulate`; this is the reference;
 * the ``L -> infinity`` extrapolation of the exact fluxes of the rings among
   rings ``nasch table`` chooses (:func:`nasch.budget.choose_lengths`: the largest
   that fit a time budget per point), or of those among ``lengths`` with ``c L``
   an integer and at most ``max_states`` rotation classes (counted exactly first,
-  :func:`markov.goe_census.recurrent_class_count`), when three or more fit
+  :func:`markov.goe.census.recurrent_class_count`), when three or more fit
   (:func:`nasch.extrapolate.extrapolate`, order 2).
 
 The deviation of a method is ``(f - f_MC) / f_MC``; ``best`` is the method
@@ -113,7 +113,7 @@ class StudyTable(RenderedTable):
     notes : tuple of str
         Methods and rings left out, and why.
     seconds : float
-    model : markov.rule.Model or None
+    model : markov.model.load.Model or None
         The model of the first grid point (the others differ in vmax and p
         only); None: NaSch.
     """
@@ -320,7 +320,7 @@ def _exact_rings(model, c: Fraction, lengths, max_states: int, budget,
 
     NaSch's classes are counted exactly (the Garden of Eden census); another
     model's are bounded by every configuration (:func:`nasch.budget.predicted_classes`)."""
-    from markov.goe_census import recurrent_class_count
+    from markov.goe.census import recurrent_class_count
 
     from .budget import choose_lengths, predicted_classes
 
@@ -381,7 +381,7 @@ def convergence_study(vmax: Sequence[int] | None, p: Sequence[float] | None,
     methods : sequence of str
         Method names (``mf``, ``pmf``, ``pmf2``, ``clusterN``, ``comf``); those
         a model refuses are left out with a note.
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The update rule; default NaSch; the Monte Carlo reference simulates it.
     mc_length, mc_steps, mc_replicas : int
         Monte Carlo ring (rounded up to match each density), steps per replica

@@ -27,8 +27,8 @@ from typing import Sequence
 import numpy as np
 
 from markov.errors import InvalidParameterError, NaschError
-from markov.ring import PARALLEL, UPDATES, Ring
-from markov.rule import Model
+from markov.model.ring import PARALLEL, UPDATES, Ring
+from markov.model.load import Model
 from markov.validate import ensure_int, ensure_real
 from symbolic import supported
 
@@ -345,7 +345,7 @@ def _table_models(vmax, p, model: Model | None, update: str) -> list[Model]:
         return [job_model(vmax, x, None, update) for x in ps]
     if not isinstance(model, Model):
         raise InvalidParameterError(
-            f"model must be a markov.rule.Model (see load_model), got {type(model).__name__}")
+            f"model must be a markov.model.load.Model (see load_model), got {type(model).__name__}")
     if vmax is not None and vmax != model.vmax:
         model = model.with_params(vmax=vmax)
     if ps is None:
@@ -379,8 +379,8 @@ def flux_table(vmax: int | None = None, p=None, lengths: Sequence[int] | None = 
     lengths : sequence of int, optional
         Ring lengths; default: chosen per density by ``budget``
         (:func:`nasch.budget.choose_lengths`, the choice of the study and the figure).
-    model : markov.rule.Model, optional
-        The update rule (:func:`markov.rule.load_model`); default NaSch.  For
+    model : markov.model.load.Model, optional
+        The update rule (:func:`markov.model.load.load_model`); default NaSch.  For
         another model the approximations it refuses (pMF, pMF2 need NaSch's
         Garden of Eden patterns) are left out with a note, a ring with several
         closed classes gets a note instead of a flux; the Monte Carlo column
@@ -398,13 +398,13 @@ def flux_table(vmax: int | None = None, p=None, lengths: Sequence[int] | None = 
         Monte Carlo time steps per replica and (density, p); 0: no Monte Carlo.
     mc_warmup : int, optional
         Steps run before recording; default automatic (the warm-up is cut from
-        the recorded steps, :func:`markov.montecarlo.simulate`).
+        the recorded steps, :func:`markov.simulation.montecarlo.simulate`).
     mc_length : int
         Minimal Monte Carlo ring; the ring used is the smallest multiple of the
         density's denominator above it, so its density equals ``N / L`` exactly.
     mc_replicas : int
         Independent Monte Carlo runs per point; their spread enters the error
-        bar (see :func:`markov.montecarlo.simulate`).
+        bar (see :func:`markov.simulation.montecarlo.simulate`).
     seed : int
         Base seed; each Monte Carlo run derives its own from it and its point
         (:func:`nasch.jobs.point_seed`, as a figure or the study does).

@@ -12,7 +12,7 @@ Methods (see ``docs/symbolic.md``):
   and densities c >= 0.005 (a banded system that grows like vmax^4 and 1 / c).
 
 Every method reads the update rule: NaSch by default, any
-:class:`markov.rule.Model` with ``model=`` (pMF and pMF2 remove the model's
+:class:`markov.model.load.Model` with ``model=`` (pMF and pMF2 remove the model's
 own Garden of Eden patterns and refuse a rule whose patterns of that order are
 infinitely many: fi at vmax >= 2, kkw for pMF2; COMF refuses rules that read
 the car ahead).  See
@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from markov.errors import InvalidParameterError
-from markov.goe_patterns import MAX_VMAX
+from markov.goe.patterns import MAX_VMAX
 
 __all__ = ["APPROXIMATIONS", "METHODS", "MAX_PMF_VMAX", "Approximation", "approximate",
            "equations", "supported", "method_name", "label", "ExactSolution", "exact_solution"]
@@ -167,7 +167,7 @@ class Approximation:
         Densities of cars with velocity ``v = 0..vmax``; they sum to ``density``.
     flux : float or (k,) ndarray
         ``sum_v v c_v``.
-    model : markov.rule.Model or None
+    model : markov.model.load.Model or None
         The rule when it is not NaSch (``p`` is then the model's ``p``, or None).
     """
 
@@ -225,13 +225,13 @@ def _resolve_model(model, vmax, p):
 
     A NaSch model is returned as None (the default path, with its vmax and p).
     """
-    from markov.rule import Model
+    from markov.model.load import Model
 
     if model is None:
         return None, vmax, p
     if not isinstance(model, Model):
         raise InvalidParameterError(
-            f"model must be a markov.rule.Model (see load_model), got {type(model).__name__}")
+            f"model must be a markov.model.load.Model (see load_model), got {type(model).__name__}")
     params = model.params
     for name, given in (("vmax", vmax), ("p", p)):
         if given is not None and (name not in params or given != params[name]):
@@ -273,7 +273,7 @@ def approximate(method: str, vmax: int | None, p: float | None, density,
         Car density ``0 < c < 1``; an array gives ``c_v`` of shape ``(vmax + 1, k)``.
     order : int, optional
         Cluster size ``N`` for ``method="cluster"``.
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The update rule (default NaSch with ``vmax`` and ``p``).  With a model,
         ``vmax`` and ``p`` may be None (taken from it) or must agree with it.
 
@@ -343,7 +343,7 @@ def equations(method: str, vmax: int | None, order: int | None = None, model=Non
     vmax : int
     order : int, optional
         Cluster size of ``method="cluster"``.
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The rule (default NaSch); its probability parameters become symbols
         (``1 - p`` is written ``q``); ``vmax`` may be None or must agree.
 

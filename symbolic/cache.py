@@ -5,7 +5,7 @@ of numpy arrays that depends only on the update rules, the code that derives
 it and its parameters (method, order, vmax).  It is built once and stored as
 ``<name>-<key>.npz`` where ``key`` is a SHA-256 digest of
 
-* the source of :mod:`markov.rules` (the single definition of NaSch),
+* the source of :mod:`markov.model.nasch_steps` (the single definition of NaSch),
 * the source of the deriving module (a changed derivation never reads an old file),
 * the parameters,
 
@@ -97,7 +97,7 @@ def cache_key(module_name: str, **params) -> str:
     False
     """
     h = hashlib.sha256()
-    h.update(_source_digest("markov.rules").encode())
+    h.update(_source_digest("markov.model.nasch_steps").encode())
     h.update(_source_digest(module_name).encode())
     h.update(repr(sorted(params.items())).encode())
     return h.hexdigest()

@@ -10,7 +10,7 @@ and ``P_n`` is required to be a fixed point of one parallel update.  The new
 state of ``n`` consecutive cells depends on a *window* of ``m = n + R + H``
 cells at the previous time: cars up to ``R`` cells behind (``R`` = farthest
 move) and, for each of them, the ``H`` cells ahead that decide its move
-(``H`` = largest gap horizon); both are read off :mod:`markov.rules`
+(``H`` = largest gap horizon); both are read off :mod:`markov.model.nasch_steps`
 (:func:`symbolic.meanfield.reach`, :func:`symbolic.meanfield.gap_horizons`).
 
 Support first.  Only windows whose ``n``-cell sub-words all have positive
@@ -29,7 +29,7 @@ windows instead of 65,536 (392 words and 8,013 windows for n = 6, instead of
 4,096 and 1,048,576).
 
 Transfer.  For each window every car's move comes from
-:func:`markov.rules.velocity_outcomes` (with a sympy ``p`` to read off the R3
+:func:`markov.model.nasch_steps.velocity_outcomes` (with a sympy ``p`` to read off the R3
 coin weights ``1``, ``q``, ``p``); cars none of whose outcomes land inside
 the cluster sum out (their weights add to one, checked), the others branch.
 The table ``window -> cluster word`` with weight ``mult q^a p^b`` is built
@@ -51,7 +51,7 @@ solution is continued from there in steps of a factor 2 in ``p`` (or
 the equations of :mod:`symbolic.meanfield`.  ``n >= 2`` is exact for
 ``vmax = 1``: the flux is ``(1 - sqrt(1 - 4 q c (1 - c))) / 2``.
 
-Cell codes as in :func:`markov.observables.cluster_probabilities`: ``0`` empty,
+Cell codes as in :func:`markov.solvers.observables.cluster_probabilities`: ``0`` empty,
 ``v + 1`` a car of velocity ``v``; word codes in base ``B = vmax + 2``, first
 cell most significant (C order).
 
@@ -365,7 +365,7 @@ def window_count(vmax: int, n: int, limit: int | None = None, model=None) -> int
     ----------
     vmax, n : int
     limit : int, optional
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The rule (default NaSch); its ``vmax`` must be ``vmax``.
 
     Returns
@@ -578,7 +578,7 @@ def transfer(vmax: int, n: int, model=None) -> Transfer:
     Parameters
     ----------
     vmax, n : int
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The rule (default NaSch, any ``0 < p < 1``); its vmax must be ``vmax``.
 
     Raises
@@ -680,7 +680,7 @@ def push(vmax: int, n: int, probs: np.ndarray, p_val, model=None) -> np.ndarray:
     probs : (k, B**n) float array
     p_val : float or (k,) array
         NaSch's ``p``; None with a model.
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
 
     Returns
     -------
@@ -905,7 +905,7 @@ def cluster_fixed_point(vmax: int, n: int, p_val, c_val, tol: float = 1e-14,
         Largest change of a probability at convergence.
     anderson_steps : int
         Accelerated steps before Newton takes over.
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The rule (default NaSch).
 
     Returns
@@ -929,7 +929,7 @@ def solve_cluster(vmax: int, n: int, p_val, c_val, model=None) -> np.ndarray:
     vmax, n : int
     p_val, c_val : float or array_like
         NaSch's ``p`` (None with a model) and the densities.
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The rule (default NaSch); its vmax must be ``vmax``.
 
     Returns
@@ -977,7 +977,7 @@ def word_probability(vmax: int, n: int, probs: np.ndarray, word) -> np.ndarray:
     0.0
     """
     if isinstance(word, str):
-        from markov.encoding import from_text
+        from markov.chain.encoding import from_text
 
         word = [cell + 1 for cell in from_text(word, vmax)]   # digits: 0 empty, v + 1
     word = [int(x) for x in word]

@@ -4,7 +4,7 @@ State of a car: its velocity ``v`` (the cells it moved in the last step) and
 its gap ``d`` (empty cells ahead).  COMF treats the states of consecutive cars
 as independent, all with the same distribution ``P(v, d)``.  In one parallel
 update a car moves ``w`` cells with probability ``T(w | v, d)``
-(:func:`markov.rules.velocity_outcomes`; the gap matters only up to the
+(:func:`markov.model.nasch_steps.velocity_outcomes`; the gap matters only up to the
 horizon ``H`` of :func:`symbolic.meanfield.gap_horizons`), the car ahead moves
 ``a`` cells with probability
 
@@ -47,7 +47,7 @@ from functools import lru_cache
 import numpy as np
 import scipy.sparse as sp_sparse
 
-from markov.encoding import EMPTY, from_text
+from markov.chain.encoding import EMPTY, from_text
 from markov.errors import ConvergenceError, InvalidParameterError
 from markov.validate import ensure_open_unit
 
@@ -83,7 +83,7 @@ def ensure_comf_rule(model) -> None:
 
     Parameters
     ----------
-    model : markov.rule.Model
+    model : markov.model.load.Model
         The model.
     """
     from .ruleview import reads_ahead
@@ -325,7 +325,7 @@ class ComfState:
         ``g_a``, the move distribution of the car ahead (= of every car).
     residual : float
         ``max |P - update(P)|``.
-    model : markov.rule.Model
+    model : markov.model.load.Model
         The rule (NaSch with ``p`` unless given).
     """
 
@@ -366,7 +366,7 @@ def comf_state(vmax: int, p: float | None, c: float, model=None) -> ComfState:
     vmax : int
     p, c : float
         NaSch's ``p`` (None with a model) and the density.
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The rule, with this vmax; it must not read the car ahead
         (:func:`ensure_comf_rule`).
 
@@ -447,7 +447,7 @@ def solve_comf(vmax: int, p_val, c_val, model=None) -> np.ndarray:
     vmax : int
     p_val, c_val : float or array_like
         NaSch's ``p`` (None with a model) and the densities.
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
 
     Returns
     -------
@@ -555,7 +555,7 @@ def comf_equations(vmax: int, model=None) -> list:
     Parameters
     ----------
     vmax : int
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The rule (default NaSch); refused if it reads the car ahead for some
         parameter values.
 

@@ -1,8 +1,8 @@
 """Exact rational stationary states of tiny rings, with ``p`` a number or a symbol.
 
 The matrix comes from the same enumeration as the floating-point solver:
-:func:`markov.statespace.recurrent_keys` for the states and the row generator
-of :func:`markov.transition.successors` for the transitions, read with the
+:func:`markov.chain.statespace.recurrent_keys` for the states and the row generator
+of :func:`markov.chain.transition.successors` for the transitions, read with the
 model's symbolic rule table: every entry reports how many cars took each
 weight of the table (NaSch: ``a`` cars moved, weight ``1 - p`` each, ``b``
 braked, weight ``p``), so its probability is a product of those weights.
@@ -24,10 +24,10 @@ import sympy as sp
 from sympy.polys.matrices import DomainMatrix
 
 from markov.errors import InvalidParameterError, StateSpaceTooLargeError
-from markov.ring import PARALLEL, Ring
-from markov.statespace import recurrent_keys
-from markov.encoding import decode
-from markov.transition import successors
+from markov.model.ring import PARALLEL, Ring
+from markov.chain.statespace import recurrent_keys
+from markov.chain.encoding import decode
+from markov.chain.transition import successors
 
 from .meanfield import p as P_SYMBOL
 
@@ -45,7 +45,7 @@ def transition_polynomials(ring: Ring, keys: np.ndarray, lump: bool = True):
     ring : Ring
         Parallel update only (the random-sequential weights carry ``1/L``).
     keys : (n,) int64 array, sorted
-        A closed state set (e.g. :func:`markov.statespace.recurrent_keys`).
+        A closed state set (e.g. :func:`markov.chain.statespace.recurrent_keys`).
     lump : bool
         Whether ``keys`` are rotation classes.
 
@@ -147,7 +147,7 @@ def exact_solution(length: int, cars: int, vmax: int, p=None) -> ExactSolution:
             f"{n} recurrent rotation classes; exact {'symbolic' if symbolic else 'rational'}"
             f" solutions are limited to {limit}")
     poly = transition_polynomials(ring, keys)
-    # the table's weights are expressions of the symbol p (markov.rule.tabulate)
+    # the table's weights are expressions of the symbol p (markov.model.table.tabulate)
     weights = ring.table(symbolic=True).weights
     if symbolic:
         dom = sp.QQ.frac_field(P_SYMBOL)

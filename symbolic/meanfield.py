@@ -6,9 +6,9 @@ probability ``d = 1 - c`` and holds a car of velocity ``v`` with probability
 
 .. math:: c_w' = \\sum_v c_v \\sum_g P_{MF}(\\text{gap} = g)\\, T(v, g \\to w),
 
-where ``T`` is :func:`markov.rules.velocity_outcomes` (R1-R3, with a sympy
+where ``T`` is :func:`markov.model.nasch_steps.velocity_outcomes` (R1-R3, with a sympy
 ``p``) and the gap only matters up to the *horizon* ``h_v`` at which
-:func:`markov.rules.deterministic_velocity` stops changing.  A cell holds a car
+:func:`markov.model.nasch_steps.deterministic_velocity` stops changing.  A cell holds a car
 of velocity ``w`` at ``t + 1`` exactly when the car ``w`` cells behind it moved
 ``w``, so this car-by-car sum *is* the site-oriented update of one cell.  The
 gap events are the words ``(v, •^g, car)`` for ``g < h_v`` (weight
@@ -32,9 +32,9 @@ from functools import lru_cache
 
 import sympy as sp
 
-from markov.encoding import EMPTY
+from markov.chain.encoding import EMPTY
 from markov.errors import InvalidParameterError
-from markov.rules import deterministic_velocity
+from markov.model.nasch_steps import deterministic_velocity
 
 __all__ = [
     "p", "q", "c", "d", "ANY_CAR",
@@ -45,7 +45,7 @@ __all__ = [
 
 p, q, c, d = sp.symbols("p q c d", positive=True)
 
-ANY_CAR = None    # a car of any velocity (weight c in MF); EMPTY: markov.encoding
+ANY_CAR = None    # a car of any velocity (weight c in MF); EMPTY: markov.chain.encoding
 
 
 def _ensure_vmax(vmax) -> int:
@@ -78,7 +78,7 @@ def velocity_symbols(vmax: int) -> tuple[sp.Symbol, ...]:
 def gap_horizons(vmax: int) -> tuple[int, ...]:
     """Per velocity ``v``: the smallest gap from which R1+R2 no longer depend on it.
 
-    Read off :func:`markov.rules.deterministic_velocity`, so a change of the
+    Read off :func:`markov.model.nasch_steps.deterministic_velocity`, so a change of the
     rules changes every derived equation.
 
     Examples
@@ -131,7 +131,7 @@ class CarEvent:
 def car_events(vmax: int, model=None) -> tuple[CarEvent, ...]:
     """Every (velocity, decisive word ahead, outcome) of one car, from the rules.
 
-    ``model`` (a :class:`markov.rule.Model` with this vmax; default NaSch)
+    ``model`` (a :class:`markov.model.load.Model` with this vmax; default NaSch)
     gives the rule: its weights in one symbol per probability parameter
     (``1 - p`` written ``q``).  Where the rule reads the velocity of the car
     ahead, the word ahead ends in that car's velocity (weight ``c_u``), one
@@ -191,7 +191,7 @@ def mf_equations(vmax: int, model=None) -> list[sp.Eq]:
     Parameters
     ----------
     vmax : int
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The rule (default NaSch): its probability parameters are the symbols.
 
     Returns

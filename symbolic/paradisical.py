@@ -8,7 +8,7 @@ Construction (the paper's, made explicit; it reproduces eqs. (pmf10)-(pmf11),
   0, the others the product-measure weight (``d`` per empty cell, ``c_u`` per
   car);
 * the car moves ``w`` cells with the R3 coin weight from
-  :func:`markov.rules.velocity_outcomes`; summing gives ``F_w``;
+  :func:`markov.model.nasch_steps.velocity_outcomes`; summing gives ``F_w``;
 * the normalisation ``N = c / sum_w F_w`` restores ``sum_w c_w = c``; it is the
   inverse probability that the continuation of a car is GoE free,
   e.g. ``1 / (c_0 + d (1 - c_2))`` for ``vmax = 2``.
@@ -22,7 +22,7 @@ its first car (its second car lies inside it), so
 
 the MF right-hand side minus the weight of the words that start with each
 pattern.  The patterns are the elementary GoE patterns of the exhaustive
-automaton search :func:`markov.goe_patterns.elementary_patterns`: ``pmf``
+automaton search :func:`markov.goe.patterns.elementary_patterns`: ``pmf``
 removes those of order 1 (the pairs ``a •^k b`` with ``k < b``), ``pmf2``
 also those of order 2 (vmax = 2: the paper's ``(0,•,•,2)``).  For vmax 1, 2
 they equal the paper's lists (:data:`GOE_PATTERNS`, tested).
@@ -43,10 +43,10 @@ from functools import lru_cache
 
 import sympy as sp
 
-from markov.encoding import EMPTY, from_text
+from markov.chain.encoding import EMPTY, from_text
 from markov.errors import InvalidParameterError
-from markov.goe_patterns import MAX_VMAX, elementary_patterns
-from markov.rules import velocity_outcomes
+from markov.goe.patterns import MAX_VMAX, elementary_patterns
+from markov.model.nasch_steps import velocity_outcomes
 
 from .meanfield import (ANY_CAR, c, car_events, d, gap_horizons, p, q, velocity_symbols,
                         word_weight)
@@ -78,7 +78,7 @@ def goe_patterns(vmax: int, second_order: bool = False,
     """Elementary GoE patterns of order 1 (and 2 with ``second_order``), as cell tuples.
 
     The minimal forbidden words of the limit language ``L_inf`` of the rule
-    (:func:`markov.goe_patterns.elementary_patterns`) whose order is at most 1
+    (:func:`markov.goe.patterns.elementary_patterns`) whose order is at most 1
     (2).  Such a word lies outside ``L_1`` (``L_2``) with its proper factors
     inside, so it is a minimal forbidden word of ``L_1`` (``L_2``): the longest
     of those bounds the search, which is then complete for these orders even
@@ -89,7 +89,7 @@ def goe_patterns(vmax: int, second_order: bool = False,
     vmax : int
         1..6; with ``model``, the model's.
     second_order : bool
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The rule (default NaSch); only its support matters.
 
     Returns
@@ -112,7 +112,7 @@ def goe_patterns(vmax: int, second_order: bool = False,
     (0, -1, -1, 2)
     """
     from markov.errors import StateSpaceTooLargeError
-    from markov.goe_patterns import limit_order, minimal_forbidden_words, order_automaton
+    from markov.goe.patterns import limit_order, minimal_forbidden_words, order_automaton
 
     from .ruleview import nasch
 
@@ -155,7 +155,7 @@ def ensure_pmf_model(model, second_order: bool = False) -> None:
 
     Parameters
     ----------
-    model : markov.rule.Model
+    model : markov.model.load.Model
     second_order : bool
     """
     import re
@@ -221,7 +221,7 @@ def pmf_rhs(vmax: int, second_order: bool = False,
     vmax : int
     second_order : bool
     anchored : bool
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The rule (default NaSch), with this vmax.
 
     Returns
@@ -268,7 +268,7 @@ def pmf_normalisation(vmax: int, second_order: bool = False,
     vmax : int
     second_order : bool
     anchored : bool
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         See :func:`pmf_rhs`.
 
     Returns
@@ -288,7 +288,7 @@ def pmf_equations(vmax: int, second_order: bool = False, model=None) -> list[sp.
     vmax : int
     second_order : bool
         Also remove the patterns of order 2 (pMF2).
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The rule (default NaSch); its probabilities are the symbols.
 
     Returns

@@ -1,7 +1,7 @@
-"""The update rule as the approximations read it: a :class:`markov.rule.Model`, tabulated.
+"""The update rule as the approximations read it: a :class:`markov.model.load.Model`, tabulated.
 
 Every approximation needs, per car velocity ``v``, gap ``g`` and velocity of
-the car ahead ``a``, the distribution of the car's move (:func:`markov.rule.tabulate`):
+the car ahead ``a``, the distribution of the car's move (:func:`markov.model.table.tabulate`):
 
 * :func:`numeric_moves`: ``T[v, g, a, w]`` at the model's parameter values
   (MF, COMF), gaps ``0..H`` with ``H`` the model's horizon;
@@ -9,12 +9,12 @@ the car ahead ``a``, the distribution of the car's move (:func:`markov.rule.tabu
   probability parameter (the n-cluster transfer and every printed equation):
   per entry the moves and the index of their weight in :attr:`RuleStructure.exprs`.
 
-The shipped NaSch rule is read from :func:`markov.rules.velocity_outcomes`
+The shipped NaSch rule is read from :func:`markov.model.nasch_steps.velocity_outcomes`
 directly (its fast path: no car-ahead axis to tabulate, vmax up to 100 for
 MF; ``tests/test_models.py`` checks the two definitions agree entry by entry).
 
 Gaps beyond a method's window are gaps ``>= H``: the table repeats row ``H``
-there (:func:`markov.rule.tabulate` checks the rule agrees).  A rule whose row
+there (:func:`markov.model.table.tabulate` checks the rule agrees).  A rule whose row
 ``H`` still reads the car ahead would need the car ahead at any distance; the
 approximations refuse it (:func:`ensure_far_independent`), none of the shipped
 models does.
@@ -27,7 +27,7 @@ from functools import lru_cache
 import numpy as np
 
 from markov.errors import InvalidParameterError
-from markov.rule import Model, load_model
+from markov.model.load import Model, load_model
 
 __all__ = ["nasch", "numeric_moves", "horizons_of", "RuleStructure", "structure",
            "reads_ahead", "ensure_far_independent", "probability_symbols", "NASCH"]
@@ -57,7 +57,7 @@ def probability_symbols(model: Model) -> dict:
 
     Parameters
     ----------
-    model : markov.rule.Model
+    model : markov.model.load.Model
         The model.
 
     Returns
@@ -105,7 +105,7 @@ def numeric_moves(model: Model) -> tuple[np.ndarray, tuple[int, ...]]:
 
     Parameters
     ----------
-    model : markov.rule.Model
+    model : markov.model.load.Model
 
     Returns
     -------
@@ -115,7 +115,7 @@ def numeric_moves(model: Model) -> tuple[np.ndarray, tuple[int, ...]]:
     """
     vmax = model.vmax
     if model.is_nasch:
-        from markov.rules import velocity_outcomes
+        from markov.model.nasch_steps import velocity_outcomes
 
         horizon = vmax
         t = np.zeros((vmax + 1, horizon + 1, 1, vmax + 1))
@@ -125,7 +125,7 @@ def numeric_moves(model: Model) -> tuple[np.ndarray, tuple[int, ...]]:
                     t[v, g, 0, int(w)] += float(weight)
         t = np.broadcast_to(t, (vmax + 1, horizon + 1, vmax + 1, vmax + 1))
     else:
-        from markov.rule import cached_table
+        from markov.model.table import cached_table
 
         table = cached_table(model)
         horizon = table.horizon
@@ -144,7 +144,7 @@ def reads_ahead(model: Model) -> bool:
 
     Parameters
     ----------
-    model : markov.rule.Model
+    model : markov.model.load.Model
         The model.
 
     Returns
@@ -261,7 +261,7 @@ def _structure(source_key: str, model: Model) -> RuleStructure:
     vmax = model.vmax
     syms = probability_symbols(model)
     if model.is_nasch:
-        from markov.rules import velocity_outcomes
+        from markov.model.nasch_steps import velocity_outcomes
 
         horizon = vmax
         rows = {}
@@ -272,7 +272,7 @@ def _structure(source_key: str, model: Model) -> RuleStructure:
                 for a in range(vmax + 1):
                     rows[v, g, a] = row
     else:
-        from markov.rule import cached_table
+        from markov.model.table import cached_table
 
         table = cached_table(model, symbolic=True)
         horizon = table.horizon
@@ -323,7 +323,7 @@ def structure(model: Model) -> RuleStructure:
 
     Parameters
     ----------
-    model : markov.rule.Model
+    model : markov.model.load.Model
 
     Returns
     -------

@@ -83,7 +83,7 @@ def solve_mf(vmax: int, p_val, c_val, model=None) -> np.ndarray:
     ----------
     vmax : int
     p_val, c_val : float or array_like
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
 
     Returns
     -------
@@ -266,7 +266,7 @@ def solve_pmf(vmax: int, p_val, c_val, second_order: bool = False,
         pMF2: also without the patterns of order 2.
     method : {"auto", "iterate"}
     anchored : bool
-    model : markov.rule.Model, optional
+    model : markov.model.load.Model, optional
         The rule (default NaSch with ``p_val``).
 
     Returns

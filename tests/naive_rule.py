@@ -1,7 +1,7 @@
 """A deliberately naive chain for ANY rule: plain Python, configurations as tuples.
 
 Written from the rule text alone: it calls ``rule(v, gap, v_ahead, params)``
-directly (never :func:`markov.rule.tabulate`) on every configuration of a tiny
+directly (never :func:`markov.model.table.tabulate`) on every configuration of a tiny
 ring, so it is the oracle the tabulated rule and, later, the kernels are
 checked against.  A configuration is a tuple of cells, ``None`` for an empty
 cell, else the car's velocity (the cells it moved in its last update).
@@ -254,7 +254,7 @@ def lump_vector(chain, pi):
 def bjh_flag_chain(L, N, vmax, p, ps):
     """BJH parallel update with a per-car bit "my gap was 0 at my last update".
 
-    Written from the BJH text, independently of :mod:`markov.models.bjh`: R1;
+    Written from the BJH text, independently of :mod:`markov.model.shipped.bjh`: R1;
     a car whose bit is set and whose gap is now > 0 stays with ``ps``; R2; R3
     with ``p``; R4; the new bit is ``gap == 0`` at this update.  A cell is
     ``None`` or ``(v, bit)``.  Returns ``(states, P)`` over every

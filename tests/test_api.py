@@ -1,7 +1,7 @@
 """The public API: what the packages list, and numpydoc on every public function.
 
 Public means: listed in ``__all__`` of a module whose name has no leading
-underscore (private modules such as ``markov._kernels`` are internals).
+underscore (private modules such as ``markov.chain.kernels`` are internals).
 """
 from __future__ import annotations
 

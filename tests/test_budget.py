@@ -9,7 +9,7 @@ from nasch.budget import (lengths_within_budget, parse_budget, predicted_classes
                            predicted_seconds)
 from nasch.cli import main
 from nasch.extrapolate import extrapolate_flux
-from markov.statespace import recurrent_keys
+from markov.chain.statespace import recurrent_keys
 from nasch.tables import flux_table
 
 

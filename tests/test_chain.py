@@ -9,9 +9,9 @@ import naive
 from reference import vmax1_infinite_flux
 from markov import (NoUniqueStationaryStateError, Ring, RingChain, SOLVERS,
                     StateSpaceTooLargeError, solve)
-from markov.statespace import all_keys, count_all, recurrent_keys
-from markov.encoding import decode, encode
-from markov.transition import transition_matrix
+from markov.chain.statespace import all_keys, count_all, recurrent_keys
+from markov.chain.encoding import decode, encode
+from markov.chain.transition import transition_matrix
 
 SMALL = [  # (L, N, vmax)
     (3, 1, 1), (3, 2, 1), (5, 2, 1), (6, 3, 1), (7, 3, 1),
@@ -125,7 +125,7 @@ def test_invariants(L, N, vmax, p):
     np.testing.assert_allclose(three.sum(axis=2), sol.cluster_probabilities(2), atol=1e-14)
     np.testing.assert_allclose(three.sum(axis=0), sol.cluster_probabilities(2), atol=1e-14)
     # stationarity: the mean advance of the next step equals sum_v v c_v
-    from markov.observables import expected_move
+    from markov.solvers.observables import expected_move
     assert expected_move(ring, sol.keys, sol.pi) == pytest.approx(sol.flux, abs=1e-13)
 
 

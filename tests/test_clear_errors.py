@@ -16,10 +16,10 @@ import numpy as np
 import pytest
 
 from markov import InvalidParameterError, Ring, RingChain, solve
-from markov.chain import MIN_P, min_p
-from markov.goe import census
-from markov.statespace import _row_successors, recurrent_keys
-from markov._factored import factored_fits, frontier_successors
+from markov.solvers.ring_chain import MIN_P, min_p
+from markov.goe.configurations import census
+from markov.chain.statespace import _row_successors, recurrent_keys
+from markov.chain.factored import factored_fits, frontier_successors
 
 NASCH = [sys.executable, "-m", "nasch"]
 
@@ -156,11 +156,11 @@ def test_row_generator_search_step_equals_the_factored_one(L, N, vmax, lump, mon
     # the fallback of the state search against the factored levels, where both
     # apply, on a part of the class (the whole class is its own successor set),
     # cut into pieces of about seven successors
-    import markov.statespace
+    import markov.chain.statespace
 
     ring = Ring(L, N, vmax, 0.5)
     frontier = recurrent_keys(ring, lump)[::3]
     expected = frontier_successors(ring, frontier, lump)
     assert 0 < len(expected) < len(recurrent_keys(ring, lump)) or len(frontier) < 3
-    monkeypatch.setattr(markov.statespace, "_CHUNK", 7)
+    monkeypatch.setattr(markov.chain.statespace, "_CHUNK", 7)
     assert np.array_equal(_row_successors(ring, frontier, lump), expected)

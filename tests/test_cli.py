@@ -70,7 +70,7 @@ def test_console_script_runs_in_a_subprocess():
 def test_models_lists_every_shipped_model_with_its_defaults():
     import json
 
-    from markov.rule import MODELS
+    from markov.model.load import MODELS
 
     out = CliRunner().invoke(main, ["models", "--json"])
     assert out.exit_code == 0, out.output
@@ -91,7 +91,7 @@ def test_deterministic_limits_answer_the_class_of_the_compact_jam():
 
 
 def test_solve_any_model_records_it_and_matches_the_api():
-    from markov.rule import load_model
+    from markov.model.load import load_model
 
     out = CliRunner().invoke(main, ["solve", "-L", "9", "-N", "4", "--model", "vdr",
                                     "--param", "p0=0.75", "--p", "0.1", "--json"])
@@ -136,7 +136,7 @@ def test_solve_ordered_sequential_update():
 def test_one_default_p_for_every_command_and_the_api():
     # what is not given takes the model's declared default (nasch models: vmax 2, p 0.5),
     # and the output says which values it used
-    from markov.rule import MODELS
+    from markov.model.load import MODELS
 
     defaults = MODELS["nasch"].parameters
     assert (defaults["vmax"], defaults["p"]) == (2, 0.5)

@@ -1,14 +1,14 @@
-"""markov.correlations: C(t) and tau against dense matrix powers, sums and the simulator."""
+"""markov.analysis.correlations: C(t) and tau against dense matrix powers, sums and the simulator."""
 import numpy as np
 import pytest
 from threadpoolctl import threadpool_limits
 
 from markov import InvalidParameterError, Ring, RingChain
-from markov.correlations import autocorrelation, autocorrelation_time, observable_values
-from markov.encoding import decode
-from markov.fluctuations import block_autocorrelation_time
-from markov.montecarlo import integrated_autocorrelation_time, mser_truncation, simulate
-from markov.rule import load_model
+from markov.analysis.correlations import autocorrelation, autocorrelation_time, observable_values
+from markov.chain.encoding import decode
+from markov.analysis.fluctuations import block_autocorrelation_time
+from markov.simulation.montecarlo import integrated_autocorrelation_time, mser_truncation, simulate
+from markov.model.load import load_model
 
 VDR = load_model("vdr", {"vmax": 2, "p": 0.2, "p0": 0.6})
 KKW = load_model("kkw", {"vmax": 2})

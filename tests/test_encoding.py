@@ -5,8 +5,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from markov import InvalidParameterError
-from markov._kernels import orbit_size
-from markov.encoding import (canonical_keys, check_encodable, compact_jam_key, decode, encode,
+from markov.chain.kernels import orbit_size
+from markov.chain.encoding import (canonical_keys, check_encodable, compact_jam_key, decode, encode,
                              from_text, max_length, powers, to_text)
 
 

@@ -11,7 +11,7 @@ from reference import vmax1_infinite_flux
 from markov import InvalidParameterError, Ring
 from nasch.extrapolate import extrapolate, extrapolate_flux
 from nasch.rings import commensurate_lengths
-from markov.montecarlo import simulate
+from markov.simulation.montecarlo import simulate
 
 
 def test_exact_series_is_recovered():

@@ -8,13 +8,13 @@ import pytest
 import naive
 import naive_rule as nr
 from markov import InvalidParameterError, Ring, RingChain, solve
-from markov._aggregates import position_aggregates
-from markov._factored import FactoredOperator, frontier_successors, level_rule, word_bits
-from markov._sequential import successor_keys
-from markov.rule import MODELS, load_model
-from markov.statespace import all_keys, recurrent_keys
-from markov.encoding import decode, encode, unique_keys
-from markov.transition import transition_matrix
+from markov.solvers.aggregates import position_aggregates
+from markov.chain.factored import FactoredOperator, frontier_successors, level_rule, word_bits
+from markov.chain.sequential import successor_keys
+from markov.model.load import MODELS, load_model
+from markov.chain.statespace import all_keys, recurrent_keys
+from markov.chain.encoding import decode, encode, unique_keys
+from markov.chain.transition import transition_matrix
 
 # vmax 1, 2, 3, 5; one car, one empty cell, low and high density; B = 3, 4, 5, 7
 CASES = [(3, 1, 1), (9, 4, 1), (8, 7, 1), (10, 5, 2), (12, 6, 2), (7, 6, 2), (12, 1, 2),

@@ -1,4 +1,4 @@
-"""markov.fluctuations: Delta and Lambda(s) against the tilted dense chain, hand results, MC."""
+"""markov.analysis.fluctuations: Delta and Lambda(s) against the tilted dense chain, hand results, MC."""
 import json
 
 import numpy as np
@@ -6,12 +6,12 @@ import pytest
 from click.testing import CliRunner
 
 from markov import InvalidParameterError, Ring, RingChain
-from markov import fluctuations as fluct
-from markov.correlations import autocorrelation, autocorrelation_time
-from markov.fluctuations import (block_autocorrelation_time, current_fluctuations,
+from markov.analysis import fluctuations as fluct
+from markov.analysis.correlations import autocorrelation, autocorrelation_time
+from markov.analysis.fluctuations import (block_autocorrelation_time, current_fluctuations,
                                  current_variance, scgf)
-from markov.montecarlo import simulate
-from markov.observables import expected_move
+from markov.simulation.montecarlo import simulate
+from markov.solvers.observables import expected_move
 from nasch.cli import main
 from test_correlations import RINGS, dense_chain, one_blas_thread  # noqa: F401 (autouse)
 

@@ -6,7 +6,7 @@ PRL 80, 209 (1998), and its parallel-update counterpart in the manner of
 Povolotsky and Mendes, J. Stat. Phys. 123, 125 (2006), each checked there
 against its own brute force) gives the current, the diffusion coefficient and
 the scaled cumulant generating function of the total distance travelled on a
-finite ring; :mod:`markov.fluctuations` computes them from the chain (one
+finite ring; :mod:`markov.analysis.fluctuations` computes them from the chain (one
 linear solve, or the tilted operator's leading eigenvalue).
 """
 from __future__ import annotations
@@ -14,8 +14,8 @@ from __future__ import annotations
 import pytest
 
 import reference_current as ref
-from markov.fluctuations import current_fluctuations, scgf
-from markov.ring import Ring
+from markov.analysis.fluctuations import current_fluctuations, scgf
+from markov.model.ring import Ring
 
 RINGS = [(6, 2), (7, 3), (8, 4), (9, 6), (12, 5)]
 

@@ -13,9 +13,9 @@ import pandas as pd
 import pytest
 
 from markov import Ring
-from markov.chain import solve, solve_classes, to_frame
+from markov.solvers.ring_chain import solve, solve_classes, to_frame
 from markov.errors import InvalidParameterError
-from markov.rule import load_model
+from markov.model.load import load_model
 from nasch.study import convergence_study
 from nasch.tables import flux_table
 

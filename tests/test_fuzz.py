@@ -38,7 +38,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from markov import CorruptFileError, Ring, load_solution, solve
-from markov.storage import SUM_TOLERANCE
+from markov.solvers.storage import SUM_TOLERANCE
 from nasch.cli import main
 
 pytestmark = pytest.mark.slow

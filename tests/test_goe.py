@@ -1,11 +1,11 @@
 """Garden of Eden analysis, checked against independent routes.
 
-Oracles written here from the rule text (no import of markov.rules or
-markov.goe*): plain-Python successors of a ring configuration and a naive
+Oracles written here from the rule text (no import of markov.model.nasch_steps or
+markov.goe.configurations*): plain-Python successors of a ring configuration and a naive
 backward search for predecessors.  Further routes: the set of all successors
-of all configurations (markov.transition), the recurrent class found by
-breadth-first search from the compact jam (markov.statespace), and the exact
-stationary state (markov.chain).
+of all configurations (markov.chain.transition), the recurrent class found by
+breadth-first search from the compact jam (markov.chain.statespace), and the exact
+stationary state (markov.solvers.ring_chain).
 """
 from __future__ import annotations
 
@@ -18,15 +18,15 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from markov.chain import solve
+from markov.solvers.ring_chain import solve
 from markov.errors import InvalidParameterError
-from markov.goe import census, goe_mask, image_keys, is_goe, is_pattern_free, pattern_free_mask
-from markov.goe_census import frozen_count, pattern_free_count, recurrent_class_count
-from markov.goe_patterns import elementary_patterns, word_allowed
-from markov.ring import Ring
-from markov.statespace import all_keys, recurrent_keys
-from markov.encoding import decode, encode
-from markov.transition import successors
+from markov.goe.configurations import census, goe_mask, image_keys, is_goe, is_pattern_free, pattern_free_mask
+from markov.goe.census import frozen_count, pattern_free_count, recurrent_class_count
+from markov.goe.patterns import elementary_patterns, word_allowed
+from markov.model.ring import Ring
+from markov.chain.statespace import all_keys, recurrent_keys
+from markov.chain.encoding import decode, encode
+from markov.chain.transition import successors
 
 # ---------------------------------------------------------------- naive oracle
 
@@ -89,7 +89,7 @@ def all_configs(L, N, vmax):
 
 def ring_of(word, vmax, extra):
     """The word followed by ``extra`` empty cells, as a ring configuration."""
-    from markov.encoding import from_text
+    from markov.chain.encoding import from_text
     return tuple(from_text(word, vmax)) + (-1,) * extra
 
 

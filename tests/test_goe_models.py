@@ -18,14 +18,15 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from markov.encoding import encode, from_text
+from markov.chain.encoding import encode, from_text
 from markov.errors import InvalidParameterError
-from markov.goe import census, goe_count, goe_mask, pattern_free_mask
-from markov.goe_census import frozen_count, recurrent_class_bound, recurrent_class_count
-from markov.goe_patterns import elementary_patterns, limit_order, rule_support
-from markov.ring import Ring
-from markov.rule import MODELS, load_model, rule
-from markov.statespace import all_keys
+from markov.goe.configurations import census, goe_count, goe_mask, pattern_free_mask
+from markov.goe.census import frozen_count, recurrent_class_bound, recurrent_class_count
+from markov.goe.patterns import elementary_patterns, limit_order, rule_support
+from markov.model.ring import Ring
+from markov.model.load import MODELS, load_model
+from markov.model.spec import rule
+from markov.chain.statespace import all_keys
 from nasch.cli import main
 from nasch.model_options import build_model, parse_params
 from tests.naive_rule import Chain, parallel_step

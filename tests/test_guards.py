@@ -34,7 +34,7 @@ def refused(result, words):
 
 @pytest.mark.parametrize("tol", [float("nan"), float("inf"), -1.0, 0.0, 1e-16, 0.5])
 def test_api_refuses_bad_tol_before_enumerating(tol, monkeypatch):
-    monkeypatch.setattr("markov.chain.recurrent_keys",
+    monkeypatch.setattr("markov.solvers.ring_chain.recurrent_keys",
                         lambda *a, **k: pytest.fail("enumerated before checking tol"))
     ring = Ring(12, 6, 2, 0.5)
     with pytest.raises(InvalidParameterError, match="tol must be a finite number in"):
@@ -64,7 +64,7 @@ def test_max_memory_must_be_positive_and_finite(value):
 
 
 def test_unknown_method_refused_before_enumerating(monkeypatch):
-    monkeypatch.setattr("markov.chain.recurrent_keys",
+    monkeypatch.setattr("markov.solvers.ring_chain.recurrent_keys",
                         lambda *a, **k: pytest.fail("enumerated before checking the method"))
     with pytest.raises(InvalidParameterError, match="method must be one of"):
         solve(Ring(12, 6, 2, 0.5), method="lu")
@@ -78,9 +78,9 @@ def test_unknown_method_refused_before_enumerating(monkeypatch):
     (["-L", "40", "-N", "0", "--vmax", "2"], "L = 30"),      # even an empty ring: no key
 ])
 def test_rings_beyond_the_key_are_refused_at_once(args, longest, monkeypatch):
-    monkeypatch.setattr("markov.chain.recurrent_keys",
+    monkeypatch.setattr("markov.solvers.ring_chain.recurrent_keys",
                         lambda *a, **k: pytest.fail("enumerated before checking the key"))
-    monkeypatch.setattr("markov.goe_census.recurrent_class_count",
+    monkeypatch.setattr("markov.goe.census.recurrent_class_count",
                         lambda *a, **k: pytest.fail("counted before checking the key"))
     res = run("solve", *args, "--p", "0.5")
     assert refused(res, f"holds rings of up to {longest} cells")
@@ -93,7 +93,7 @@ def test_large_counts_are_written_with_an_exponent():
 
 
 def test_simulate_memory_guard_refuses_before_allocating(monkeypatch):
-    monkeypatch.setattr("markov.montecarlo.initial_configuration",
+    monkeypatch.setattr("markov.simulation.montecarlo.initial_configuration",
                         lambda *a, **k: pytest.fail("allocated before the memory guard"))
     res = run("simulate", "-L", "1000000000", "-c", "0.2", "--p", "0.5", "--steps", "100",
               "--max-memory", "1")
@@ -104,7 +104,7 @@ def test_simulate_memory_guard_refuses_before_allocating(monkeypatch):
 
 def test_simulation_bytes_matches_the_measured_peak():
     # measured in issue 12: L = 1e9, N = 2e8 peaked at 9.6 GB resident
-    from markov.montecarlo import simulation_bytes
+    from markov.simulation.montecarlo import simulation_bytes
     assert simulation_bytes(Ring(10**9, 2 * 10**8, 2, 0.5)) == pytest.approx(9.6e9, rel=0.01)
 
 
@@ -113,7 +113,7 @@ def test_simulation_bytes_matches_the_measured_peak():
 @pytest.mark.parametrize("args", [["--vmax", "7"], ["--vmax", "9"],
                                   ["--census", "-L", "12", "-N", "6", "--vmax", "7"]])
 def test_goe_beyond_vmax6_refused_at_once_with_the_reason(args, monkeypatch):
-    monkeypatch.setattr("markov.goe_patterns.preimage_automaton",
+    monkeypatch.setattr("markov.goe.patterns.preimage_automaton",
                         lambda *a, **k: pytest.fail("built an automaton before checking vmax"))
     res = run("goe", *args)
     assert refused(res, "built for vmax in 1..6") and "tenfold" in res.output
@@ -148,7 +148,7 @@ def no_work(monkeypatch):
         pytest.fail("computed before the output path was checked")
     monkeypatch.setattr("nasch.tables.flux_table", fail)
     monkeypatch.setattr("nasch.plot.fundamental_data", fail)
-    monkeypatch.setattr("markov.chain.solve", fail)
+    monkeypatch.setattr("markov.solvers.ring_chain.solve", fail)
 
 
 COMMANDS = {  # command line before the output path, and the file suffix it needs
@@ -240,7 +240,7 @@ def test_lone_car_flux_is_w_minus_p_over_L(L, vmax, p):
 
 def test_random_sequential_unreachable_count_quoted_in_the_readme():
     # README: L = 9, N = 4, vmax = 3 random-sequential: 1,899 of 32,256 unreachable
-    from markov.statespace import all_keys, recurrent_keys
+    from markov.chain.statespace import all_keys, recurrent_keys
     ring = Ring(9, 4, 3, 0.5, "random-sequential")
     every = all_keys(ring)
     assert len(every) == 32_256
@@ -251,10 +251,10 @@ def test_goe_doc_lone_car_pattern_free_but_transient_not_frozen():
     # docs/goe.md: "pattern-free = recurrent + frozen" fails for N = 1, vmax >= 3:
     # L = 8, N = 1, vmax = 3 has 8 pattern-free transient configurations that are
     # not frozen (the car at velocity 1), and the recurrent class is 2 L.
-    from markov.goe import pattern_free_mask
-    from markov.goe_census import frozen_count, pattern_free_count, recurrent_class_count
-    from markov.statespace import all_keys, recurrent_keys
-    from markov.encoding import decode
+    from markov.goe.configurations import pattern_free_mask
+    from markov.goe.census import frozen_count, pattern_free_count, recurrent_class_count
+    from markov.chain.statespace import all_keys, recurrent_keys
+    from markov.chain.encoding import decode
     ring = Ring(8, 1, 3, 0.5)
     keys = all_keys(ring)
     pf = keys[pattern_free_mask(keys, 8, 3)]
@@ -274,14 +274,14 @@ def test_goe_doc_lone_car_pattern_free_but_transient_not_frozen():
 
 def _no_solve(monkeypatch):
     """Any exact solve, Monte Carlo run or job fan-out fails the test."""
-    import markov.chain  # noqa: F401 - imported before patching: no module binds a fake
+    import markov.solvers.ring_chain  # noqa: F401 - imported before patching: no module binds a fake
     import nasch.plot  # noqa: F401
     import nasch.tables  # noqa: F401
 
     def fail(*a, **k):
         pytest.fail("work started before the refusal")
     for target in ("nasch.sweep.run_jobs", "nasch.tables.run_jobs", "nasch.plot.run_jobs",
-                   "markov.chain.solve"):
+                   "markov.solvers.ring_chain.solve"):
         monkeypatch.setattr(target, fail)
 
 

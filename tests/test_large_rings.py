@@ -8,13 +8,13 @@ from click.testing import CliRunner
 
 from markov import (ConvergenceError, InvalidParameterError, Ring, RingChain, SOLVERS,
                     StateSpaceTooLargeError, solve, stationary)
-from markov.chain import AUTO_MATRIX_STATES
-from markov._factored import FactoredOperator
+from markov.solvers.ring_chain import AUTO_MATRIX_STATES
+from markov.chain.factored import FactoredOperator
 from markov.memory import factored_bytes_per_state, memory_limit, solver_vectors
-from markov._sequential import SequentialOperator
-from markov.statespace import recurrent_keys
+from markov.chain.sequential import SequentialOperator
+from markov.chain.statespace import recurrent_keys
 from markov.choices import PRODUCT_METHODS
-from markov.transition import transition_matrix
+from markov.chain.transition import transition_matrix
 from nasch.cli import main
 
 SOLVER_CASES = [(m, *case) for m in PRODUCT_METHODS for case in [
@@ -170,9 +170,9 @@ def test_cli_solve_operator_and_method_options():
 
 
 def test_refused_before_enumerating_when_the_count_predicts_too_many_states(monkeypatch):
-    from markov.goe_census import recurrent_class_bound, recurrent_class_count
+    from markov.goe.census import recurrent_class_bound, recurrent_class_count
 
-    monkeypatch.setattr("markov.chain.recurrent_keys",
+    monkeypatch.setattr("markov.solvers.ring_chain.recurrent_keys",
                         lambda *a, **k: pytest.fail("enumerated before the bound refused"))
     # L = 24 would take a minute to enumerate: the refusal must come from the count
     lower = -(-recurrent_class_count(24, 12, 2) // 24)  # orbits have at most L members
@@ -187,7 +187,7 @@ def test_refused_before_enumerating_when_the_count_predicts_too_many_states(monk
 
 def test_the_solver_takes_its_size_bound_from_the_caller(monkeypatch):
     # the exact chain does not reach into the Garden of Eden automata by itself
-    monkeypatch.setattr("markov.goe_census.recurrent_class_count",
+    monkeypatch.setattr("markov.goe.census.recurrent_class_count",
                         lambda *a: pytest.fail("the solver called the GoE count"))
     calls = []
 

@@ -5,7 +5,7 @@ nothing of the lumping code (canonical keys, orbit-summed rows) is used to
 build it.  Every observable we report is translation invariant, so it must
 come out the same from both chains, and the lumped stationary vector must be
 the unlumped one summed over rotation orbits.  The orbit sums are formed here
-by rotating cell tuples in plain Python, not with :func:`markov.encoding.canonical`.
+by rotating cell tuples in plain Python, not with :func:`markov.chain.encoding.canonical`.
 """
 from collections import defaultdict
 
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from markov import Ring, solve
-from markov.encoding import decode, encode
+from markov.chain.encoding import decode, encode
 
 CASES = [  # (L, N, vmax, p, update): both update orders, vmax 1..3, several p
     (8, 4, 2, 0.5, "parallel"),

@@ -14,11 +14,11 @@ import pytest
 import scipy.sparse as sp
 
 import naive_rule as naive
-from markov.chain import RingChain, solve, solve_classes
-from markov.classes import all_configurations_classes
+from markov.solvers.ring_chain import RingChain, solve, solve_classes
+from markov.chain.classes import all_configurations_classes
 from markov.errors import InvalidParameterError, NoUniqueStationaryStateError
-from markov.ring import Ring
-from markov.rule import MODELS, load_model
+from markov.model.ring import Ring
+from markov.model.load import MODELS, load_model
 
 #: probabilities strictly inside (0, 1), different from each other and from 1/2
 PROBS = {"p": 0.3, "p0": 0.65, "pt": 0.55, "ps": 0.7, "a": 0.2, "b": 0.35}
@@ -79,7 +79,7 @@ def test_lumped_solution_equals_the_naive_chain(name):
 
 def test_nasch_shortcut_is_one_closed_class():
     # the proven single class (no SCC split for NaSch, 0 < p < 1) is what the split finds
-    from markov.classes import closed_classes
+    from markov.chain.classes import closed_classes
 
     for L, N, vmax, update in ((8, 3, 2, "parallel"), (9, 4, 3, "parallel"),
                                (8, 5, 2, "random-sequential")):
@@ -140,7 +140,7 @@ def test_start_configuration_is_checked():
 
 
 def test_user_rule_with_three_outcomes_through_the_public_interface():
-    from markov.rule import rule
+    from markov.model.spec import rule
 
     @rule(vmax=2, p=0.2, r=0.3, name="hop3")
     def hop3(v, gap, v_ahead, params):
@@ -196,9 +196,9 @@ def _bind_function(function):
 def test_transition_matrix_equals_the_naive_chain_entry_by_entry(name, update):
     # every configuration of a small ring, unlumped and lumped: the row generator
     # (rule table) against the rule function called configuration by configuration
-    from markov.encoding import decode
-    from markov.statespace import all_keys
-    from markov.transition import transition_matrix
+    from markov.chain.encoding import decode
+    from markov.chain.statespace import all_keys
+    from markov.chain.transition import transition_matrix
 
     model = _model(name, 2)
     L, N = (6, 3) if name != "kkw" else (5, 2)
@@ -222,13 +222,13 @@ def test_transition_matrix_equals_the_naive_chain_entry_by_entry(name, update):
 def test_a_chain_too_large_to_split_is_verified_by_a_second_search(monkeypatch):
     # pretend the support graph does not fit: the reachable set is solved as one
     # class and checked by a search from the answer's most probable state
-    import markov.chain
-    import markov.classes
+    import markov.solvers.ring_chain
+    import markov.chain.classes
 
     kkw = Ring(10, 4, model=_model("kkw", 2))   # one class, not proven (all searched)
     exact = solve(kkw).flux
-    monkeypatch.setattr(markov.classes, "support_graph_bytes", lambda ring, n: float("inf"))
-    monkeypatch.setattr(markov.chain, "search_all_fits", lambda ring, lump, limit: False)
+    monkeypatch.setattr(markov.chain.classes, "support_graph_bytes", lambda ring, n: float("inf"))
+    monkeypatch.setattr(markov.solvers.ring_chain, "search_all_fits", lambda ring, lump, limit: False)
     chain = RingChain(kkw, operator="matrix-free")
     assert chain.classes == [chain.reachable] and chain.unverified
     sol = chain.solution(method="bicgstab", tol=1e-12)
@@ -248,7 +248,7 @@ def test_a_rule_containing_nasch_support_has_one_class_over_all_configurations(
         name, vmax, update):
     # known_irreducible's argument (every NaSch path is a path of the rule), checked by
     # searching every configuration of small rings
-    from markov.classes import all_configurations_classes, known_irreducible
+    from markov.chain.classes import all_configurations_classes, known_irreducible
 
     model = _model(name, vmax)
     for L, N in ((5, 1), (6, 2), (7, 3), (6, 4), (7, 6)):
@@ -258,7 +258,7 @@ def test_a_rule_containing_nasch_support_has_one_class_over_all_configurations(
 
 
 def test_rules_without_nasch_support_are_searched_and_some_have_several_classes():
-    from markov.classes import known_irreducible
+    from markov.chain.classes import known_irreducible
 
     for name, (L, N) in (("fi", (8, 5)), ("cc", (12, 3))):
         ring = Ring(L, N, model=_model(name, 2))

@@ -1,4 +1,4 @@
-"""The rule as a value (markov.rule, markov.models) against the naive chain and the literature.
+"""The rule as a value (markov.model, markov.model.shipped) against the naive chain and the literature.
 
 ``naive_rule.Chain`` calls each rule function directly on every configuration
 of a tiny ring; the tabulated rule is checked against it entry by entry, the
@@ -22,10 +22,12 @@ import sympy
 import naive_rule as nr
 import reference
 from markov import InvalidParameterError, Ring, solve
-from markov.models import SHIPPED, bjh, nasch
-from markov.rule import (MODELS, ModelSpec, available_models, load_model, rule,
-                         symbolic_outcomes, tabulate)
-from markov.rules import velocity_outcomes
+from markov.model.load import SHIPPED
+from markov.model.shipped import bjh, nasch
+from markov.model.load import MODELS, available_models, load_model
+from markov.model.spec import ModelSpec, rule
+from markov.model.table import symbolic_outcomes, tabulate
+from markov.model.nasch_steps import velocity_outcomes
 
 ROOT = Path(__file__).resolve().parent.parent
 EXAMPLE = str(ROOT / "examples" / "my_rule.py") + ":rule"
@@ -350,11 +352,11 @@ def test_model_is_hashable_picklable_and_keyed():
     again = pickle.loads(pickle.dumps(user))
     assert again == user and again.params["r"] == 0.05 and "@" in user.key()
     assert json.loads(json.dumps(user.describe()))["source"].endswith("my_rule.py:rule")
-    assert load_model("markov.models.fi:rule", {"vmax": 2, "p": 0.5}).vmax == 2
+    assert load_model("markov.model.shipped.fi:rule", {"vmax": 2, "p": 0.5}).vmax == 2
 
 
 def test_loading_a_rule_file_imports_nothing_heavy():
-    code = (f"from markov.rule import load_model; load_model({EXAMPLE!r}, {{'vmax': 3}})\n"
+    code = (f"from markov import load_model; load_model({EXAMPLE!r}, {{'vmax': 3}})\n"
             "import sys, json; print(json.dumps(sorted(sys.modules)))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120, check=True)
@@ -367,7 +369,7 @@ def test_loading_a_rule_file_imports_nothing_heavy():
 
 def _bind_user(function, params):
     rule(**params)(function)
-    from markov.rule import _bind
+    from markov.model.load import _bind
     return _bind(function.spec, "test", {})
 
 
@@ -427,7 +429,7 @@ def test_a_spec_needs_an_integer_vmax():
 
 
 def test_a_table_too_large_to_evaluate_is_refused_before_calling_the_rule():
-    from markov.rule import MAX_RULE_CALLS
+    from markov.model.table import MAX_RULE_CALLS
 
     calls = []
 

@@ -2,8 +2,8 @@
 
 Each test asserts what the numbers say (verdicts and numbers in README.md and
 docs/symbolic.md).  References: the elementary GoE patterns of the exhaustive
-automaton search (markov.goe_patterns), long Monte Carlo runs on large rings of
-exactly the density (markov.montecarlo), the exact p -> 0 limit min(vmax c, 1 - c)
+automaton search (markov.goe.patterns), long Monte Carlo runs on large rings of
+exactly the density (markov.simulation.montecarlo), the exact p -> 0 limit min(vmax c, 1 - c)
 and, for vmax = 1, the closed form of the exact flux.
 """
 from fractions import Fraction
@@ -14,8 +14,8 @@ import pytest
 from reference import vmax1_infinite_flux
 
 from markov import Ring
-from markov.goe_patterns import elementary_patterns
-from markov.montecarlo import simulate
+from markov.goe.patterns import elementary_patterns
+from markov.simulation.montecarlo import simulate
 from nasch.rings import mc_ring
 from symbolic import approximate
 from symbolic.cluster import cluster_fixed_point, word_probability

@@ -134,9 +134,9 @@ def test_a_table_and_a_figure_simulate_the_same_point_alike():
 
 # --- any model: space-time diagram and the models' fundamental diagrams (issue 18) -------
 
-from markov.montecarlo import trajectory  # noqa: E402
-from markov.ring import Ring  # noqa: E402
-from markov.rule import load_model  # noqa: E402
+from markov.simulation.montecarlo import trajectory  # noqa: E402
+from markov.model.ring import Ring  # noqa: E402
+from markov.model.load import load_model
 from nasch.plot import models_data, models_figure, spacetime_figure  # noqa: E402
 
 

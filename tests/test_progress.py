@@ -4,8 +4,6 @@ import subprocess
 import sys
 
 from markov import progress
-
-
 class _Terminal(io.StringIO):
     def isatty(self):
         return True

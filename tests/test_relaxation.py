@@ -9,8 +9,8 @@ import pytest
 from click.testing import CliRunner
 
 from markov.errors import InvalidParameterError
-from markov.ring import Ring
-from markov.spectrum import relaxation_spectrum
+from markov.model.ring import Ring
+from markov.analysis.spectrum import relaxation_spectrum
 from nasch.cli import main
 from nasch.relaxation import fit_power_law, relaxation_curves
 
@@ -101,7 +101,7 @@ def test_spectrum_cli_several_lengths_fit_and_text():
     (["-L", "8", "-c", "1.5", "--p", "0.5"], "--density"),
     (["-L", "8", "-N", "4", "--p", "0.5", "--count", "0"], "--count"),
     (["-L", "8", "-N", "4", "--p", "0.5", "--tol", "0"], "--tol"),
-    (["-L", "8", "-N", "4"], "--p"),
+    (["-L", "8", "-N", "4", "--p", "1.5"], "p must be a probability"),
     (["-L", "14", "-N", "7", "--p", "0.5", "--operator", "matrix", "--max-memory", "0.001"],
      "memory limit"),
     (["-L", "8", "-N", "4", "--p", "0.5", "--update", "ordered-sequential",
@@ -131,7 +131,7 @@ def test_plot_relaxation(tmp_path):
 def test_curves_of_another_model_and_update():
     """VDR under random-sequential update: the curve's first point is the spectrum
     of that very ring."""
-    from markov.rule import load_model
+    from markov.model.load import load_model
 
     m = load_model("vdr", {"vmax": 2, "p0": 0.75})
     d = relaxation_curves(6, [0.2], model=m, update="random-sequential", cars=[2, 3])

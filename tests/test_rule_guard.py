@@ -13,9 +13,10 @@ import time
 
 import pytest
 
-import markov.rule_guard as guard
+import markov.model.guard as guard
 from markov.errors import InvalidParameterError
-from markov.rule import rule, symbolic_outcomes, tabulate
+from markov.model.spec import rule
+from markov.model.table import symbolic_outcomes, tabulate
 
 NASCH = [sys.executable, "-m", "nasch"]
 HEAD = "import random, sys, time\nimport numpy as np\n"
@@ -26,7 +27,7 @@ def _model(body: str, name: str = "bad"):
     exec(HEAD + f"def {name}(v, gap, v_ahead, params):\n" + textwrap.indent(body, "    "),
          namespace)
     rule(vmax=2, p=0.5)(namespace[name])
-    from markov.rule import _bind
+    from markov.model.load import _bind
     return _bind(namespace[name].spec, "test", {})
 
 
@@ -126,7 +127,7 @@ def test_a_deterministic_rule_with_symbols_passes_and_a_random_one_does_not():
 ])
 def test_the_command_line_refuses_in_one_line_with_status_2(tmp_path, body, message):
     path = tmp_path / "user_rule.py"
-    path.write_text("from markov.rule import rule\n" + HEAD + "@rule(vmax=2, p=0.5)\n"
+    path.write_text("from markov import rule\n" + HEAD + "@rule(vmax=2, p=0.5)\n"
                     "def bad(v, gap, v_ahead, params):\n" + textwrap.indent(body, "    ") + "\n")
     out = subprocess.run([*NASCH, "solve", "-L", "6", "-N", "3", "--model", f"{path}:bad"],
                          capture_output=True, text=True, timeout=60)

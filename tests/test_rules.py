@@ -4,7 +4,7 @@ import itertools
 import pytest
 import sympy
 
-from markov.rules import (accelerate, brake_to_gap, deterministic_velocity, randomize,
+from markov.model.nasch_steps import (accelerate, brake_to_gap, deterministic_velocity, randomize,
                           velocity_outcomes)
 
 

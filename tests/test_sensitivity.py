@@ -1,4 +1,4 @@
-"""Exact sensitivities (markov.sensitivity): d pi / d p, d flux / d p for any probability parameter.
+"""Exact sensitivities (markov.analysis.sensitivity): d pi / d p, d flux / d p for any probability parameter.
 
 Checked against central differences of exact fluxes (solves at p +- h), the
 derivative of the exact rational flux f(p) (symbolic.exact, and a sympy solve
@@ -18,8 +18,8 @@ from sympy.polys.matrices import DomainMatrix
 
 from markov import Ring, RingChain, solve
 from markov.errors import InvalidParameterError
-from markov.rule import load_model
-from markov.sensitivity import derivative_product, sensitivity, weight_derivatives
+from markov.model.load import load_model
+from markov.analysis.sensitivity import derivative_product, sensitivity, weight_derivatives
 from nasch.cli import main
 
 H = 1e-5   # central differences: truncation ~ h^2 f''' / 6, rounding ~ 1e-15 / h: ~1e-10
@@ -87,7 +87,7 @@ def test_dflux_equals_the_derivative_of_the_exact_rational_flux(N, vmax, p):
 
 def test_vdr_dflux_dp0_equals_the_derivative_of_the_exact_rational_flux():
     # the 6-cell VDR chain solved over QQ(p0) here, from the symbolic transition counts
-    from markov.encoding import decode
+    from markov.chain.encoding import decode
     from symbolic.exact import transition_polynomials
 
     ring = _ring("vdr", "parallel", 6, 3, vmax=2, p=0.25, p0=0.5)
@@ -193,7 +193,7 @@ def test_a_matrix_free_solution_takes_the_factored_route():
 def test_a_user_rule_without_symbols_falls_back_to_the_central_difference(tmp_path):
     path = tmp_path / "squared.py"
     path.write_text(
-        "from markov.rule import rule\n\n"
+        "from markov import rule\n\n"
         "@rule(vmax=2, p=0.6)\n"
         "def squared(v, gap, v_ahead, params):\n"
         "    b = float(params['p']) ** 2   # float(): a sympy symbol cannot pass\n"

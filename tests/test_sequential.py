@@ -4,10 +4,10 @@ import pytest
 
 from markov import Ring
 from markov import InvalidParameterError
-from markov._sequential import KeyIndex, SequentialOperator, successor_keys
-from markov.encoding import canonical_keys, decode, encode
-from markov.statespace import recurrent_keys
-from markov.transition import successors, transition_matrix
+from markov.chain.sequential import KeyIndex, SequentialOperator, successor_keys
+from markov.chain.encoding import canonical_keys, decode, encode
+from markov.chain.statespace import recurrent_keys
+from markov.chain.transition import successors, transition_matrix
 
 CASES = [  # (L, N, vmax, update): B = 3 and 5 take the division path, B = 4 and 8 bit shifts
     (7, 3, 1, "random-sequential"),
@@ -43,8 +43,8 @@ def test_row_operator_refuses_parallel_update():
 
 
 def test_successor_keys_of_parallel_update_match_the_factored_search():
-    from markov._factored import frontier_successors
-    from markov.encoding import unique_keys
+    from markov.chain.factored import frontier_successors
+    from markov.chain.encoding import unique_keys
 
     for lump in (True, False):
         ring = Ring(7, 3, 2, 0.5)

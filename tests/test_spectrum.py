@@ -6,10 +6,10 @@ import math
 import numpy as np
 import pytest
 
-from markov.chain import RingChain
-from markov.ring import Ring
-from markov.rule import load_model
-from markov.spectrum import (orbit_sizes, relaxation_spectrum, sector_matrix, sector_operator,
+from markov.solvers.ring_chain import RingChain
+from markov.model.ring import Ring
+from markov.model.load import load_model
+from markov.analysis.spectrum import (orbit_sizes, relaxation_spectrum, sector_matrix, sector_operator,
                              sector_states)
 from markov.errors import InvalidParameterError
 
@@ -113,7 +113,7 @@ def test_periodic_orbits_only_in_their_sectors():
                                   Ring(10, 4, model=load_model("kkw", {"vmax": 2})),
                                   Ring(10, 5, model=load_model("bjh", {"vmax": 2}))], ids=repr)
 def test_factored_sector_operator_equals_the_sector_matrix(ring):
-    from markov._factored import FactoredOperator
+    from markov.chain.factored import FactoredOperator
 
     keys = RingChain(ring).keys
     op = FactoredOperator(ring, keys, lump=True, shifts=True)
@@ -127,7 +127,7 @@ def test_factored_sector_operator_equals_the_sector_matrix(ring):
 
 
 def test_arpack_and_factored_agree_with_dense(monkeypatch):
-    import markov.spectrum as spectrum
+    import markov.analysis.spectrum as spectrum
 
     # 270 classes: with the dense limit lowered, ARPACK runs on every sector
     monkeypatch.setattr(spectrum, "DENSE_SECTOR_STATES", 50)
@@ -212,10 +212,10 @@ def test_unverified_chain_is_checked_before_its_spectrum(monkeypatch):
     """Above SPLIT_MAX_STATES a chain not proven irreducible is taken as one class to be
     verified: the spectrum verifies it first (cruise control at low density has
     several closed classes and is refused; VDR has one and is solved)."""
-    import markov.chain
+    import markov.solvers.ring_chain
     from markov.errors import NoUniqueStationaryStateError
 
-    monkeypatch.setattr(markov.chain, "SPLIT_MAX_STATES", 5)
+    monkeypatch.setattr(markov.solvers.ring_chain, "SPLIT_MAX_STATES", 5)
     cc = Ring(12, 3, model=load_model("cc", {"vmax": 2, "p": 0.2}))
     with pytest.raises(NoUniqueStationaryStateError):
         relaxation_spectrum(cc, count=1)
@@ -229,7 +229,7 @@ def test_unverified_chain_is_checked_before_its_spectrum(monkeypatch):
 def test_row_sector_operator_equals_the_sector_matrix(ring):
     """Random-sequential update, matrix-free: the row operator with the phase of each
     successor, in every sector, and the spectrum it gives."""
-    from markov._sequential import SequentialOperator
+    from markov.chain.sequential import SequentialOperator
 
     keys = RingChain(ring).keys
     op = SequentialOperator(ring, keys, lump=True)
@@ -245,7 +245,7 @@ def test_row_sector_operator_equals_the_sector_matrix(ring):
 
 
 def test_random_sequential_goes_matrix_free_only_when_the_matrices_do_not_fit(monkeypatch):
-    import markov.spectrum as spectrum
+    import markov.analysis.spectrum as spectrum
 
     ring = Ring(9, 4, 2, 0.5, update="random-sequential")
     assert relaxation_spectrum(ring, count=1).operator == "matrix"

@@ -35,8 +35,8 @@ def test_import_markov_loads_no_heavy_library():
 def test_solver_and_library_modules_load_neither_sympy_dask_nor_matplotlib():
     loaded = _top(_modules_after(
         "from markov import Ring, solve\n"
-        "import nasch.tables, nasch.plot, nasch.sweep, markov.montecarlo, markov.goe\n"
-        "import markov.storage, nasch.extrapolate\n"
+        "import nasch.tables, nasch.plot, nasch.sweep, markov.simulation.montecarlo, markov.goe.configurations\n"
+        "import markov.solvers.storage, nasch.extrapolate\n"
         "solve(Ring(8, 4, 2, 0.5)).flux"))
     assert not loaded & set(HEAVY)
     assert "numpy" in loaded   # the check itself works

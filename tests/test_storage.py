@@ -4,7 +4,7 @@ Independent routes: the naive plain-Python chain of ``tests/naive.py``
 (configurations as tuples, its own BFS and dense solve) for the decoder and
 the probabilities; the unlumped solve (``lump=False``) for the expansion of
 a lumped solution; a digit-by-digit decoding written here for the key rule
-stated in ``markov.storage``.
+stated in ``markov.solvers.storage``.
 """
 from __future__ import annotations
 
@@ -21,10 +21,10 @@ from click.testing import CliRunner
 
 import naive
 from markov import CorruptFileError, InvalidParameterError, NaschError, Ring, load_solution, solve
-from markov.encoding import encode
-from markov.statespace import all_keys, recurrent_keys
+from markov.chain.encoding import encode
+from markov.chain.statespace import all_keys, recurrent_keys
 from nasch.cli import main
-from markov.storage import (ENCODING, SUM_TOLERANCE, decode_keys,
+from markov.solvers.storage import (ENCODING, SUM_TOLERANCE, decode_keys,
                             rotation_counts, top_configurations)
 
 CASES = [(8, 3, 2, 0.5, "parallel"), (7, 3, 1, 0.25, "parallel"), (9, 4, 3, 0.75, "parallel"),
@@ -291,7 +291,7 @@ def test_the_check_of_velocities_holds_on_every_recurrent_class_and_refuses_othe
     """Every recurrent state of 352 small rings (L <= 8, both updates) passes the checks
     of the keys, lumped and not; and they are no formality: under parallel update they
     refuse configurations that no step produces."""
-    from markov.storage import _Bad, _check_keys
+    from markov.solvers.storage import _Bad, _check_keys
 
     for L in range(1, 9):
         for N in range(L + 1):
@@ -436,7 +436,7 @@ def test_cli_save_and_top(tmp_path):
 def test_cli_save_top_bad_values_refused_before_work(args, words, monkeypatch):
     def no_work(*a, **k):
         raise AssertionError("the solver ran before the options were checked")
-    monkeypatch.setattr("markov.chain.solve", no_work)
+    monkeypatch.setattr("markov.solvers.ring_chain.solve", no_work)
     res = CliRunner().invoke(main, ["solve", "-L", "8", "-N", "3", "--p", "0.5", *args])
     assert res.exit_code == 2 and words in res.output and "Traceback" not in res.output
 
@@ -444,7 +444,7 @@ def test_cli_save_top_bad_values_refused_before_work(args, words, monkeypatch):
 @pytest.mark.parametrize("model,update", [("vdr", "parallel"), ("kkw", "random-sequential"),
                                           ("tt", "ordered-sequential")])
 def test_a_model_round_trips_with_its_parameters(tmp_path, model, update):
-    from markov.rule import load_model
+    from markov.model.load import load_model
 
     m = load_model(model, {"vmax": 2} if model != "kkw" else {"vmax": 2, "a": 0.3})
     sol = solve(Ring(7, 3, update=update, model=m))

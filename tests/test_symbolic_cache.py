@@ -75,7 +75,7 @@ def test_the_key_follows_the_rules_source(monkeypatch):
     real = cache._source_digest
 
     def edited(name):
-        return "edited rules" if name == "markov.rules" else real(name)
+        return "edited rules" if name == "markov.model.nasch_steps" else real(name)
     monkeypatch.setattr(cache, "_source_digest", edited)
     assert cache.cache_key("symbolic.cluster", method="cluster", order=4, vmax=2) != before
 

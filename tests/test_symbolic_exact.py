@@ -6,7 +6,7 @@ import pytest
 import sympy as sp
 
 from markov import InvalidParameterError, Ring, solve
-from markov.statespace import recurrent_keys
+from markov.chain.statespace import recurrent_keys
 from markov.errors import StateSpaceTooLargeError
 from symbolic.exact import exact_solution, transition_polynomials
 from symbolic.meanfield import p

@@ -4,7 +4,7 @@ import pytest
 import sympy as sp
 
 from markov import InvalidParameterError, Ring, solve
-from markov.rules import deterministic_velocity
+from markov.model.nasch_steps import deterministic_velocity
 from symbolic.cluster import push
 from symbolic.meanfield import (c, car_events, d, gap_horizons, mf_equations, mf_rhs,
                                 mf_solution, on_constraint, p, paper_mf_equations,

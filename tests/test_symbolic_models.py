@@ -1,4 +1,4 @@
-"""Approximations derived from other update rules (markov.rule models): MF, n-cluster, COMF.
+"""Approximations derived from other update rules (markov.model models): MF, n-cluster, COMF.
 
 pMF and pMF2: tests/test_symbolic_pmf_models.py.
 """
@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from markov.chain import solve
+from markov.solvers.ring_chain import solve
 from markov.errors import InvalidParameterError
-from markov.ring import Ring
-from markov.rule import load_model
+from markov.model.ring import Ring
+from markov.model.load import load_model
 from symbolic import approximate, equations
 
 from reference import vmax1_infinite_flux

@@ -6,7 +6,7 @@ import pytest
 import sympy as sp
 
 from markov import Ring, solve
-from markov.observables import expected_move
+from markov.solvers.observables import expected_move
 from symbolic.meanfield import c, d, on_constraint, p, q, velocity_symbols
 from symbolic.paradisical import (GOE_PATTERNS, SECOND_ORDER_PATTERNS, goe_patterns,
                                   paper_c2, paper_cubic, paper_pmf_equations,
@@ -151,9 +151,9 @@ def test_goe_patterns_have_zero_exact_probability(vmax, L, N):
 
 
 def _goe_search():
-    """markov.goe_patterns.elementary_patterns (another module's exhaustive search), if present."""
+    """markov.goe.patterns.elementary_patterns (another module's exhaustive search), if present."""
     try:
-        module = importlib.import_module("markov.goe_patterns")
+        module = importlib.import_module("markov.goe.patterns")
     except ImportError:
         return None
     return getattr(module, "elementary_patterns", None)
@@ -163,7 +163,7 @@ def _goe_search():
 def test_pattern_data_agrees_with_the_goe_search(vmax):
     search = _goe_search()
     if search is None:
-        pytest.skip("markov.goe_patterns offers no pattern search")
+        pytest.skip("markov.goe.patterns offers no pattern search")
     result = search(vmax, 6)
     found = {(pt.pattern, pt.order) for pt in result.patterns}
     expected = {(t, 1) for t in GOE_PATTERNS[vmax]} | {(t, 2) for t in SECOND_ORDER_PATTERNS[vmax]}
@@ -211,7 +211,7 @@ def test_pmf_breaks_the_flux_bound_for_weak_noise():
 def test_patterns_used_are_the_papers_for_vmax_1_and_2():
     # the equations take their patterns from the automaton search; for vmax 1, 2 they are
     # exactly the paper's lists (order 1) plus (0,•,•,2) (order 2)
-    from markov.encoding import from_text
+    from markov.chain.encoding import from_text
     for vmax in (1, 2):
         assert set(goe_patterns(vmax)) == {tuple(from_text(t, vmax)) for t in GOE_PATTERNS[vmax]}
         assert set(goe_patterns(vmax, True)) - set(goe_patterns(vmax)) == {
@@ -222,7 +222,7 @@ def _enumerated_rhs(vmax, second, cv, pv):
     """F_w by brute force (float weights): every word of K cells ahead, anchored patterns out."""
     import itertools
 
-    from markov.rules import velocity_outcomes
+    from markov.model.nasch_steps import velocity_outcomes
     from symbolic.meanfield import gap_horizons
     pats = goe_patterns(vmax, second)
     K = max(max(gap_horizons(vmax)), max(len(pt) for pt in pats) - 1)

@@ -1,4 +1,4 @@
-"""pMF and pMF2 of other update rules (markov.rule models): the model's own GoE patterns removed."""
+"""pMF and pMF2 of other update rules (markov.model models): the model's own GoE patterns removed."""
 from __future__ import annotations
 
 import itertools
@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from markov.encoding import EMPTY, from_text
+from markov.chain.encoding import EMPTY, from_text
 from markov.errors import InvalidParameterError
-from markov.goe_patterns import elementary_patterns, word_allowed
-from markov.rule import load_model
+from markov.goe.patterns import elementary_patterns, word_allowed
+from markov.model.load import load_model
 from symbolic import approximate, equations
 from symbolic.paradisical import goe_patterns
 from symbolic.ruleview import numeric_moves
@@ -62,8 +62,8 @@ def test_vmax1_pmf_is_exact_for_nasch_through_a_model_and_not_for_tt():
     f = approximate("pmf", None, None, 0.5, model=tt).flux
     assert abs(f - 0.2168044453) < 1e-9
     assert f - approximate("cluster5", None, None, 0.5, model=tt).flux > 1e-3
-    from markov.chain import solve
-    from markov.ring import Ring
+    from markov.solvers.ring_chain import solve
+    from markov.model.ring import Ring
     assert float(solve(Ring(14, 7, model=tt)).flux) - f > 5e-3
 
 
@@ -148,7 +148,7 @@ def test_refusals_are_one_line(call, words):
 
 def test_fi_refusal_names_the_unsettled_orders(monkeypatch):
     # the real refusal takes the GoE search 45 s to measure; a lower cap gives it in seconds
-    import markov.goe_patterns as gp
+    import markov.goe.patterns as gp
     monkeypatch.setattr(gp, "_MAX_STATES", 3000)
     with pytest.raises(InvalidParameterError) as err:
         approximate("pmf", None, None, C, model=load_model("fi", {"vmax": 2}))
@@ -192,7 +192,7 @@ def test_docs_table_pmf_columns():
 def test_a_probability_named_like_a_symbol_of_the_equations_is_refused(tmp_path):
     rule = tmp_path / "qrule.py"
     rule.write_text(
-        "from markov.rule import rule\n\n"
+        "from markov import rule\n\n"
         "@rule(vmax=1, q=0.3, name='qrule')\n"
         "def f(v, gap, v_ahead, params):\n"
         "    u = min(v + 1, params['vmax'], gap)\n"

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import markov.montecarlo
-from markov.chain import solve
+import markov.simulation.montecarlo
+from markov.solvers.ring_chain import solve
 from markov.errors import NoUniqueStationaryStateError
-from markov.ring import PARALLEL, UPDATES, Ring
-from markov.rule import load_model
+from markov.model.ring import PARALLEL, UPDATES, Ring
+from markov.model.load import load_model
 from nasch.cli import main
 from nasch.jobs import ExactJob, monte_carlo_job, point_seed, run_job
 from nasch.sweep import single_threaded
@@ -121,16 +121,16 @@ def test_cruise_control_prints_the_flux_every_class_has():
 
 
 def test_reducible_ring_gets_a_note_not_a_number(monkeypatch):
-    import markov.chain
+    import markov.solvers.ring_chain
 
-    real = markov.chain.solve
+    real = markov.solvers.ring_chain.solve
 
     def reducible(ring, **kw):
         if ring.length == 10:
             raise NoUniqueStationaryStateError("two closed classes (test)")
         return real(ring, **kw)
 
-    monkeypatch.setattr(markov.chain, "solve", reducible)
+    monkeypatch.setattr(markov.solvers.ring_chain, "solve", reducible)
     t = flux_table(model=VDR, lengths=[8, 10], densities=[0.5], mc_steps=0, serial=True,
                    extrapolation=False, methods=())
     bad = [r for r in t.rows if r.length == 10][0]
@@ -170,7 +170,7 @@ def _fake_simulate(seen):
 
 def test_study_of_a_model_passes_it_to_the_simulator(monkeypatch):
     seen = []
-    monkeypatch.setattr(markov.montecarlo, "simulate", _fake_simulate(seen))
+    monkeypatch.setattr(markov.simulation.montecarlo, "simulate", _fake_simulate(seen))
     r = CliRunner().invoke(main, ["study", "--model", "vdr", "--param", "p0=0.75", "--p", "0.1",
                                   "--density", "0.5", "--methods", "mf,pmf,cluster2",
                                   "--no-extrapolation", "--mc-steps", "200", "--serial",

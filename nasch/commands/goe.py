@@ -47,7 +47,7 @@ def goe(vmax, model, params, max_cells, do_census, length, cars, update, as_json
     if do_census:
         if length is None or cars is None:
             raise InvalidParameterError("--census needs --length L and --cars N")
-        from markov.goe import census
+        from markov.goe.configurations import census
         row = census(length, cars, model=rule, update=update)
         if as_json:
             emit_json(row)
@@ -75,7 +75,7 @@ def goe(vmax, model, params, max_cells, do_census, length, cars, update, as_json
         raise InvalidParameterError(
             "--update random-sequential has no elementary patterns: a configuration with an"
             " empty cell is its own predecessor (use --census to count GoE rings)")
-    from markov.goe_patterns import elementary_patterns
+    from markov.goe.patterns import elementary_patterns
     result = elementary_patterns(None, max_cells, rule)
     if as_json:
         emit_json(result.to_dict())

@@ -23,7 +23,7 @@ def models(as_json):
       nasch models
       nasch solve -L 12 -N 4 --model vdr --param p0=0.75 --p 0.1
     """
-    from markov.rule import available_models
+    from markov.model.load import available_models
 
     listing = available_models()
     if as_json:

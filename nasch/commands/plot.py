@@ -135,8 +135,8 @@ def spacetime(length, density, vmax, p, model, params, update, steps, warmup, se
       nasch plot spacetime --model kkw --update ordered-sequential --bw -o kkw.pdf
     """
     from markov.files import check_output_path
-    from markov.montecarlo import trajectory
-    from markov.ring import Ring
+    from markov.simulation.montecarlo import trajectory
+    from markov.model.ring import Ring
     from markov.validate import ensure_int, ensure_real
 
     from ..model_options import build_model
@@ -190,8 +190,8 @@ def models(models_text, vmax, params, update, length, densities, steps, replicas
       nasch plot models --models nasch,kkw --vmax 3 --param p=0.25 --steps 4000 -o fd.pdf
     """
     from markov.files import check_output_path
-    from markov.montecarlo import MIN_STEPS
-    from markov.rule import load_model
+    from markov.simulation.montecarlo import MIN_STEPS
+    from markov.model.load import load_model
     from markov.validate import ensure_int
 
     from ..model_options import parse_params
@@ -258,8 +258,8 @@ def relaxation(length, model, params, vmax, p_text, update, spectrum_cars, count
       nasch plot relaxation -L 10 --model vdr --param p0=0.75 --p 0.1,0.3 -o vdr.png
     """
     from markov.files import check_output_path
-    from markov.ring import Ring
-    from markov.spectrum import relaxation_spectrum
+    from markov.model.ring import Ring
+    from markov.analysis.spectrum import relaxation_spectrum
     from markov.validate import ensure_int
 
     from ..plot import FIGURE_FORMATS, relaxation_figure, save_figure

@@ -57,8 +57,8 @@ def simulate(length, density, cars, vmax, p, model, params, steps, warmup, repli
       nasch simulate -L 10000 -c 0.2 --model vdr --param p0=0.75 --p 0.1 --steps 4000
       nasch simulate -L 10000 -c 0.3 --model kkw --update ordered-sequential
     """
-    from markov.ring import Ring
-    from markov.montecarlo import simulate as run
+    from markov.model.ring import Ring
+    from markov.simulation.montecarlo import simulate as run
     from markov.validate import ensure_int, ensure_max_memory, ensure_real
 
     if (density is None) == (cars is None):

@@ -93,11 +93,11 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
       nasch solve -L 10 -N 4 --model vdr --p 0.1 --param p0=0.5 --sensitivity p,p0
     """
     # every check before the work: the solver's own up-front checks, then the options
-    from markov.chain import RingChain
+    from markov.solvers.ring_chain import RingChain
     from markov.errors import NoUniqueStationaryStateError
     from markov.files import check_output_path
-    from markov.goe_census import recurrent_class_bound
-    from markov.ring import Ring
+    from markov.goe.census import recurrent_class_bound
+    from markov.model.ring import Ring
     from markov.validate import ensure_int, ensure_max_memory
 
     ring = Ring(length, cars, update=update, model=build_model(model, params, vmax=vmax, p=p))
@@ -119,7 +119,7 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
                                           ("--sensitivity", names), ("--fluctuations", fluctuations),
                                           ("--autocorrelation", lags is not None)) if given]
     if every_class or start is not None:
-        from markov.chain import solve_classes
+        from markov.solvers.ring_chain import solve_classes
 
         classes = solve_classes(ring, every=every_class, start=start, lump=not no_lump, tol=tol,
                                 max_memory=limit)
@@ -129,7 +129,7 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
         sol = classes[0].solution
         chain = None
     else:
-        # markov.chain.solve, keeping the chain: a sensitivity reuses its operator
+        # markov.solvers.ring_chain.solve, keeping the chain: a sensitivity reuses its operator
         chain = RingChain(ring, lump=not no_lump, max_memory=limit, operator=operator,
                           state_bound=recurrent_class_bound)
         try:
@@ -189,7 +189,7 @@ def _sensitivity_names(ring, given, every_class: bool) -> list[str]:
     """The parameter names of --sensitivity, each checked before any solve."""
     if not given:
         return []
-    from markov.sensitivity import weight_derivatives
+    from markov.analysis.sensitivity import weight_derivatives
 
     names: list[str] = []
     for item in given:
@@ -209,7 +209,7 @@ def _sensitivity_names(ring, given, every_class: bool) -> list[str]:
 def _sensitivities(system, sol, names, tol) -> dict:
     if not names:
         return {}
-    from markov.sensitivity import sensitivity
+    from markov.analysis.sensitivity import sensitivity
 
     # the solve for dpi targets the stationary solve's tolerance, at most 1e-12
     return {name: sensitivity(system, name, solution=sol, tol=min(tol, 1e-12))
@@ -226,9 +226,9 @@ def _dynamics(sol, chain, start, limit, operator, fluctuations: bool, lags) -> d
     (``chain``, or, after --start, the chain of the class the start falls into)."""
     import numpy as np
 
-    from markov.chain import RingChain
-    from markov.correlations import autocorrelation, autocorrelation_time
-    from markov.fluctuations import current_fluctuations
+    from markov.solvers.ring_chain import RingChain
+    from markov.analysis.correlations import autocorrelation, autocorrelation_time
+    from markov.analysis.fluctuations import current_fluctuations
 
     if chain is None:
         chain = RingChain(sol.ring, lump=sol.lumped, max_memory=limit, operator=operator,

@@ -80,8 +80,8 @@ def spectrum(length_text, cars, density, model, params, vmax, p, update, count, 
       nasch spectrum -L 12 -N 4 --model vdr --param p0=0.75 --p 0.1 --sector 0,1
       nasch spectrum -L 10,12,14,16,18 -c 0.5 --vmax 1 --p 0.5 --count 1 --json
     """
-    from markov.ring import Ring
-    from markov.spectrum import relaxation_spectrum
+    from markov.model.ring import Ring
+    from markov.analysis.spectrum import relaxation_spectrum
     from markov.validate import ensure_int, ensure_max_memory, ensure_tol
 
     from ..relaxation import fit_power_law

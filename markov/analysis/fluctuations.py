@@ -1,0 +1,489 @@
+"""Current fluctuations of a ring: the diffusion coefficient and the SCGF, exactly.
+
+``Y_t`` is the number of cells moved by all cars up to time ``t`` of the
+stationary chain, the sum of the increments ``m(X_{k-1}, X_k)``:
+
+* parallel and ordered-sequential update: every car moves its new velocity,
+  so ``m`` is the sum of the velocities of the target state, ``m(y)``;
+* random-sequential update, one sub-step: one car moves (at most its gap
+  ``< L`` cells), so ``m(x, y)`` is the change of the sum of the car
+  positions mod ``L``, read from the unlumped successors of each state
+  (:func:`markov.chain.transition.successors`) before they are lumped.
+
+With ``a(x) = E[m | X_0 = x]`` (column), ``b = pi (P o m)`` (row, ``b(y) =
+sum_x pi(x) P(x, y) m(x, y)``) and ``J = pi . a``, the covariance of two
+increments ``j >= 1`` steps apart is ``(b - J pi) P^{j-1} a``, hence
+(Green-Kubo, one solve :func:`markov.solvers.fundamental.solve_fundamental`)
+
+.. math:: \\Delta = \\lim_t \\operatorname{var}(Y_t)/t
+          = \\operatorname{var}(m) + 2\\, w \\cdot a, \\qquad
+          w (I - P) = b - J \\pi,\\ \\textstyle\\sum w = 0,
+
+with ``var(m) = pi (P o m^2) 1 - J^2``.  For parallel and ordered-sequential
+update ``b = pi o m``, ``a = P m`` and ``Delta = C_m(0) tau_m``, the
+autocorrelation function and time of ``m = L f`` (:mod:`markov.analysis.correlations`).
+The scaled cumulant generating function
+
+.. math:: \\Lambda(s) = \\lim_t \\tfrac1t \\log E\\, e^{s Y_t}
+
+is the log of the Perron eigenvalue of the tilted matrix ``P_s(x, y) = P(x, y)
+exp(s m(x, y))`` (for parallel update ``A_s = diag(e^{s m}) A``, matrix-free
+when the chain is); ``Lambda'(0) = J``, ``Lambda''(0) = Delta``.
+
+Units: per step of the chain: a time step for parallel and ordered-sequential
+update, a sub-step (one cell drawn) for random-sequential update.  Per time
+step of random-sequential update (``L`` sub-steps) ``J`` and ``Delta`` are
+``L`` times the per-sub-step values; in continuous time (each cell drawn at
+rate 1, so each car updated at rate 1) ``J_c = L J`` and ``Delta_c = L
+(Delta + J^2)``, ``Lambda_c(s) = L (e^{Lambda(s)} - 1)`` (the number of
+sub-steps is Poisson).  Per cell: ``J / L`` is the flux (per time step), and the
+current through one bond has ``Delta / L^2`` (per time step).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from numba import njit
+
+from markov import memory
+from markov.analysis.correlations import MAX_LAGS, StationaryChain, prepare, sub_steps
+from markov.chain.encoding import canonical_keys
+from markov.chain.kernels import cars_of
+from markov.chain.transition import state_indices, successors
+from markov.errors import ConvergenceError, InvalidParameterError
+from markov.model.ring import RANDOM_SEQUENTIAL, Ring
+from markov.solvers.fundamental import solve_fundamental
+from markov.solvers.observables import velocity_counts
+from markov.solvers.ring_chain import RingChain
+from markov.validate import ensure_int, ensure_real
+
+__all__ = ["CurrentFluctuations", "SCGF", "current_fluctuations", "current_variance",
+           "block_autocorrelation_time", "scgf", "moved_per_state", "DENSE_EIG_LIMIT"]
+
+#: Tilted chains up to this many states are diagonalised densely (LAPACK).
+DENSE_EIG_LIMIT = 300
+#: Bound on ``|s| * N * vmax`` of :func:`scgf` (``exp`` of it must not overflow).
+MAX_TILT = 300.0
+_CHUNK = 1 << 15
+
+
+# --- the increments ---------------------------------------------------------------
+
+
+def moved_per_state(ring: Ring, keys: np.ndarray) -> np.ndarray:
+    """Cells moved in the step into each state: the sum of its velocities.
+
+    The increment ``m(y)`` of parallel and ordered-sequential update (every
+    car moves its new velocity once a step).
+
+    Parameters
+    ----------
+    ring : Ring
+    keys : (n,) int64 array
+
+    Returns
+    -------
+    (n,) float64 array
+
+    Examples
+    --------
+    >>> from markov.chain.encoding import encode
+    >>> moved_per_state(Ring(5, 3, 2, 0.5), np.array([encode([2, -1, 0, 1, -1], 2)])).tolist()
+    [3.0]
+    """
+    return velocity_counts(ring, keys) @ np.arange(ring.vmax + 1, dtype=np.float64)
+
+
+@njit(cache=True)
+def _position_sums(keys, length, b, out):
+    pos = np.empty(length, np.int64)
+    vel = np.empty(length, np.int64)
+    for i in range(keys.shape[0]):
+        n = cars_of(keys[i], length, b, pos, vel)
+        s = 0
+        for j in range(n):
+            s += pos[j]
+        out[i] = s
+
+
+def _position_sum(ring: Ring, keys: np.ndarray) -> np.ndarray:
+    out = np.empty(len(keys), np.int64)
+    _position_sums(np.ascontiguousarray(keys, np.int64), ring.length, ring.vmax + 2, out)
+    return out
+
+
+class _Increments(NamedTuple):
+    """What the moments of ``Y_t`` need: ``cov_j = (h0 P^{j-1}) . r`` for ``j >= 1``."""
+
+    current: float              # J = E m
+    variance: float             # var(m) of one step
+    h0: np.ndarray              # row vector, sums to zero
+    r: np.ndarray               # column read out
+    m: np.ndarray | None        # moved per target state (parallel, ordered-sequential)
+    transitions: tuple | None   # (source, target, probability, moved) (random-sequential)
+
+
+def _transition_moves(sc: StationaryChain, keep: bool):
+    """Stream the unlumped successor rows: ``a``, ``E[m^2 | x]``, ``b``; the entries if ``keep``."""
+    ring, keys, pi = sc.ring, sc.keys, sc.pi
+    n = len(keys)
+    a, a2, b = np.zeros(n), np.zeros(n), np.zeros(n)
+    parts = []
+    for start in range(0, n, _CHUNK):
+        chunk = keys[start:start + _CHUNK]
+        rows = successors(ring, chunk, lump=False)
+        prob = rows.probabilities()
+        local = np.repeat(np.arange(len(chunk)), np.diff(rows.indptr))
+        # one car moved d < L cells: the position sum changed by d mod L
+        moved = (_position_sum(ring, rows.keys) - _position_sum(ring, chunk)[local]) % ring.length
+        target = canonical_keys(rows.keys, ring.length, ring.vmax) if sc.chain.lump \
+            else rows.keys
+        col = state_indices(keys, target)
+        pm = prob * moved
+        a[start:start + len(chunk)] = np.bincount(local, pm, len(chunk))
+        a2[start:start + len(chunk)] = np.bincount(local, pm * moved, len(chunk))
+        b += np.bincount(col, pi[start + local] * pm, n)
+        if keep:
+            parts.append((start + local, col, prob, moved.astype(np.int16)))
+    entries = tuple(np.concatenate(x) for x in zip(*parts)) if keep else None
+    return a, a2, b, entries
+
+
+def _increments(sc: StationaryChain, keep: bool = False) -> _Increments:
+    pi = sc.pi
+    if sc.ring.update != RANDOM_SEQUENTIAL:
+        m = moved_per_state(sc.ring, sc.keys)
+        J = float(np.dot(pi, m))
+        d = m - J
+        # cov_j = (pi o d) P^j . m: start one product further
+        return _Increments(J, float(np.dot(pi, d * d)), _sum_free(sc.step(pi * d), pi), m, m,
+                           None)
+    if keep:
+        memory.check_fits(f"the tilted matrix ({sc.chain.transitions:,} transitions)",
+                          40.0 * sc.chain.transitions, sc.chain.limit)
+    a, a2, b, entries = _transition_moves(sc, keep)
+    J = float(np.dot(pi, a))
+    return _Increments(J, float(np.dot(pi, a2)) - J * J, _sum_free(b - J * pi, pi), a, None,
+                       entries)
+
+
+def _sum_free(h: np.ndarray, pi: np.ndarray) -> np.ndarray:
+    """``h`` with its rounding sum removed along ``pi``.
+
+    ``h`` sums to zero in exact arithmetic; when every covariance vanishes (a
+    lone car: independent steps) it is rounding noise, whose sum is of the
+    order of the vector itself, which :func:`solve_fundamental` would refuse.
+    """
+    return h - pi * h.sum()
+
+
+# --- diffusion ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class CurrentFluctuations:
+    """Mean and diffusion of the cells moved by all cars, per step of the chain.
+
+    Attributes
+    ----------
+    ring : Ring
+    current : float
+        ``J = Lambda'(0)``: mean cells moved by all cars per step (sub-step
+        for random-sequential update).
+    diffusion : float
+        ``Delta = Lambda''(0) = lim var(Y_t) / t``, per step (sub-step).
+    variance : float
+        ``var(m)`` of the cells moved in one step (sub-step).
+    sub_steps : int
+        Steps of the chain per time step: ``L`` for random-sequential
+        update, else 1.
+    states : int
+    seconds : float
+    """
+
+    ring: Ring
+    current: float
+    diffusion: float
+    variance: float
+    sub_steps: int
+    states: int
+    seconds: float
+
+    @property
+    def time_unit(self) -> str:
+        """``"sub-step"`` (random-sequential update) or ``"step"``."""
+        return "sub-step" if self.sub_steps > 1 else "step"
+
+    @property
+    def tau_int(self) -> float:
+        """``Delta / var(m)``: the integrated autocorrelation time of the increments,
+        ``1 + 2 sum rho(t)``, in steps (sub-steps); for parallel and
+        ordered-sequential update that of the flux per step (``m = L f``)."""
+        return self.diffusion / self.variance if self.variance > 0 else 1.0
+
+    @property
+    def flux(self) -> float:
+        """``J`` per cell and time step (equals :attr:`markov.solvers.ring_chain.Solution.flux`)."""
+        return self.current * self.sub_steps / self.ring.length
+
+    @property
+    def diffusion_per_time_step(self) -> float:
+        """``Delta`` per time step (``L`` sub-steps for random-sequential update)."""
+        return self.diffusion * self.sub_steps
+
+    @property
+    def bond_diffusion(self) -> float:
+        """``Delta / L^2`` per time step: the diffusion of the current through one bond."""
+        return self.diffusion_per_time_step / self.ring.length ** 2
+
+    @property
+    def continuous_time_diffusion(self) -> float | None:
+        """Random-sequential update in continuous time (each car updated at rate 1):
+        ``L (Delta + J^2)``; ``None`` for the other updates."""
+        if self.sub_steps == 1:
+            return None
+        return self.ring.length * (self.diffusion + self.current ** 2)
+
+    def to_dict(self) -> dict:
+        """JSON-ready fields and derived values.
+
+        Returns
+        -------
+        dict
+        """
+        return {"current": self.current, "diffusion": self.diffusion,
+                "variance": self.variance, "tau_int": self.tau_int,
+                "time_unit": self.time_unit, "sub_steps": self.sub_steps,
+                "flux": self.flux, "diffusion_per_time_step": self.diffusion_per_time_step,
+                "bond_diffusion": self.bond_diffusion,
+                "continuous_time_diffusion": self.continuous_time_diffusion,
+                "states": self.states, "seconds": self.seconds}
+
+
+def _diffusion(sc: StationaryChain, inc: _Increments) -> float:
+    if inc.variance <= 0:
+        return 0.0
+    w = solve_fundamental(sc.P, sc.pi, inc.h0)
+    return inc.variance + 2.0 * float(np.dot(w, inc.r))
+
+
+def current_fluctuations(ring_or_chain, pi: np.ndarray | None = None) -> CurrentFluctuations:
+    """The current ``J`` and diffusion coefficient ``Delta`` of the ring's cars, exactly.
+
+    Green-Kubo with one solve (module notes): ``Delta = var(m) + 2 w . a``.
+
+    Parameters
+    ----------
+    ring_or_chain : Ring or RingChain
+        Any model and update; the matrix or the matrix-free operator, as the
+        chain chose (:func:`markov.analysis.correlations.prepare`).
+    pi : (n,) array, optional
+        Stationary vector, if already solved.
+
+    Returns
+    -------
+    CurrentFluctuations
+
+    Examples
+    --------
+    One car, vmax = 1: it moves with probability ``q`` each step,
+    independently, so ``J = q`` and ``Delta = p q``.
+
+    >>> fl = current_fluctuations(Ring(3, 1, 1, 0.25))
+    >>> round(fl.current, 12), round(fl.diffusion, 12)
+    (0.75, 0.1875)
+    """
+    start = time.perf_counter()
+    sc = prepare(ring_or_chain, pi)
+    inc = _increments(sc)
+    delta = _diffusion(sc, inc)
+    return CurrentFluctuations(sc.ring, inc.current, delta, inc.variance, sub_steps(sc.ring),
+                               len(sc.pi), time.perf_counter() - start)
+
+
+def current_variance(ring_or_chain, steps: int, pi: np.ndarray | None = None) -> np.ndarray:
+    """``var(Y_t)`` for ``t = 0..steps`` of the stationary chain, exactly.
+
+    ``var(Y_t) = t var(m) + 2 sum_{j=1}^{t-1} (t - j) cov_j``: ``steps - 1``
+    products ``x P``.
+
+    Parameters
+    ----------
+    ring_or_chain : Ring or RingChain
+    steps : int
+        Largest ``t``, ``0..MAX_LAGS``, in steps of the chain (sub-steps for
+        random-sequential update: ``t = k L`` for ``k`` time steps).
+    pi : (n,) array, optional
+
+    Returns
+    -------
+    (steps + 1,) float64 array
+
+    Examples
+    --------
+    Independent increments (one car, vmax = 1): ``var(Y_t) = t p q``.
+
+    >>> np.round(current_variance(Ring(3, 1, 1, 0.25), 3), 12).tolist()
+    [0.0, 0.1875, 0.375, 0.5625]
+    """
+    steps = ensure_int("steps", steps, 0, MAX_LAGS)
+    sc = prepare(ring_or_chain, pi)
+    inc = _increments(sc)
+    out = np.zeros(steps + 1)
+    g = inc.h0
+    partial = 0.0     # sum_{j < t} cov_j
+    for t in range(1, steps + 1):
+        out[t] = out[t - 1] + inc.variance + 2.0 * partial
+        if t < steps:
+            partial += float(np.dot(g, inc.r))
+            g = sc.step(g)
+    return out
+
+
+def block_autocorrelation_time(ring_or_chain, block: int = 1,
+                               pi: np.ndarray | None = None) -> float:
+    """What :func:`markov.simulation.montecarlo.simulate` reports as ``tau_int`` for blocks of ``block`` steps.
+
+    The simulator records the flux of blocks of ``b`` time steps (the cells
+    moved in the block over ``L b``) and reports the blocks' integrated
+    autocorrelation time times ``b``.  For a long run that tends to
+    ``b^2 Delta / var(Y_b)`` time steps (the long-run variance of the block
+    series over its one-block variance, times ``b``): ``tau`` of the flux per
+    step for ``b = 1`` (parallel and ordered-sequential update), about ``b``
+    once blocks are much longer than the correlations, and ``b tau / tau_b``
+    between, ``tau_b = 1 + 2 sum_{k<b} (1 - k/b) rho(k)``; never below ``b``
+    (the simulator clamps the blocks' time at 1).
+
+    Parameters
+    ----------
+    ring_or_chain : Ring or RingChain
+    block : int
+        Time steps per block (``L`` sub-steps each for random-sequential update).
+    pi : (n,) array, optional
+
+    Returns
+    -------
+    float
+        In time steps.
+
+    Examples
+    --------
+    Independent steps: the blocks are independent too, ``tau_int = b``.
+
+    >>> round(block_autocorrelation_time(Ring(3, 1, 1, 0.25), 4), 9)
+    4.0
+    """
+    block = ensure_int("block", block, 1, MAX_LAGS)
+    sc = prepare(ring_or_chain, pi)
+    k = sub_steps(sc.ring)
+    if block * k > MAX_LAGS:
+        raise InvalidParameterError(
+            f"block * sub-steps must be at most {MAX_LAGS:,}, got {block * k:,}")
+    var = current_variance(sc.chain, block * k, sc.pi)[-1]
+    if var <= 0:
+        return float(block)
+    delta = current_fluctuations(sc.chain, sc.pi).diffusion * k
+    # the simulator clamps the blocks' tau at 1 (it never trusts anticorrelation)
+    return block * max(1.0, block * delta / var)
+
+
+# --- the scaled cumulant generating function ---------------------------------------------
+
+
+class SCGF(NamedTuple):
+    """Values of ``Lambda(s)``, per step of the chain (sub-step: random-sequential).
+
+    Attributes
+    ----------
+    s : (k,) float64 array
+    value : (k,) float64 array
+        ``Lambda(s)``.
+    residual : (k,) float64 array
+        ``||A_s v - lambda v||_1 / ||v||_1`` of the Perron pair found.
+    """
+
+    s: np.ndarray
+    value: np.ndarray
+    residual: np.ndarray
+
+
+def _perron(apply, n: int, v0: np.ndarray, tol: float = 1e-14) -> tuple[float, float]:
+    """Perron root of a nonnegative irreducible operator and the residual of its vector."""
+    if n <= DENSE_EIG_LIMIT:
+        M = np.column_stack([apply(e) for e in np.eye(n)])
+        vals, vecs = scipy.linalg.eig(M)
+        k = int(np.argmax(vals.real))
+        lam, v = float(vals[k].real), vecs[:, k].real
+    else:
+        op = spla.LinearOperator((n, n), matvec=apply, dtype=np.float64)
+        try:
+            vals, vecs = spla.eigs(op, k=1, which="LR", v0=v0, tol=tol, maxiter=20_000)
+        except spla.ArpackNoConvergence as err:
+            raise ConvergenceError(f"ARPACK found no Perron pair of the tilted chain: {err}",
+                                   20_000, math.inf, None) from None
+        lam, v = float(vals[0].real), vecs[:, 0].real
+    v = v / v.sum()    # the Perron vector has one sign
+    res = float(np.abs(apply(v) - lam * v).sum() / np.abs(v).sum())
+    return lam, res
+
+
+def scgf(ring_or_chain, s_values, pi: np.ndarray | None = None) -> SCGF:
+    """The scaled cumulant generating function ``Lambda(s)`` of ``Y_t``, per step.
+
+    ``Lambda(s) = s J + log lambda(s)`` with ``lambda(s)`` the Perron root of
+    the tilted chain centred by the current, ``P(x, y) exp(s (m(x, y) - J))``
+    (which keeps it near 1): dense LAPACK up to :data:`DENSE_EIG_LIMIT`
+    states, ARPACK (largest real part, started from ``pi``) above.
+
+    Parameters
+    ----------
+    ring_or_chain : Ring or RingChain
+    s_values : float or sequence of float
+        Tilts, ``|s| N vmax <= MAX_TILT`` (meant for small ``|s|``).
+    pi : (n,) array, optional
+
+    Returns
+    -------
+    SCGF
+
+    Examples
+    --------
+    One car, vmax = 1: ``Lambda(s) = log(p + q e^s)``.
+
+    >>> r = scgf(Ring(3, 1, 1, 0.25), [0.5])
+    >>> bool(np.isclose(r.value[0], np.log(0.25 + 0.75 * np.exp(0.5)), rtol=1e-12, atol=0))
+    True
+    """
+    s_arr = np.atleast_1d(np.asarray(s_values, dtype=object)).ravel()
+    if s_arr.size == 0:
+        raise InvalidParameterError("s_values must hold at least one tilt s")
+    if not isinstance(ring_or_chain, (Ring, RingChain)):
+        prepare(ring_or_chain)   # refuses with the one message
+    ring = ring_or_chain if isinstance(ring_or_chain, Ring) else ring_or_chain.ring
+    bound = MAX_TILT / max(1, ring.cars * ring.vmax)
+    s_arr = np.array([ensure_real("s", s, -bound, bound) for s in s_arr])
+    sc = prepare(ring_or_chain, pi)
+    inc = _increments(sc, keep=True)
+    n, J = len(sc.pi), inc.current
+    v0 = np.abs(sc.pi) + 1e-300
+    values, residuals = np.empty(len(s_arr)), np.empty(len(s_arr))
+    for i, s in enumerate(s_arr):
+        if inc.m is not None:
+            tilt = np.exp(s * (inc.m - J))
+            def apply(x, tilt=tilt):
+                return tilt * sc.step(np.asarray(x, dtype=np.float64).ravel())
+        else:
+            src, col, prob, moved = inc.transitions
+            tilted_T = sp.csr_array((prob * np.exp(s * (moved - J)), (col, src)), shape=(n, n))
+            def apply(x, tilted_T=tilted_T):
+                return tilted_T @ np.asarray(x, dtype=np.float64).ravel()
+        lam, residuals[i] = _perron(apply, n, v0)
+        values[i] = s * J + math.log(lam)
+    return SCGF(s_arr, values, residuals)

@@ -1,0 +1,560 @@
+"""The relaxation spectrum of a ring: leading eigenvalues of ``P`` in every momentum sector.
+
+The rules are translation invariant, so ``P`` commutes with the rotation ``R``
+of the ring (cell ``x`` to ``x + 1``) and splits into momentum sectors
+``k = 0 .. L - 1``: functions with ``f(R s) = w f(s)``, ``w = exp(2 pi i k / L)``.
+Such a function is fixed by its values on the canonical configurations
+(:func:`markov.chain.kernels.canonical`), so sector ``k`` is a matrix on the
+rotation classes the lumped chain already holds:
+
+.. math:: P_k[c, c'] = \\sum_{s \\to c'} P(c, s)\\, w^{r(s)},
+
+the sum over the successors ``s`` of ``c`` that are ``c'`` moved ``r(s)``
+cells forward (:func:`markov.chain.kernels.canonical_shift`).  A class whose orbit
+has ``d < L`` members (a periodic configuration) carries only the sectors with
+``k d = 0 (mod L)``; it is left out of the others.  Sector 0 is the lumped
+chain itself; the union of the sectors' eigenvalues is the spectrum of the
+unlumped chain on the recurrent class.  For a real ``P``, ``P_{L-k}`` is the
+complex conjugate of ``P_k``: sectors above ``L/2`` are computed from their
+mirror.
+
+The leading eigenvalues are found by ARPACK (``scipy.sparse.linalg.eigs``,
+largest modulus) on the sector matrix, or matrix-free: for parallel update on
+the factored operator with the two phases
+(:meth:`markov.chain.factored.FactoredOperator.sector_apply`), for random-sequential
+update on the row operator with the phase of each successor
+(:meth:`markov.chain.sequential.SequentialOperator.sector_apply`); small sectors
+densely.
+Each eigenvalue carries its residual ``||x P_k - lambda x|| / ||x||``.  The
+relaxation time is ``tau = -1 / ln |lambda_2|`` for the eigenvalue of largest
+modulus after the stationary 1 (in steps; sub-steps for random-sequential
+update), and its argument is the oscillation per step.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from numba import njit
+
+from markov.chain.encoding import powers
+from markov.chain.kernels import canonical_shift, orbit_size, shift_bits
+from markov.chain.transition import state_indices, successors
+from markov.errors import ConvergenceError, InvalidParameterError
+from markov.model.ring import ORDERED_SEQUENTIAL, PARALLEL, RANDOM_SEQUENTIAL, Ring
+from markov.validate import ensure_int
+
+__all__ = ["Eigenvalue", "Spectrum", "orbit_sizes", "sector_states", "sector_matrix",
+           "sector_operator", "relaxation_spectrum", "DENSE_SECTOR_STATES",
+           "FACTORED_SECTOR_STATES"]
+
+#: Sectors up to this many states are diagonalised densely (LAPACK).
+DENSE_SECTOR_STATES = 200
+#: Parallel rings with more states use the factored operator instead of sector matrices.
+FACTORED_SECTOR_STATES = 20_000
+_CHUNK = 1 << 15
+
+
+@dataclass(frozen=True)
+class Eigenvalue:
+    """One eigenvalue of ``P`` with its momentum sector and residual."""
+
+    value: complex
+    sector: int
+    residual: float
+
+    def to_dict(self) -> dict:
+        """``re``, ``im``, ``sector`` and ``residual``, as the JSON writes them.
+
+        Returns
+        -------
+        dict
+        """
+        return {"re": float(self.value.real), "im": float(self.value.imag),
+                "sector": int(self.sector), "residual": float(self.residual)}
+
+
+def _relaxation_time(modulus: float) -> float:
+    """``-1 / ln |lambda|``: 0 for ``lambda = 0``, ``inf`` for ``|lambda| = 1``."""
+    if modulus == 0:
+        return 0.0
+    return math.inf if modulus >= 1 - 1e-12 else -1.0 / math.log(modulus)
+
+
+@dataclass(frozen=True)
+class Spectrum:
+    """Leading eigenvalues of a ring's chain, the stationary eigenvalue 1 excluded.
+
+    Attributes
+    ----------
+    ring : Ring
+    eigenvalues : tuple of Eigenvalue
+        By decreasing modulus (ties: by sector, then argument).
+    sector_sizes : dict
+        States of every sector computed.
+    operator : str
+        ``"dense"``, ``"matrix"`` or ``"matrix-free"`` (the largest sector's route).
+    seconds : float
+    """
+
+    ring: Ring
+    eigenvalues: tuple
+    sector_sizes: dict
+    operator: str
+    seconds: float
+    products: int = 0
+    notes: tuple = field(default=())
+
+    @property
+    def second(self) -> Eigenvalue | None:
+        """The eigenvalue of largest modulus after 1, or None for a one-state chain."""
+        return self.eigenvalues[0] if self.eigenvalues else None
+
+    @property
+    def relaxation_time(self) -> float:
+        """``-1 / ln |lambda_2|`` in steps: ``inf`` for ``|lambda_2| = 1`` (a periodic
+        or deterministic chain), 0 when nothing is left after one step."""
+        lam = self.second
+        return 0.0 if lam is None else _relaxation_time(abs(lam.value))
+
+    def sector_relaxation_time(self, k: int) -> float:
+        """``-1 / ln |lambda|`` of the slowest eigenvalue of sector ``k`` alone.
+
+        Sector 0 is what a translation-invariant observable (the flux, the
+        density of stopped cars) started from a translation-invariant
+        distribution sees; the slowest sector overall is usually ``k = 1``,
+        a density wave drifting around the ring.
+
+        Parameters
+        ----------
+        k : int
+
+        Returns
+        -------
+        float
+            ``nan`` when the sector was not computed or holds no eigenvalue.
+        """
+        values = [abs(e.value) for e in self.eigenvalues if e.sector == k]
+        return _relaxation_time(max(values)) if values else math.nan
+
+    @property
+    def oscillation(self) -> float:
+        """The argument of ``lambda_2`` (radians per step)."""
+        lam = self.second
+        return 0.0 if lam is None else float(np.angle(lam.value))
+
+    def to_dict(self) -> dict:
+        """The spectrum as JSON-ready values (``None`` for an infinite time).
+
+        Returns
+        -------
+        dict
+        """
+        tau = self.relaxation_time
+        lam = self.second
+        tau0 = self.sector_relaxation_time(0)
+        return {"eigenvalues": [e.to_dict() for e in self.eigenvalues],
+                "relaxation_time": tau if math.isfinite(tau) else None,
+                "relaxation_time_sector0": tau0 if math.isfinite(tau0) else None,
+                "sector": None if lam is None else int(lam.sector),
+                "oscillation": self.oscillation,
+                "sector_sizes": {str(k): int(v) for k, v in self.sector_sizes.items()},
+                "operator": self.operator, "seconds": self.seconds,
+                "products": self.products, "notes": list(self.notes)}
+
+
+@njit(cache=True)
+def _orbit_sizes(keys, length, pw, out):
+    for i in range(keys.shape[0]):
+        out[i] = orbit_size(keys[i], length, pw)
+
+
+def orbit_sizes(ring: Ring, keys: np.ndarray) -> np.ndarray:
+    """Members of the rotation orbit of each key (a divisor of ``L``).
+
+    Parameters
+    ----------
+    ring : Ring
+    keys : (n,) int64 array
+
+    Returns
+    -------
+    (n,) int64 array
+    """
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    out = np.empty(len(keys), np.int64)
+    _orbit_sizes(keys, ring.length, powers(ring.length, ring.vmax), out)
+    return out
+
+
+def sector_states(ring: Ring, keys: np.ndarray, k: int, sizes: np.ndarray | None = None
+                  ) -> np.ndarray:
+    """Indices of the classes that carry sector ``k``: orbit size ``d`` with ``k d = 0 mod L``.
+
+    Parameters
+    ----------
+    ring : Ring
+    keys : (n,) int64 array
+        Canonical keys.
+    k : int
+    sizes : (n,) array, optional
+        :func:`orbit_sizes` of the keys, if known.
+
+    Returns
+    -------
+    (m,) int64 array
+
+    Examples
+    --------
+    Two cars on four cells at rest: ``XX..`` has 4 rotations, ``X.X.`` only 2,
+    so sector 1 has one class and sector 2 both.
+
+    >>> from markov.chain.encoding import encode, canonical_keys
+    >>> keys = np.sort(canonical_keys([encode([1, 1, 0, 0], 1), encode([1, 0, 1, 0], 1)], 4, 1))
+    >>> [len(sector_states(Ring(4, 2, 1, 0.5), keys, k)) for k in range(4)]
+    [2, 1, 2, 1]
+    """
+    sizes = orbit_sizes(ring, keys) if sizes is None else sizes
+    return np.flatnonzero((k * sizes) % ring.length == 0)
+
+
+@njit(cache=True)
+def _shift_keys(keys, length, pw, bits, out_shift):
+    for j in range(keys.shape[0]):
+        c, r = canonical_shift(keys[j], length, pw, bits)
+        keys[j] = c
+        out_shift[j] = r
+
+
+@dataclass(frozen=True)
+class _ShiftedRows:
+    """Every transition of the lumped chain with the shift of its successor."""
+
+    rows: np.ndarray      # row index of each entry
+    cols: np.ndarray      # canonical successor index
+    shift: np.ndarray     # r: the successor is the class moved r cells forward
+    prob: np.ndarray
+
+
+def _shifted_rows(ring: Ring, keys: np.ndarray) -> _ShiftedRows:
+    n = len(keys)
+    pw, bits = powers(ring.length, ring.vmax), shift_bits(ring.vmax)
+    parts = []
+    for start in range(0, n, _CHUNK):
+        rows = successors(ring, keys[start:start + _CHUNK], lump=False)
+        succ = rows.keys.copy()
+        shift = np.empty(len(succ), np.int16)
+        _shift_keys(succ, ring.length, pw, bits, shift)
+        col = state_indices(keys, succ)
+        row = np.repeat(np.arange(start, start + len(rows.indptr) - 1), np.diff(rows.indptr))
+        parts.append((row, col, shift, rows.probabilities()))
+    return _ShiftedRows(*(np.concatenate([p[i] for p in parts]) for i in range(4)))
+
+
+def sector_matrix(ring: Ring, keys: np.ndarray, k: int, _rows: _ShiftedRows | None = None,
+                  _sizes: np.ndarray | None = None) -> tuple[sp.csr_array, np.ndarray]:
+    """``P_k`` on the classes of sector ``k``, and their indices into ``keys``.
+
+    Parameters
+    ----------
+    ring : Ring
+    keys : (n,) int64 array, sorted
+        The canonical keys of a closed set (the recurrent class).
+    k : int
+        Momentum, ``0 <= k < L``.
+
+    Returns
+    -------
+    P_k : (m, m) complex csr_array
+        Rows and columns are the classes of :func:`sector_states`.
+    states : (m,) int64 array
+
+    Examples
+    --------
+    One car, vmax = 1, on four cells: whatever its velocity (the classes
+    ``v = 0``, ``v = 1``) it stops (``p``) or moves one cell (``q``, phase
+    ``exp(2 pi i k / 4) = i`` in sector 1):
+
+    >>> from markov.chain.statespace import recurrent_keys
+    >>> ring = Ring(4, 1, 1, 0.25)
+    >>> Pk, _ = sector_matrix(ring, recurrent_keys(ring), 1)
+    >>> np.round(Pk.toarray(), 12).tolist()
+    [[(0.25+0j), 0.75j], [(0.25+0j), 0.75j]]
+    """
+    k = ensure_int("sector", k, 0, ring.length - 1)
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    rows = _shifted_rows(ring, keys) if _rows is None else _rows
+    states = sector_states(ring, keys, k, _sizes)
+    index = np.full(len(keys), -1, np.int64)
+    index[states] = np.arange(len(states))
+    keep = (index[rows.rows] >= 0) & (index[rows.cols] >= 0)
+    phase = np.exp(2j * np.pi * k * np.arange(ring.length) / ring.length)
+    data = rows.prob[keep] * phase[rows.shift[keep]]
+    m = len(states)
+    Pk = sp.csr_array((data, (index[rows.rows[keep]], index[rows.cols[keep]])), shape=(m, m))
+    Pk.sum_duplicates()
+    return Pk, states
+
+
+class _SectorOperator(spla.LinearOperator):
+    """``x -> x P_k`` on the classes of sector ``k`` through a matrix-free operator."""
+
+    def __init__(self, op, k: int, states: np.ndarray):
+        self.op, self.k, self.states = op, k, states
+        self.full = np.zeros(op.n, np.complex128)
+        super().__init__(np.complex128, (len(states), len(states)))
+
+    def _matvec(self, x):
+        self.full[self.states] = np.ravel(x)
+        return self.op.sector_apply(self.full, self.k)[self.states]
+
+
+def sector_operator(ring: Ring, keys: np.ndarray, k: int, free=None,
+                    _rows: _ShiftedRows | None = None, _sizes: np.ndarray | None = None):
+    """``A_k = P_k^T`` as a ``LinearOperator`` (``A_k @ x`` is ``x P_k``), and its states.
+
+    Parameters
+    ----------
+    ring : Ring
+    keys : (n,) int64 array, sorted canonical keys of the recurrent class
+    k : int
+    free : FactoredOperator or SequentialOperator, optional
+        A matrix-free operator of the chain (the factored one built with
+        ``shifts=True``): the product goes through its ``sector_apply``;
+        otherwise the sector matrix is assembled.
+
+    Returns
+    -------
+    A_k : LinearOperator (complex)
+    states : (m,) int64 array
+    """
+    if free is not None:
+        states = sector_states(ring, keys, k, _sizes)
+        return _SectorOperator(free, k, states), states
+    Pk, states = sector_matrix(ring, keys, k, _rows, _sizes)
+    return spla.aslinearoperator(Pk.T.tocsr()), states
+
+
+def _parse_sectors(ring: Ring, sectors) -> list[int]:
+    if sectors is None or (isinstance(sectors, str) and sectors == "all"):
+        return list(range(ring.length))
+    if isinstance(sectors, (int, np.integer)) and not isinstance(sectors, bool):
+        sectors = [sectors]
+    try:
+        out = sorted({ensure_int("sector", k, 0, ring.length - 1) for k in sectors})
+    except TypeError:
+        raise InvalidParameterError(
+            f"sector must be 'all' or integers 0..{ring.length - 1}, got {sectors!r}") from None
+    if not out:
+        raise InvalidParameterError("no sector asked")
+    return out
+
+
+def _ncv(count: int) -> int:
+    """ARPACK's Krylov vectors for ``count`` eigenvalues."""
+    return max(2 * count + 1, count + 20)
+
+
+def _leading(A, count: int, tol: float, maxiter: int):
+    """The ``count`` eigenvalues of largest modulus of the operator ``A``, with residuals."""
+    m = A.shape[0]
+    if m <= DENSE_SECTOR_STATES or count >= m - 1:
+        from threadpoolctl import threadpool_limits
+
+        M = A.matmat(np.eye(m, dtype=np.complex128))
+        # one BLAS thread: on these small matrices threads only contend (10x slower
+        # on a loaded 2-core machine)
+        with threadpool_limits(limits=1, user_api="blas"):
+            vals, vecs = np.linalg.eig(M)
+    else:
+        v0 = np.random.default_rng(12345).standard_normal(m) + 0j
+        try:
+            vals, vecs = spla.eigs(A, k=count, which="LM", tol=tol, maxiter=maxiter, v0=v0,
+                                   ncv=min(m, _ncv(count)))
+        except spla.ArpackNoConvergence as exc:
+            raise ConvergenceError(
+                f"ARPACK found {len(exc.eigenvalues)} of {count} eigenvalues in {maxiter}"
+                " iterations", maxiter, np.inf) from None
+    order = np.lexsort((np.angle(vals), -np.abs(vals)))[:count]
+    out = []
+    for i in order:
+        v = vecs[:, i]
+        r = A.matvec(v) - vals[i] * v
+        out.append((complex(vals[i]), float(np.linalg.norm(r) / np.linalg.norm(v))))
+    return out
+
+
+#: Bytes per transition of the sector-matrix route: the shifted rows (row, column,
+#: shift, probability) and one complex sector matrix with its transpose.
+_ROW_BYTES = 8 + 8 + 2 + 8 + 2 * (16 + 4)
+
+
+def _fits(ring: Ring, keys: np.ndarray, count: int, limit: float) -> bool:
+    """Whether the sector-matrix route fits in ``limit`` bytes."""
+    try:
+        _check_memory(ring, keys, False, count, limit)
+    except MemoryError:
+        return False
+    return True
+
+
+def _check_memory(ring: Ring, keys: np.ndarray, free: bool, count: int, limit: float) -> None:
+    """Refuse, before building, a route whose arrays would not fit in ``limit`` bytes."""
+    from markov import memory
+    from markov.chain.transition import successor_counts
+
+    n = len(keys)
+    vectors = 16 * n * (_ncv(count + 1) + 4)    # ARPACK's complex basis and work vectors
+    if free and ring.update == PARALLEL:
+        from markov.chain.factored import link_bytes_per_word
+
+        need = n * memory.factored_bytes_per_state(
+            "power", link_bytes=link_bytes_per_word(ring)) + 4 * n + vectors
+        memory.check_fits(f"the factored sector operator on {n:,} classes", need, limit)
+        return
+    if free:
+        import numba
+
+        # keys, the rank hash table (at most half full), a complex accumulator per thread
+        need = n * (8 + 48 + 16 * numba.get_num_threads()) + vectors
+        memory.check_fits(f"the row sector operator on {n:,} classes", need, limit)
+        return
+    entries = int(successor_counts(ring, keys).sum())
+    memory.check_fits(f"the sector matrices ({entries:,} transitions on {n:,} classes)",
+                      entries * _ROW_BYTES + vectors, limit,
+                      "; parallel update can use operator='matrix-free'"
+                      if ring.update == PARALLEL else "")
+
+
+def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 1e-10,
+                        keys: np.ndarray | None = None, operator: str = "auto",
+                        maxiter: int = 20_000, max_memory: float | None = None) -> Spectrum:
+    """The ``count`` leading eigenvalues (after 1) of every momentum sector asked.
+
+    Parameters
+    ----------
+    ring : Ring
+        Any model and update; the chain must have one closed class.
+    count : int
+        Eigenvalues per sector (sector 0 computes one more and drops the
+        stationary eigenvalue 1).
+    sectors : "all", int or iterable of int
+    tol : float
+        ARPACK's relative accuracy of the eigenvalues.
+    keys : (n,) int64 array, optional
+        The canonical keys of the recurrent class, if already found (one
+        closed class: the caller vouches for it).
+    operator : {"auto", "matrix", "matrix-free"}
+        ``auto``: sector matrices, but matrix-free for parallel rings above
+        :data:`FACTORED_SECTOR_STATES` states and for random-sequential rings
+        whose matrices do not fit (the row operator is about 7x slower);
+        ordered-sequential update has only the matrices.
+    maxiter : int
+        ARPACK restarts.
+    max_memory : float, optional
+        Bytes allowed (default 75 % of physical memory): the route is refused
+        before it is built when its arrays would not fit.
+
+    Returns
+    -------
+    Spectrum
+        Eigenvalues of all sectors, merged and sorted by modulus.
+
+    Examples
+    --------
+    One car (NaSch vmax = 1, four cells): ``lambda_k = p + q exp(2 pi i k / 4)``
+    (and 0: the car's velocity is forgotten in one step); the slowest are
+    sectors 1 and 3, ``|lambda| = sqrt(p^2 + q^2)``.
+
+    >>> s = relaxation_spectrum(Ring(4, 1, 1, 0.5), count=1)
+    >>> [(e.sector, complex(np.round(e.value, 12))) for e in s.eigenvalues][:2]
+    [(1, (0.5+0.5j)), (3, (0.5-0.5j))]
+    >>> round(s.relaxation_time, 6)
+    2.88539
+    """
+    from markov.choices import OPERATORS
+    from markov.solvers.ring_chain import RingChain
+    from markov.validate import ensure_tol
+
+    if not isinstance(ring, Ring):
+        raise InvalidParameterError(f"ring must be a Ring, got {type(ring).__name__}")
+    count = ensure_int("count", count, 1, 1000)
+    tol = ensure_tol(tol)
+    if operator not in OPERATORS:
+        raise InvalidParameterError(f"operator must be one of {', '.join(OPERATORS)}")
+    wanted = _parse_sectors(ring, sectors)
+    start = time.perf_counter()
+    from markov.memory import memory_limit
+
+    limit = memory_limit(max_memory)
+    if keys is None:
+        chain = RingChain(ring, max_memory=max_memory)
+        keys = chain.keys
+        if chain.unverified:
+            # a large chain of a model not proven irreducible: the stationary solve
+            # checks that it is one closed class (and refuses otherwise)
+            chain.solution()
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    n = len(keys)
+    if ring.trivial:
+        # no car or no empty cell: one configuration, nothing moves
+        return Spectrum(ring, (), {k: int(k == 0) for k in wanted}, "dense",
+                        time.perf_counter() - start, notes=("a single configuration",))
+    free = operator == "matrix-free" or (operator == "auto" and ring.update == PARALLEL
+                                         and n > FACTORED_SECTOR_STATES)
+    if operator == "auto" and ring.update == RANDOM_SEQUENTIAL and not _fits(ring, keys, count,
+                                                                           limit):
+        # the row operator regenerates every row per product (7x slower than the
+        # matrix at L = 12): only where the sector matrices do not fit
+        free = True
+    if free and ring.update == ORDERED_SEQUENTIAL:
+        raise InvalidParameterError("no matrix-free sector operator for ordered-sequential"
+                                    " update; use operator='matrix'")
+    _check_memory(ring, keys, free, count, limit)
+    sizes = orbit_sizes(ring, keys)
+    free_op = rows = None
+    if free and ring.update == PARALLEL:
+        from markov.chain.factored import FactoredOperator
+
+        free_op = FactoredOperator(ring, keys, lump=True, shifts=True)
+    elif free:
+        from markov.chain.sequential import SequentialOperator
+
+        free_op = SequentialOperator(ring, keys, lump=True)
+    else:
+        rows = _shifted_rows(ring, keys)
+    # sectors above L/2 are the complex conjugates of their mirror L - k
+    mirror = sorted({min(k, (ring.length - k) % ring.length) for k in wanted})
+    found, sector_sizes, route = [], {}, "dense"
+    from markov.progress import progress_bar
+
+    bar = progress_bar(len(mirror), "spectrum", "sector")
+    for k in mirror:
+        bar.update(1)
+        states = sector_states(ring, keys, k, sizes)
+        m = len(states)
+        for kk in {k, (ring.length - k) % ring.length} & set(wanted):
+            sector_sizes[kk] = m
+        if m == 0:
+            continue
+        want = min(count + (k == 0), m)
+        A, _ = sector_operator(ring, keys, k, free_op, _rows=rows, _sizes=sizes)
+        if m > DENSE_SECTOR_STATES and want < m - 1:
+            route = "matrix-free" if free_op is not None else "matrix"
+        pairs = _leading(A, want, tol, maxiter)
+        if k == 0:   # drop the stationary eigenvalue
+            drop = int(np.argmin([abs(v - 1) for v, _ in pairs]))
+            pairs = pairs[:drop] + pairs[drop + 1:]
+            pairs = pairs[:count]
+        for kk in sorted({k, (ring.length - k) % ring.length} & set(wanted)):
+            for value, res in pairs:
+                found.append(Eigenvalue(value if kk == k else value.conjugate(), kk, res))
+    bar.close()
+    found.sort(key=lambda e: (-round(abs(e.value), 12), e.sector, np.angle(e.value)))
+    products = free_op.products if free_op is not None else 0
+    return Spectrum(ring, tuple(found), dict(sorted(sector_sizes.items())), route,
+                    time.perf_counter() - start, products)

@@ -1,0 +1,1063 @@
+"""The parallel step factored car by car: ``x -> x P`` without enumerating successors.
+
+Under parallel update every car draws its new velocity from its *row* of the
+rule table (:class:`markov.model.table.RuleTable`): the outcome distribution fixed by
+its velocity, ``min(gap, horizon)`` and the velocity of the car ahead, all
+known before anybody moves.  The draws are independent and the move (R4) is
+one-to-one, so a state with cars of ``c_0, c_1, ...`` outcomes has
+``c_0 c_1 ...`` successors; but the draws can be applied one car at a time
+while the positions stay where they are:
+
+* level 0: the distinct *words* (positions, row of every car) of the states;
+  the states that share a word are summed (``x`` restricted to a word's
+  states: they have the same successors with the same weights);
+* level ``j`` (``j = 1..N``): words in which cars ``0..j-1`` already carry
+  their new velocity and the others still carry their row.  A word of level
+  ``j`` has one parent in level ``j - 1`` per outcome of car ``j - 1`` that
+  leads to it, with that outcome's weight;
+* level ``N`` maps onto the successor states through R4 (and the canonical
+  rotation when lumped).
+
+The levels are index arrays built once; they depend on the rule's outcomes,
+not on its probabilities (while none is 0 or 1): :meth:`FactoredOperator.with_params`
+swaps the weights only.  A product is a segmented sum into level 0, one
+gather per level and a segmented sum into the states: about
+``sum(parents over the levels)`` reads, against one successor key, canonical
+rotation and hash look-up per transition for a row-by-row product.
+
+Rows
+----
+:func:`level_rule` numbers the distinct rows of the table (same new
+velocities, same weights) in the order of their outcome lists.  For NaSch
+that makes the row id the pre-braking velocity ``u`` with outcomes ``{u}``
+(``u = 0``, weight 1) or ``{u - 1, u}`` (weights ``p``, ``q``): the *NaSch
+form*, for which a level is the linear merge of the previous one with its
+braked copy and each word has at most two parents (arrays ``a`` and ``b``,
+weights ``q``/1 and ``p``).  Any other rule takes the general route: the
+children of a level, one per (row, outcome), are ``R K`` sorted runs (each
+run shifts the words of one row by one constant), merged ``K``-way into the
+next level with a CSR of (parent, outcome slot) per word.
+
+Words
+-----
+A word is one int64: the occupancy of the ``L`` cells as a bit mask in the
+high bits and the ``N`` car values (``w`` bits each, enough for the largest
+row id and ``vmax``; car 0 the lowest occupied cell) in the low bits::
+
+    word = mask << (N w)  |  sum_j value_j << (j w)
+
+Replacing car ``j``'s row ``r`` by the new velocity ``v'`` adds the constant
+``(v' - r) << (j w)`` whatever the other cars, so the children of a sorted
+level through one (row, outcome) are again sorted.  Sorting words sorts them
+by position set first, so the words of one position configuration are
+contiguous.
+
+Lumping
+-------
+The positions do not move across the levels, so the frame of a word is chosen
+from the positions alone: the rotation that makes the occupancy mask smallest
+(ties, for a periodic position set, broken by the smallest word).  Every level
+is then lumped; the full configuration is canonicalised once, after R4.  Two
+words of level ``N`` that differ by a symmetry of a periodic position set map
+onto the same state; the final segmented sum adds them.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, replace
+from functools import lru_cache
+
+import numpy as np
+from numba import njit, prange
+
+from markov.chain.encoding import powers, unique_keys
+from markov.chain.kernels import (
+    ahead_velocity,
+    canonical,
+    canonical_shift,
+    cars_of,
+    gap,
+    rotate_mask,
+    shift_bits,
+    term,
+)
+from markov.chain.operator import ChainOperator
+from markov.errors import InvalidParameterError
+from markov.model.load import Model
+from markov.model.ring import PARALLEL, Ring
+from markov.model.table import RuleTable, cached_table
+
+__all__ = ["FactoredOperator", "LevelRule", "level_rule", "word_bits", "factored_fits",
+           "link_bytes_per_word", "frontier_successors"]
+
+_MAX_WORD_BITS = 62
+
+
+# --------------------------------------------------------------------------- rows
+
+@dataclass(frozen=True, eq=False)
+class LevelRule:
+    """The distinct rows of a rule table, as the levels read them.
+
+    Attributes
+    ----------
+    row_id : (vmax+1, horizon+1, vmax+1) int64 array
+        Row of a car of velocity ``v``, gap ``min(gap, horizon)``, car ahead at ``a``.
+    count : (R,) int64 array
+        Outcomes of each row.
+    new_velocity : (R, K) int64 array
+        Their new velocities, ascending, padded with ``-1``.
+    weight : (R K,) float64 array
+        Their weights; outcome ``k`` of row ``r`` is *slot* ``r K + k``.
+    horizon : int
+    nasch_form : bool
+        Row ``u`` has the outcomes ``{u}`` (``u = 0``, weight 1) or ``{u - 1, u}``
+        with the same two weights for every ``u >= 1``, ``R = vmax + 1``: the
+        two-parent levels apply.
+    dweight : (R K,) float64 array or None
+        Derivatives of the weights with respect to one parameter, slot by slot,
+        when the rows were numbered with them (:func:`level_rule`).
+    """
+
+    row_id: np.ndarray
+    count: np.ndarray
+    new_velocity: np.ndarray
+    weight: np.ndarray
+    horizon: int
+    nasch_form: bool
+    dweight: np.ndarray | None = None
+
+    @property
+    def rows(self) -> int:
+        return int(self.count.shape[0])
+
+    @property
+    def brake_weights(self) -> tuple[float, float]:
+        """``(p, q)``: the weights of ``u - 1`` and ``u`` (NaSch form only)."""
+        k = self.new_velocity.shape[1]
+        return float(self.weight[k]), float(self.weight[k + 1])
+
+
+def _cells(table: RuleTable):
+    vmax = table.count.shape[0] - 1
+    return itertools.product(range(vmax + 1), range(table.horizon + 1), range(vmax + 1))
+
+
+def _nasch_form(count, new, weight, dweight=None) -> bool:
+    k = new.shape[1]
+    if count[0] != 1 or new[0, 0] != 0 or k < 2:
+        return False
+    same = (weight,) if dweight is None else (weight, dweight)
+    if dweight is not None and dweight[0] != 0:   # the two-parent gather takes weight 1 there
+        return False
+    for r in range(1, count.shape[0]):
+        if count[r] != 2 or new[r, 0] != r - 1 or new[r, 1] != r \
+                or any(x[r * k] != x[k] or x[r * k + 1] != x[k + 1] for x in same):
+            return False
+    return True
+
+
+def level_rule(table: RuleTable, dweight: np.ndarray | None = None) -> LevelRule:
+    """Number the distinct rows of a rule table (NaSch: the row id is ``u``).
+
+    Parameters
+    ----------
+    table : RuleTable
+        Numeric, tabulated up to its horizon (:meth:`markov.model.ring.Ring.table`).
+    dweight : array shaped like ``table.weight``, optional
+        Derivatives of the weights with respect to a parameter: cells of equal
+        weights but different derivatives then get rows of their own, and the
+        rule carries them (:attr:`LevelRule.dweight`).
+
+    Returns
+    -------
+    LevelRule
+    """
+    vmax = table.count.shape[0] - 1
+    signature = {}
+    for v, g, a in _cells(table):
+        n = int(table.count[v, g, a])
+        signature[v, g, a] = (tuple(int(x) for x in table.new_velocity[v, g, a, :n]),
+                              tuple(float(x) for x in table.weight[v, g, a, :n]),
+                              () if dweight is None
+                              else tuple(float(x) for x in dweight[v, g, a, :n]))
+    rows = sorted(set(signature.values()))
+    number = {s: r for r, s in enumerate(rows)}
+    row_id = np.zeros((vmax + 1, table.horizon + 1, vmax + 1), dtype=np.int64)
+    for cell, s in signature.items():
+        row_id[cell] = number[s]
+    k = max(len(new) for new, _, _ in rows)
+    if len(rows) * k > np.iinfo(np.int16).max:
+        raise InvalidParameterError(
+            f"the factored operator numbers outcomes with int16: {len(rows)} distinct rows of"
+            f" {k} outcomes are too many")
+    count = np.array([len(new) for new, _, _ in rows], dtype=np.int64)
+    new = np.full((len(rows), k), -1, dtype=np.int64)
+    weight = np.zeros(len(rows) * k)
+    dw = None if dweight is None else np.zeros(len(rows) * k)
+    for r, (vs, ws, ds) in enumerate(rows):
+        new[r, :len(vs)] = vs
+        weight[r * k:r * k + len(ws)] = ws
+        if dw is not None:
+            dw[r * k:r * k + len(ds)] = ds
+    return LevelRule(row_id, count, new, weight, int(table.horizon),
+                     _nasch_form(count, new, weight, dw), dw)
+
+
+def _slot_derivatives(rule: LevelRule, dweight: np.ndarray) -> np.ndarray | None:
+    """``dweight`` (shaped like the table's weights) slot by slot of ``rule``'s rows.
+
+    ``None`` when two cells that share a row have different derivatives (a
+    row merged for equal weights, e.g. VDR with ``p0 = p`` and the derivative
+    in ``p0``), or when the NaSch form's one ``(dp, dq)`` does not hold:
+    the rows must then be numbered with the derivatives (:func:`level_rule`).
+    """
+    k = rule.new_velocity.shape[1]
+    out = np.full(rule.weight.shape, np.nan)
+    vmax = rule.row_id.shape[0] - 1
+    for v, g, a in itertools.product(range(vmax + 1), range(rule.horizon + 1), range(vmax + 1)):
+        r = int(rule.row_id[v, g, a])
+        n = int(rule.count[r])
+        mine = out[r * k:r * k + n]
+        if np.isnan(mine[0]):
+            mine[:] = dweight[v, g, a, :n]
+        elif not np.array_equal(mine, dweight[v, g, a, :n]):
+            return None
+    out[np.isnan(out)] = 0.0
+    if rule.nasch_form and not _nasch_form(rule.count, rule.new_velocity, rule.weight, out):
+        return None
+    return out
+
+
+def _reweigh(rule: LevelRule, table: RuleTable) -> LevelRule | None:
+    """``rule``'s rows with the weights of another table of the same outcomes.
+
+    ``None`` when the rows of ``table`` do not refine into ``rule``'s (other
+    outcomes, or two cells of one row with different weights now): the levels
+    must be rebuilt.
+    """
+    if table.horizon != rule.horizon or table.count.shape[0] != rule.row_id.shape[0]:
+        return None
+    k = rule.new_velocity.shape[1]
+    weight = np.full(rule.weight.shape, np.nan)
+    for v, g, a in _cells(table):
+        r = int(rule.row_id[v, g, a])
+        n = int(table.count[v, g, a])
+        if n != rule.count[r] or \
+                not np.array_equal(table.new_velocity[v, g, a, :n], rule.new_velocity[r, :n]):
+            return None
+        mine = weight[r * k:r * k + n]
+        if np.isnan(mine[0]):
+            mine[:] = table.weight[v, g, a, :n]
+        elif not np.array_equal(mine, table.weight[v, g, a, :n]):
+            return None
+    weight[np.isnan(weight)] = 0.0
+    if rule.nasch_form and not _nasch_form(rule.count, rule.new_velocity, weight):
+        return None
+    return replace(rule, weight=weight, dweight=None)
+
+
+@lru_cache(maxsize=64)
+def _model_rule(model: Model) -> LevelRule:
+    return level_rule(cached_table(model))
+
+
+def link_bytes_per_word(ring: Ring) -> float:
+    """Bytes of level links per word, estimated before the levels exist.
+
+    The NaSch form holds two int32 parents per word; any other rule an int64
+    row pointer per word and an int32 parent and int16 slot per link, at most
+    ``K`` (the most outcomes of a row) links per word on average when the
+    levels do not shrink.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    float
+    """
+    rule = _model_rule(ring.model)
+    return 8.0 if rule.nasch_form else 8.0 + 6.0 * rule.new_velocity.shape[1]
+
+
+def word_bits(ring: Ring) -> tuple[int, int]:
+    """``(w, total)``: bits per car value and bits of a whole word.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    tuple of int
+
+    Raises
+    ------
+    InvalidParameterError
+        When a word would not fit in 62 bits (``L + N w``, ``w`` the bits of
+        the largest row id and ``vmax``).
+    """
+    w, total = _word_width(ring)
+    if total > _MAX_WORD_BITS:
+        raise InvalidParameterError(
+            f"the factored operator packs a configuration into {ring.length} + {ring.cars}"
+            f" x {w} = {total} bits, more than {_MAX_WORD_BITS}")
+    return w, total
+
+
+def factored_fits(ring: Ring) -> bool:
+    """Whether :func:`word_bits` accepts the ring (its words fit 62 bits).
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    bool
+    """
+    return _word_width(ring)[1] <= _MAX_WORD_BITS
+
+
+def _word_width(ring: Ring, rule: LevelRule | None = None) -> tuple[int, int]:
+    """Bits per car field (the largest row id and ``vmax``) and of a whole word."""
+    rule = _model_rule(ring.model) if rule is None else rule
+    w = max(int(ring.vmax), rule.rows - 1).bit_length()
+    return w, ring.length + ring.cars * w
+
+
+# -------------------------------------------------------------------------- level 0
+
+@njit(cache=True)
+def _frame_word(key, length, vmax, w, lump, row_id, horizon, pos, vel, u):
+    """Level-0 word of a state (positions in its frame, the row of every car) and the frame's rotation."""
+    n = cars_of(key, length, vmax + 2, pos, vel)
+    mask = np.int64(0)
+    for i in range(n):
+        u[i] = row_id[vel[i], min(gap(pos, n, i, length), horizon), ahead_velocity(vel, n, i)]
+    for i in range(n):
+        mask |= np.int64(1) << pos[i]
+    shift = n * w
+    best = np.int64(-1)
+    best_r = 0
+    for r in range(length if lump else 1):
+        rotated = rotate_mask(mask, r, length)
+        if best >= 0 and rotated > (best >> shift):
+            continue
+        # cars in the frame start with the first car at or above cell r
+        k0 = 0
+        while k0 < n and pos[k0] < r:
+            k0 += 1
+        word = rotated << shift
+        for t in range(n):
+            word |= np.int64(u[(k0 + t) % n]) << (t * w)
+        if best < 0 or word < best:
+            best = word
+            best_r = r
+    return best, best_r
+
+
+@njit(cache=True, parallel=True)
+def _frame_words(keys, length, vmax, w, lump, row_id, horizon, out, rotation):
+    """Level-0 words of the states; ``rotation`` (if not empty) receives each frame's rotation."""
+    n = keys.shape[0]
+    nblocks = (n + 4095) // 4096
+    keep = rotation.shape[0] > 0
+    for blk in prange(nblocks):
+        pos = np.empty(length, np.int64)
+        vel = np.empty(length, np.int64)
+        u = np.empty(length, np.int64)
+        for i in range(blk * 4096, min(n, (blk + 1) * 4096)):
+            word, r = _frame_word(keys[i], length, vmax, w, lump, row_id, horizon, pos, vel, u)
+            out[i] = word
+            if keep:
+                rotation[i] = r
+
+
+def _level0(ring: Ring, keys: np.ndarray, w: int, lump: bool, rule: LevelRule,
+            rotation: np.ndarray | None = None) -> np.ndarray:
+    words = np.empty_like(keys)
+    _frame_words(keys, ring.length, ring.vmax, w, bool(lump), rule.row_id, rule.horizon, words,
+                 np.empty(0, np.int16) if rotation is None else rotation)
+    return words
+
+
+# ----------------------------------------------------------------------- the levels
+
+@njit(cache=True)
+def _next_level(words, j, w, links):
+    """NaSch form: merge a sorted level with its words in which car ``j`` braked.
+
+    Returns the next level (sorted) and, if ``links``, for each of its words
+    the index of the parent with car ``j`` unchanged (``a``; encoded
+    ``-i - 2`` when that car's row has one outcome, so the weight is 1
+    instead of ``q``; ``-1`` for none) and of the parent in which car ``j``
+    was one faster (``b``, weight ``p``; ``-1`` for none).
+    """
+    m = words.shape[0]
+    step = np.int64(1) << (j * w)
+    vmask = (np.int64(1) << w) - 1
+    out = np.empty(2 * m, np.int64)
+    a = np.empty(2 * m if links else 0, np.int32)
+    b = np.empty(2 * m if links else 0, np.int32)
+    i = 0  # next unchanged word
+    d = 0  # next candidate for a braked word
+    while d < m and (words[d] >> (j * w)) & vmask == 0:
+        d += 1
+    k = 0
+    while i < m or d < m:
+        take_i = i < m and (d >= m or words[i] <= words[d] - step)
+        take_d = d < m and (i >= m or words[d] - step <= words[i])
+        if take_i:
+            out[k] = words[i]
+        else:
+            out[k] = words[d] - step
+        if links:
+            if take_i:
+                a[k] = i if (words[i] >> (j * w)) & vmask > 0 else -i - 2
+            else:
+                a[k] = -1
+            b[k] = d if take_d else -1
+        if take_i:
+            i += 1
+        if take_d:
+            d += 1
+            while d < m and (words[d] >> (j * w)) & vmask == 0:
+                d += 1
+        k += 1
+    return out[:k].copy(), a[:k].copy(), b[:k].copy()
+
+
+@njit(cache=True)
+def _merge_level(words, j, w, count, new_velocity, links):
+    """Any rule: the next level as the ``K``-way merge of one sorted run per (row, outcome).
+
+    Returns the next level (sorted) and, if ``links``, its CSR of parents:
+    word ``t`` of the next level has the parents ``parent[indptr[t]:indptr[t+1]]``
+    (indices into ``words``) through the outcome slots ``slot[...]`` (row
+    ``r``, outcome ``k``: ``r K + k``).
+    """
+    m = words.shape[0]
+    rows, kmax = new_velocity.shape
+    shift = j * w
+    vmask = (np.int64(1) << w) - 1
+    # the parents bucketed by car j's row, in order: bucket r is the run of row r
+    start = np.zeros(rows + 1, np.int64)
+    total = 0
+    for i in range(m):
+        r = (words[i] >> shift) & vmask
+        start[r + 1] += 1
+        total += count[r]
+    for r in range(rows):
+        start[r + 1] += start[r]
+    fill = start[:rows].copy()
+    bucket = np.empty(m, np.int64)
+    for i in range(m):
+        r = (words[i] >> shift) & vmask
+        bucket[fill[r]] = i
+        fill[r] += 1
+    # one stream per (row, outcome): the row's run shifted by (v' - r) << shift
+    g = 0
+    cur = np.empty(rows * kmax, np.int64)
+    end = np.empty(rows * kmax, np.int64)
+    delta = np.empty(rows * kmax, np.int64)
+    slot_of = np.empty(rows * kmax, np.int64)
+    head = np.empty(rows * kmax, np.int64)
+    for r in range(rows):
+        if start[r + 1] == start[r]:
+            continue
+        for k in range(count[r]):
+            cur[g] = start[r]
+            end[g] = start[r + 1]
+            delta[g] = (new_velocity[r, k] - r) << shift
+            slot_of[g] = r * kmax + k
+            head[g] = words[bucket[start[r]]] + delta[g]
+            g += 1
+    out = np.empty(total, np.int64)
+    indptr = np.empty(total + 1 if links else 0, np.int64)
+    parent = np.empty(total if links else 0, np.int32)
+    slot = np.empty(total if links else 0, np.int16)
+    done = np.iinfo(np.int64).max
+    k = -1
+    for e in range(total):
+        best = 0
+        for s in range(1, g):
+            if head[s] < head[best]:
+                best = s
+        word = head[best]
+        if k < 0 or word != out[k]:
+            k += 1
+            out[k] = word
+            if links:
+                indptr[k] = e
+        if links:
+            parent[e] = bucket[cur[best]]
+            slot[e] = slot_of[best]
+        cur[best] += 1
+        head[best] = words[bucket[cur[best]]] + delta[best] if cur[best] < end[best] else done
+    k += 1
+    if links:
+        indptr[k] = total
+        return out[:k].copy(), indptr[:k + 1].copy(), parent, slot
+    return out[:k].copy(), indptr, parent, slot
+
+
+def _step(words, j, w, rule: LevelRule, links: bool):
+    """Level ``j + 1`` from level ``j`` and its links (``(a, b)`` or ``(indptr, parent, slot)``)."""
+    if rule.nasch_form:
+        out, a, b = _next_level(words, j, w, links)
+        return out, (a, b)
+    out, indptr, parent, slot = _merge_level(words, j, w, rule.count, rule.new_velocity, links)
+    return out, (indptr, parent, slot)
+
+
+# ------------------------------------------------------------------------ the move
+
+@njit(cache=True)
+def _moved_key(word, length, ncars, w, pw, bits, lump):
+    """State key after R4 of a last-level word (canonical rotation if ``lump``)."""
+    mask = word >> (ncars * w)
+    vmask = (np.int64(1) << w) - 1
+    key = np.int64(0)
+    t = 0
+    for x in range(length):
+        if (mask >> x) & 1:
+            v = (word >> (t * w)) & vmask
+            key += term(x, v, length, pw)
+            t += 1
+    return canonical(key, length, pw, bits) if lump else key
+
+
+@njit(cache=True, parallel=True)
+def _moved_keys(words, length, ncars, w, pw, bits, lump, out):
+    for i in prange(words.shape[0]):
+        out[i] = _moved_key(words[i], length, ncars, w, pw, bits, lump)
+
+
+@njit(cache=True, parallel=True)
+def _moved_shifts(words, length, ncars, w, pw, bits, out):
+    """For each last-level word: the shift ``r`` of its moved key from the canonical one."""
+    for i in prange(words.shape[0]):
+        key = _moved_key(words[i], length, ncars, w, pw, bits, False)
+        out[i] = canonical_shift(key, length, pw, bits)[1]
+
+
+@njit(cache=True)
+def _segments(sorted_values, targets, offsets):
+    """``offsets[t]:offsets[t+1]`` = the run of ``sorted_values`` equal to ``targets[t]``.
+
+    Returns the number of values not found among ``targets`` (0 when closed).
+    """
+    k = 0
+    missing = 0
+    m = sorted_values.shape[0]
+    for t in range(targets.shape[0]):
+        offsets[t] = k
+        while k < m and sorted_values[k] < targets[t]:
+            missing += 1
+            k += 1
+        while k < m and sorted_values[k] == targets[t]:
+            k += 1
+    offsets[targets.shape[0]] = k
+    return missing + (m - k)
+
+
+def frontier_successors(ring: Ring, keys: np.ndarray, lump: bool) -> np.ndarray:
+    """Sorted distinct successor states of a set of states (parallel update, any model).
+
+    The support of ``x P`` for ``x`` supported on ``keys``, found through the
+    levels (merged at every level) instead of one key per transition: the
+    step of the recurrent-class search.
+
+    Parameters
+    ----------
+    ring : Ring
+    keys : (n,) int64 array
+        States (canonical keys if ``lump``).
+    lump : bool
+
+    Returns
+    -------
+    (m,) int64 array, sorted
+    """
+    w, _ = word_bits(ring)
+    rule = _model_rule(ring.model)
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    words = unique_keys(_level0(ring, keys, w, lump, rule))
+    for j in range(ring.cars):
+        words = _step(words, j, w, rule, False)[0]
+    out = np.empty_like(words)
+    _moved_keys(words, ring.length, ring.cars, w, powers(ring.length, ring.vmax),
+                shift_bits(ring.vmax), bool(lump), out)
+    return unique_keys(out)
+
+
+@njit(cache=True)
+def _permute_rows(indptr, parent, slot, order):
+    """The CSR rows ``order[0], order[1], ...`` of a level, as a new CSR."""
+    n = order.shape[0]
+    out_ptr = np.empty(n + 1, np.int64)
+    out_ptr[0] = 0
+    for t in range(n):
+        out_ptr[t + 1] = out_ptr[t] + indptr[order[t] + 1] - indptr[order[t]]
+    out_parent = np.empty_like(parent)
+    out_slot = np.empty_like(slot)
+    for t in range(n):
+        lo = indptr[order[t]]
+        for e in range(out_ptr[t + 1] - out_ptr[t]):
+            out_parent[out_ptr[t] + e] = parent[lo + e]
+            out_slot[out_ptr[t] + e] = slot[lo + e]
+    return out_ptr, out_parent, out_slot
+
+
+# ----------------------------------------------------------------------- products
+
+@njit(cache=True, parallel=True)
+def _gather_states(x, perm, offsets, out):
+    """Level 0: ``out[w] = sum of x over the states of word w``."""
+    for i in prange(out.shape[0]):
+        s = 0.0
+        for k in range(offsets[i], offsets[i + 1]):
+            s += x[perm[k]]
+        out[i] = s
+
+
+@njit(cache=True, inline="always")
+def _two_parents(a, b, z, p, q):
+    s = 0.0
+    if a >= 0:
+        s = q * z[a]
+    elif a < -1:
+        s = z[-a - 2]
+    if b >= 0:
+        s += p * z[b]
+    return s
+
+
+@njit(cache=True, parallel=True)
+def _gather_level(a, b, z, p, q, out):
+    """NaSch form, level ``j``: ``out[w] = weight_a z[a[w]] + p z[b[w]]``."""
+    for i in prange(a.shape[0]):
+        out[i] = _two_parents(a[i], b[i], z, p, q)
+
+
+@njit(cache=True, parallel=True)
+def _gather_last(a, b, offsets, z, p, q, out):
+    """NaSch form, level ``N`` fused with R4: ``out[s] = sum over the words that move onto s``."""
+    for s in prange(out.shape[0]):
+        acc = 0.0
+        for k in range(offsets[s], offsets[s + 1]):
+            acc += _two_parents(a[k], b[k], z, p, q)
+        out[s] = acc
+
+
+@njit(cache=True, parallel=True)
+def _gather_rows(indptr, parent, slot, weight, z, out):
+    """Any rule, level ``j``: ``out[w] = sum over w's parents of weight z[parent]``."""
+    for i in prange(out.shape[0]):
+        s = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            s += weight[slot[e]] * z[parent[e]]
+        out[i] = s
+
+
+@njit(cache=True, parallel=True)
+def _gather_rows_last(indptr, parent, slot, offsets, weight, z, out):
+    """Any rule, level ``N`` fused with R4."""
+    for s in prange(out.shape[0]):
+        acc = 0.0
+        for k in range(offsets[s], offsets[s + 1]):
+            for e in range(indptr[k], indptr[k + 1]):
+                acc += weight[slot[e]] * z[parent[e]]
+        out[s] = acc
+
+
+# Forward mode: a level is linear in z and in the weights, z_j = G_j(w) z_{j-1},
+# so dz_j = G_j(w) dz_{j-1} + G_j(dw) z_{j-1} (dz_0 = 0: level 0 has no weights).
+
+@njit(cache=True, inline="always")
+def _two_parents_pair(a, b, z, dz, p, q, dp, dq):
+    s = 0.0
+    ds = 0.0
+    if a >= 0:
+        s = q * z[a]
+        ds = q * dz[a] + dq * z[a]
+    elif a < -1:           # a row of one outcome: weight 1, derivative 0
+        s = z[-a - 2]
+        ds = dz[-a - 2]
+    if b >= 0:
+        s += p * z[b]
+        ds += p * dz[b] + dp * z[b]
+    return s, ds
+
+
+@njit(cache=True, parallel=True)
+def _gather_level_pair(a, b, z, dz, p, q, dp, dq, out, dout):
+    """NaSch form, level ``j``, and its derivative."""
+    for i in prange(a.shape[0]):
+        out[i], dout[i] = _two_parents_pair(a[i], b[i], z, dz, p, q, dp, dq)
+
+
+@njit(cache=True, parallel=True)
+def _gather_last_pair(a, b, offsets, z, dz, p, q, dp, dq, dout):
+    """NaSch form, level ``N`` fused with R4: the derivative only."""
+    for s in prange(dout.shape[0]):
+        acc = 0.0
+        for k in range(offsets[s], offsets[s + 1]):
+            acc += _two_parents_pair(a[k], b[k], z, dz, p, q, dp, dq)[1]
+        dout[s] = acc
+
+
+@njit(cache=True, parallel=True)
+def _gather_rows_pair(indptr, parent, slot, weight, dweight, z, dz, out, dout):
+    """Any rule, level ``j``, and its derivative."""
+    for i in prange(out.shape[0]):
+        s = 0.0
+        ds = 0.0
+        for e in range(indptr[i], indptr[i + 1]):
+            w, x = weight[slot[e]], z[parent[e]]
+            s += w * x
+            ds += w * dz[parent[e]] + dweight[slot[e]] * x
+        out[i] = s
+        dout[i] = ds
+
+
+@njit(cache=True, parallel=True)
+def _gather_rows_last_pair(indptr, parent, slot, offsets, weight, dweight, z, dz, dout):
+    """Any rule, level ``N`` fused with R4: the derivative only."""
+    for s in prange(dout.shape[0]):
+        acc = 0.0
+        for k in range(offsets[s], offsets[s + 1]):
+            for e in range(indptr[k], indptr[k + 1]):
+                acc += weight[slot[e]] * dz[parent[e]] + dweight[slot[e]] * z[parent[e]]
+        dout[s] = acc
+
+
+class FactoredOperator(ChainOperator):
+    """The parallel-update chain as a ``LinearOperator`` (``A = P^T``), through the per-car levels.
+
+    See :class:`markov.chain.operator.ChainOperator` for the convention.
+
+    Parameters
+    ----------
+    ring : Ring
+        The system (parallel update, ``N >= 1``, any model); its rule table
+        gives the outcomes and weights.
+    keys : (n,) int64 array, sorted
+        A closed set of (canonical, if ``lump``) state keys, e.g. the
+        recurrent class (:func:`markov.chain.statespace.recurrent_keys`).
+    lump : bool
+        Whether ``keys`` are rotation classes.
+
+    Attributes
+    ----------
+    n : int
+        Number of states.
+    level_sizes : list of int
+        Words per level, ``0..N``.
+    rule : LevelRule
+        The rows of the rule table and their weights.
+    products, seconds
+        Products applied so far and the time spent in them.
+    derivative_split : bool or None
+        Whether the last :meth:`derivative_apply` needed levels with the rows
+        split by their derivatives (``None`` before the first).
+
+    Notes
+    -----
+    The result equals ``P.T @ x`` for the CSR matrix of
+    :func:`markov.chain.transition.transition_matrix` to rounding; the weights
+    enter only the products, so :meth:`with_params` reuses the levels.
+
+    Examples
+    --------
+    >>> from markov.chain.statespace import recurrent_keys
+    >>> ring = Ring(3, 1, 1, 0.5)            # one car: rotation classes v = 0, v = 1
+    >>> op = FactoredOperator(ring, recurrent_keys(ring), lump=True)
+    >>> op.apply(np.array([1.0, 0.0])).tolist()   # from v = 0: v' = 1 or 0, each 1/2
+    [0.5, 0.5]
+    """
+
+    def __init__(self, ring: Ring, keys: np.ndarray, lump: bool, _levels=None,
+                 shifts: bool = False):
+        if ring.update != PARALLEL:
+            raise InvalidParameterError("the factored operator is for parallel update")
+        if ring.cars < 1:
+            raise InvalidParameterError("the factored operator needs at least one car")
+        super().__init__(ring, keys, lump)
+        if _levels is None:
+            _levels = self._build(_model_rule(ring.model), shifts and lump)
+        (self.rule, self._perm, self._offsets0, self._links, self._offsets_last,
+         self.level_sizes, self._shifts) = _levels
+        self._buffers = (np.empty(max(self.level_sizes)), np.empty(max(self.level_sizes)))
+        self._complex_buffers = None   # sector_apply's, made on first use
+        self.derivative_split = None   # set by derivative_apply
+        self._split = None             # (dweight, operator with rows split by it)
+
+    def _build(self, rule: LevelRule, shifts: bool = False):
+        ring = self.ring
+        w, total = _word_width(ring, rule)
+        if total > _MAX_WORD_BITS:
+            raise InvalidParameterError(
+                f"the factored operator packs a configuration into {ring.length} + {ring.cars}"
+                f" x {w} = {total} bits, more than {_MAX_WORD_BITS}")
+        n = self.n
+        if n >= 2**31:
+            raise InvalidParameterError("the factored operator indexes states with int32")
+        state_shift = np.empty(n, np.int16) if shifts else None
+        words = _level0(ring, self.keys, w, self.lump, rule, state_shift)
+        perm = np.argsort(words, kind="stable").astype(np.int32)
+        words = words[perm]
+        first = np.flatnonzero(np.concatenate(([True], words[1:] != words[:-1])))
+        offsets0 = np.append(first, n).astype(np.int64)
+        words = words[first]
+        sizes = [len(words)]
+        links = []
+        for j in range(ring.cars):
+            words, link = _step(words, j, w, rule, True)
+            if len(words) >= 2**31:
+                raise InvalidParameterError("the factored operator indexes words with int32")
+            links.append(link)
+            sizes.append(len(words))
+        targets = np.empty_like(words)
+        pw, bits = powers(ring.length, ring.vmax), shift_bits(ring.vmax)
+        _moved_keys(words, ring.length, ring.cars, w, pw, bits, self.lump, targets)
+        word_shift = None
+        if shifts:
+            word_shift = np.empty(len(words), np.int16)
+            _moved_shifts(words, ring.length, ring.cars, w, pw, bits, word_shift)
+        del words
+        order = np.argsort(targets, kind="stable")
+        offsets_last = np.empty(n + 1, dtype=np.int64)
+        if _segments(targets[order], self.keys, offsets_last):
+            raise RuntimeError("a successor lies outside the state set: it is not closed")
+        if rule.nasch_form:
+            a, b = links[-1]
+            links[-1] = (a[order], b[order])
+        else:
+            links[-1] = _permute_rows(*links[-1], order)
+        shift_arrays = (state_shift, word_shift[order]) if shifts else None
+        return rule, perm, offsets0, links, offsets_last, sizes, shift_arrays
+
+    @property
+    def edges(self) -> int:
+        """Parent links per product: the words of levels ``1..N`` (NaSch form,
+        two-parent gathers) or their parents (general)."""
+        if self.rule.nasch_form:
+            return int(sum(self.level_sizes[1:]))
+        return int(sum(link[1].shape[0] for link in self._links))
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held: the level links, the level-0 permutation and offsets, two buffers."""
+        links = sum(a.nbytes for link in self._links for a in link)
+        return (links + self._perm.nbytes + self._offsets0.nbytes + self._offsets_last.nbytes
+                + sum(buf.nbytes for buf in self._buffers))
+
+    def with_params(self, **changes) -> "FactoredOperator":
+        """The same levels with other probability parameters (no rebuild).
+
+        The levels are rebuilt only when the new values change the outcomes
+        (a probability 0 or 1) or split a row (two weights that were equal
+        now differ).
+
+        Parameters
+        ----------
+        **changes
+            Parameter values, e.g. ``p=0.25``.
+
+        Returns
+        -------
+        FactoredOperator
+        """
+        return self._with_ring(self.ring.with_params(**changes))
+
+    def with_p(self, p: float) -> "FactoredOperator":
+        """:meth:`with_params` with another braking probability ``p``.
+
+        Parameters
+        ----------
+        p : float
+
+        Returns
+        -------
+        FactoredOperator
+        """
+        return self._with_ring(self.ring.with_p(p))
+
+    def _with_ring(self, ring: Ring) -> "FactoredOperator":
+        rule = _reweigh(self.rule, ring.table())
+        if rule is None:
+            return FactoredOperator(ring, self.keys, self.lump, shifts=self._shifts is not None)
+        levels = (rule, self._perm, self._offsets0, self._links, self._offsets_last,
+                  self.level_sizes, self._shifts)
+        return FactoredOperator(ring, self.keys, self.lump, _levels=levels)
+
+    def derivative_apply(self, x: np.ndarray, dweight: np.ndarray,
+                         out: np.ndarray | None = None) -> np.ndarray:
+        """``x dP``: the product with the derivative of ``P`` in one parameter.
+
+        Forward mode through the levels: each level is linear in the weights,
+        so the derivative of level ``j`` is ``G_j(w) dz + G_j(dw) z``, about
+        twice the reads of :meth:`apply`.  When two table cells that share a
+        row (merged for equal weights) have different derivatives, or the
+        NaSch form's single ``(dp, dq)`` does not hold, the levels are rebuilt
+        once with the rows numbered by their derivatives too (kept for the next
+        call with the same ``dweight``; :attr:`derivative_split` says so).
+
+        Parameters
+        ----------
+        x : (n,) float64 array
+        dweight : float64 array shaped like ``ring.table().weight``
+            Derivatives of the table's weights (:func:`markov.analysis.sensitivity.weight_derivatives`).
+        out : (n,) float64 array, optional
+
+        Returns
+        -------
+        (n,) float64 array
+
+        Examples
+        --------
+        >>> from markov.chain.statespace import recurrent_keys
+        >>> ring = Ring(3, 1, 1, 0.5)            # one car: v' = 0 with p, 1 with q
+        >>> op = FactoredOperator(ring, recurrent_keys(ring), lump=True)
+        >>> dw = np.zeros_like(ring.table().weight)
+        >>> dw[..., 0], dw[..., 1] = 1.0, -1.0   # d/dp of (p, q) in every two-outcome row
+        >>> dw[ring.table().count == 1] = 0.0
+        >>> op.derivative_apply(np.array([1.0, 0.0]), dw).tolist()
+        [1.0, -1.0]
+        """
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        if x.shape != (self.n,):
+            raise InvalidParameterError(f"x must have shape ({self.n},), got {x.shape}")
+        table = self.ring.table()
+        dweight = np.ascontiguousarray(dweight, dtype=np.float64)
+        if dweight.shape != table.weight.shape:
+            raise InvalidParameterError(
+                f"dweight must have the table's shape {table.weight.shape}, got {dweight.shape}")
+        op, slots = self, _slot_derivatives(self.rule, dweight)
+        self.derivative_split = slots is None
+        if slots is None:
+            cached = self._split
+            if cached is None or not np.array_equal(cached[0], dweight):
+                rule = level_rule(table, dweight)
+                split = FactoredOperator(self.ring, self.keys, self.lump,
+                                         _levels=self._build(rule))
+                cached = (dweight.copy(), split)
+                self._split = cached
+            op = cached[1]
+            slots = op.rule.dweight
+        out = np.empty(self.n) if out is None else out
+        op._derivative_product(x, slots, out)
+        return out
+
+    def _derivative_product(self, x: np.ndarray, dweight: np.ndarray, out: np.ndarray) -> None:
+        rule = self.rule
+        z, dz = np.empty(self.level_sizes[0]), np.zeros(self.level_sizes[0])
+        _gather_states(x, self._perm, self._offsets0, z)
+        if rule.nasch_form:
+            p, q = rule.brake_weights
+            k = rule.new_velocity.shape[1]
+            dp, dq = float(dweight[k]), float(dweight[k + 1])
+            for a, b in self._links[:-1]:
+                nz, ndz = np.empty(a.shape[0]), np.empty(a.shape[0])
+                _gather_level_pair(a, b, z, dz, p, q, dp, dq, nz, ndz)
+                z, dz = nz, ndz
+            a, b = self._links[-1]
+            _gather_last_pair(a, b, self._offsets_last, z, dz, p, q, dp, dq, out)
+            return
+        for indptr, parent, slot in self._links[:-1]:
+            m = indptr.shape[0] - 1
+            nz, ndz = np.empty(m), np.empty(m)
+            _gather_rows_pair(indptr, parent, slot, rule.weight, dweight, z, dz, nz, ndz)
+            z, dz = nz, ndz
+        indptr, parent, slot = self._links[-1]
+        _gather_rows_last_pair(indptr, parent, slot, self._offsets_last, rule.weight, dweight,
+                               z, dz, out)
+
+    def _product(self, x: np.ndarray, out: np.ndarray) -> None:
+        self._through_levels(x, out, fused=True)
+
+    def _through_levels(self, x: np.ndarray, out: np.ndarray, fused: bool,
+                        buffers: tuple | None = None) -> None:
+        """Level 0 to level ``N``; ``fused``: summed into the states (``x P``), else
+        ``out`` gets the last level's words in the order of :attr:`_offsets_last`.
+        The kernels take complex vectors as they take real ones (``buffers`` then
+        complex too): the levels' weights are real."""
+        rule = self.rule
+        buffers = self._buffers if buffers is None else buffers
+        which = 0  # ping-pong between the two level buffers
+        z = buffers[0][:self.level_sizes[0]]
+        _gather_states(x, self._perm, self._offsets0, z)
+        if rule.nasch_form:
+            p, q = rule.brake_weights
+            for a, b in self._links[:-1]:
+                which ^= 1
+                parents, z = z, buffers[which][:a.shape[0]]
+                _gather_level(a, b, parents, p, q, z)
+            a, b = self._links[-1]
+            if fused:
+                _gather_last(a, b, self._offsets_last, z, p, q, out)
+            else:
+                _gather_level(a, b, z, p, q, out)
+            return
+        for indptr, parent, slot in self._links[:-1]:
+            which ^= 1
+            parents, z = z, buffers[which][:indptr.shape[0] - 1]
+            _gather_rows(indptr, parent, slot, rule.weight, parents, z)
+        indptr, parent, slot = self._links[-1]
+        if fused:
+            _gather_rows_last(indptr, parent, slot, self._offsets_last, rule.weight, z, out)
+        else:
+            _gather_rows(indptr, parent, slot, rule.weight, z, out)
+
+    def sector_apply(self, x: np.ndarray, k: int) -> np.ndarray:
+        """``x P_k``: the chain in momentum sector ``k`` (:mod:`markov.analysis.spectrum`).
+
+        ``P_k[c, c']`` sums ``P(c, s) exp(2 pi i k r / L)`` over the successors
+        ``s`` of ``c`` that are ``c'`` moved ``r`` cells forward
+        (:func:`markov.chain.kernels.canonical_shift`).  The levels are real: the
+        phase of a state's frame enters at level 0, that of each moved word at
+        the end; the complex vector goes through the same (real-weighted) kernels.
+
+        Parameters
+        ----------
+        x : (n,) complex array
+            A row vector on the states (zero on states whose orbit does not
+            carry sector ``k``).
+        k : int
+            The sector, ``0 <= k < L``.
+
+        Returns
+        -------
+        (n,) complex128 array
+        """
+        if self._shifts is None:
+            raise InvalidParameterError("this operator was built without shifts=True")
+        length = self.ring.length
+        phase = np.exp(2j * np.pi * (int(k) % length) * np.arange(length) / length)
+        state_shift, word_shift = self._shifts
+        x = np.asarray(x, dtype=np.complex128) * phase[state_shift]
+        if self._complex_buffers is None:
+            size = max(self.level_sizes)
+            self._complex_buffers = (np.empty(size, np.complex128),
+                                     np.empty(size, np.complex128),
+                                     np.empty(self.level_sizes[-1], np.complex128))
+        values = self._complex_buffers[2]
+        self._through_levels(x, values, fused=False, buffers=self._complex_buffers[:2])
+        out = np.empty(self.n, np.complex128)
+        _phase_segments(values, self._offsets_last, word_shift, phase, out)
+        self.products += 1
+        return out
+
+
+@njit(cache=True, parallel=True)
+def _phase_segments(values, offsets, shift, phase, out):
+    """``out[s] = sum over the words k moving onto s of phase[shift[k]] values[k]``."""
+    for s in prange(out.shape[0]):
+        acc = 0j
+        for k in range(offsets[s], offsets[s + 1]):
+            acc += phase[shift[k]] * values[k]
+        out[s] = acc

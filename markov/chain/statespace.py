@@ -1,0 +1,211 @@
+"""State spaces: the recurrent class (from the compact jam) and all configurations.
+
+For ``0 < p < 1`` and ``N >= 2`` every configuration reaches the compact jam
+(stopped cars bunched together) with positive probability, so the chain has a
+single closed class: everything reachable from the jam.  (A single car is the
+exception: it settles at velocities ``w - 1`` and ``w``, ``w = min(vmax, L - 1)``,
+and the search starts there.)  We find it by breadth-first search
+over the *support* of the successor relation, which does not depend on ``p``.
+Sets of states are sorted ``int64`` key arrays (:mod:`markov.chain.encoding`), 8 bytes
+per state, merged level by level; no Python containers of states.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+
+from markov.chain.encoding import (
+    canonical_keys,
+    check_encodable,
+    compact_jam_key,
+    encode,
+    powers,
+    unique_keys,
+)
+from markov.errors import StateSpaceTooLargeError
+from markov.memory import gib, memory_limit, search_bytes_per_state
+from markov.model.ring import PARALLEL, Ring
+from markov.progress import progress_bar
+
+__all__ = ["recurrent_keys", "all_keys", "count_all"]
+
+# States per call of the successor kernels: bounds the frontier's transient
+# arrays (words of every level, successor keys) to a few hundred MB.
+_CHUNK = 1 << 22
+
+
+def count_all(ring: Ring) -> int:
+    """Number of configurations with ``N`` cars: ``C(L, N) (vmax + 1)**N``.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    int
+    """
+    return math.comb(ring.length, ring.cars) * (ring.vmax + 1) ** ring.cars
+
+
+def _merge(visited: np.ndarray, new: np.ndarray) -> np.ndarray:
+    merged = np.concatenate([visited, new])
+    merged.sort(kind="stable")  # two sorted runs: timsort merges them in linear time
+    return merged
+
+
+def _not_in(sorted_set: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    idx = np.searchsorted(sorted_set, candidates)
+    idx[idx == len(sorted_set)] = 0
+    return candidates[sorted_set[idx] != candidates]
+
+
+def _successor_set(ring: Ring, frontier: np.ndarray, lump: bool) -> np.ndarray:
+    """Sorted distinct successors of the frontier states (the support of ``x P``)."""
+    if ring.update == PARALLEL:
+        from markov.chain.factored import factored_fits, frontier_successors
+
+        if factored_fits(ring):
+            return frontier_successors(ring, frontier, lump)
+        return _row_successors(ring, frontier, lump)
+    from markov.chain.sequential import successor_keys
+
+    return unique_keys(successor_keys(ring, frontier, lump)[1])
+
+
+def _row_successors(ring: Ring, frontier: np.ndarray, lump: bool) -> np.ndarray:
+    """:func:`_successor_set` from the row generator, ``2**k`` keys per state.
+
+    For parallel rings whose factored word does not fit 62 bits (e.g. L = 24,
+    N = 23, vmax = 2: 70 bits); the frontier is cut so that each piece has
+    about ``_CHUNK`` successors.
+    """
+    from markov.chain.transition import successor_counts, successors
+
+    ends = np.cumsum(successor_counts(ring, frontier))
+    found = []
+    lo = 0
+    while lo < frontier.size:
+        before = ends[lo - 1] if lo else 0
+        hi = max(lo + 1, int(np.searchsorted(ends, before + _CHUNK, side="right")))
+        found.append(unique_keys(successors(ring, frontier[lo:hi], lump).keys))
+        lo = hi
+    return found[0] if len(found) == 1 else unique_keys(np.concatenate(found))
+
+
+def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = None,
+                   per_state: float | None = None, start: int | None = None) -> np.ndarray:
+    """Sorted keys of everything reachable from the compact jam (or from ``start``).
+
+    For NaSch with ``0 < p < 1`` that is the recurrent class of the chain; for
+    other rules it is a closed set that may hold several closed classes and
+    transient states (:func:`markov.chain.classes.closed_classes` splits it).
+
+    Parameters
+    ----------
+    ring : Ring
+        The system; ``p`` is irrelevant (only which transitions are possible).
+    lump : bool
+        Return canonical rotation keys (one per rotation orbit).
+    max_memory : float, optional
+        Bytes (not GiB) allowed for the whole solve; default 75 % of physical memory.
+    per_state : float, optional
+        Bytes per state the caller will need (:mod:`markov.memory`); default
+        and at least the search's own :func:`markov.memory.search_bytes_per_state`.
+    start : int, optional
+        Key of the configuration to start from (default the compact jam).
+
+    Returns
+    -------
+    (n,) int64 array, sorted
+
+    Raises
+    ------
+    StateSpaceTooLargeError
+        As soon as the states found so far, times ``per_state``, exceed the limit.
+
+    Notes
+    -----
+    Breadth-first search from the compact jam over the support of the
+    successor relation.  Parallel update walks the per-car levels of
+    :func:`markov.chain.factored.frontier_successors` (successors merged at every
+    level, about three words per state) instead of ``2**k`` keys per state.
+
+    Examples
+    --------
+    >>> from markov.model.ring import Ring
+    >>> len(recurrent_keys(Ring(3, 1, 1, 0.5), lump=False))   # 1 car, v in {0, 1}
+    6
+    """
+    check_encodable(ring.length, ring.vmax)
+    limit = memory_limit(max_memory)
+    per_state = max(search_bytes_per_state(), per_state or 0.0)
+    if start is not None:
+        pass
+    elif not (ring.is_nasch and ring.cars == 1):
+        start = compact_jam_key(ring.length, ring.cars, ring.vmax)
+    else:
+        # A lone car sees the gap L - 1 forever, so R1+R2 push its velocity up to
+        # w = min(vmax, L - 1) and R3 takes it at most one below: only w - 1 and
+        # w are recurrent; the stopped car (the "jam") is transient once w >= 2.
+        top = min(ring.vmax, ring.length - 1)
+        start = encode([top] + [-1] * (ring.length - 1), ring.vmax)
+    visited = np.array([start], dtype=np.int64)
+    if lump:
+        visited = canonical_keys(visited, ring.length, ring.vmax)
+    frontier = visited
+    with progress_bar(None, "recurrent class", "state") as bar:
+        while frontier.size:
+            found = [_successor_set(ring, frontier[lo:lo + _CHUNK], lump)
+                     for lo in range(0, frontier.size, _CHUNK)]
+            new = _not_in(visited, found[0] if len(found) == 1
+                          else unique_keys(np.concatenate(found)))
+            visited = _merge(visited, new)
+            frontier = new
+            bar.update(new.size)
+            if visited.size * per_state > limit:
+                raise StateSpaceTooLargeError(
+                    f"the recurrent class has more than {visited.size:,} states"
+                    f" (L={ring.length}, N={ring.cars}, vmax={ring.vmax}, lump={lump});"
+                    f" at about {per_state:.0f} bytes per state that exceeds the memory"
+                    f" limit of {gib(limit)}")
+    return visited
+
+
+def all_keys(ring: Ring, lump: bool = False, max_memory: float | None = None) -> np.ndarray:
+    """Sorted keys of every configuration with ``N`` cars (canonical if ``lump``).
+
+    Refuses (:class:`StateSpaceTooLargeError`) when ``count_all(ring)`` keys
+    would not fit in ``max_memory`` bytes (default 75 % of physical memory).
+
+    Parameters
+    ----------
+    ring : Ring
+    lump : bool
+    max_memory : float, optional
+
+    Returns
+    -------
+    (n,) int64 array, sorted
+    """
+    check_encodable(ring.length, ring.vmax)
+    total = count_all(ring)
+    limit = memory_limit(max_memory)
+    if total * 24 > limit:
+        raise StateSpaceTooLargeError(
+            f"{total:,} configurations (L={ring.length}, N={ring.cars}, vmax={ring.vmax})"
+            f" need about {gib(total * 24)}, over the limit of {gib(limit)}")
+    pw = powers(ring.length, ring.vmax)
+    if ring.cars == 0:
+        return np.zeros(1, dtype=np.int64)
+    places = np.array(list(itertools.combinations(range(ring.length), ring.cars)), dtype=np.int64)
+    place_pw = pw[places]                                     # (C, N) B**x
+    digits = np.array(list(itertools.product(range(1, ring.vmax + 2), repeat=ring.cars)),
+                      dtype=np.int64)                         # (V, N) v + 1
+    keys = np.concatenate([place_pw @ row for row in digits]) if len(places) < len(digits) \
+        else (place_pw[:, None, :] * digits[None, :, :]).sum(axis=2).ravel()
+    if lump:
+        keys = canonical_keys(keys, ring.length, ring.vmax)
+    return unique_keys(keys)
