@@ -12,8 +12,11 @@ A configuration is a tuple of ``L`` cells, ``cells[x - 1]`` for cell ``x``:
 
 Readings of ``docs/roads.md`` where the text leaves a choice
 -------------------------------------------------------------
-* The reservoir's virtual car takes the parameters of cell 1, so on an empty
-  road with an open exit its ``v_ahead`` is the ``vmax`` of cell 1.  If its
+* The reservoir's virtual car sees exactly what a car on cell 0 sees under
+  "What a rule sees": on an empty road ``gap = L``, ``v_ahead = 0`` with a
+  ``sink`` or a shut ``wall``, the unbounded gap with an open ``wall``.  It
+  takes the parameters of cell 1, so with an open exit its ``v_ahead`` is the
+  ``vmax`` of cell 1.  If its
   new velocity exceeds ``L`` (only when the ``vmax`` of cell 1 exceeds ``L``
   and the exit is open) it drives through: it counts as entering and as
   leaving, and it crosses every bond.
@@ -22,7 +25,9 @@ Readings of ``docs/roads.md`` where the text leaves a choice
   ``bond_currents[k] = inflow + (ramp inflows at cells <= k)``
   ``= flux - (ramp inflows at cells > k)``.
 * ``insert`` on a road shorter than the bulk ``vmax`` would put a car on a
-  cell beyond ``L`` (empty road: ``c = vmax``): refused.
+  cell beyond ``L`` (empty road: ``c = vmax``): refused.  ``c`` and the new
+  car's velocity use the bulk ``vmax`` even where cell ``c`` or cell 1 lies in
+  a stretch with another ``vmax`` (the car may then carry more than its cell's).
 * Ordered-sequential ``site1``: the entry attempt is last and sees the
   updated road, so it needs cell 1 empty *after* the cars and the ramps moved
   (as the reservoir's virtual car does; this keeps the vmax = 1 map exact).
@@ -34,7 +39,9 @@ Readings of ``docs/roads.md`` where the text leaves a choice
 * The defaults ``site1``/``sink`` (``vmax = 1``) and ``reservoir``/``wall``
   (``vmax >= 2``) read the bulk model's ``vmax``.
 * ``sink``: the car on cell ``L`` at time ``t`` is never given to the rule; a
-  car that stays there gets velocity 0 whatever velocity it arrived with.
+  car that stays there gets velocity 0 whatever velocity it arrived with.  The
+  car behind it sees its velocity as it is in the configuration (the one it
+  arrived with, until it has stood one step).
 
 Time: one step of the chain is one time step (parallel, ordered-sequential)
 or one sub-step (random-sequential, ``L + 1`` sub-steps a time step); the
@@ -45,8 +52,9 @@ from __future__ import annotations
 import itertools
 import math
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable, NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -136,7 +144,7 @@ class Road:
                     raise ValueError(f"stretch sets unknown parameters {sorted(unknown)}")
                 return {**bulk, **values}
         else:
-            raise ValueError(f"model must be a markov.rule.Model or a rule function, got {self.model!r}")
+            raise TypeError(f"model must be a markov.rule.Model or a rule function, got {self.model!r}")
         object.__setattr__(self, "rule", rule)
         object.__setattr__(self, "bulk", bulk)
         vmax = bulk["vmax"]
@@ -229,7 +237,7 @@ class Counts(NamedTuple):
 class _Branch:
     """One branch of a step in progress: its probability, the cells, the counts."""
 
-    __slots__ = ("pr", "cells", "left", "entered", "ramps", "bonds")
+    __slots__ = ("bonds", "cells", "entered", "left", "pr", "ramps")
 
     def __init__(self, pr, cells, left, entered, ramps, bonds):
         self.pr, self.cells = pr, cells

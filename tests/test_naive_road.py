@@ -9,12 +9,13 @@ a configuration is written cell 1 first, ``_`` empty, else the velocity.
 """
 from __future__ import annotations
 
+import itertools
 import math
 
+import naive_road as nr
 import numpy as np
 import pytest
 
-import naive_road as nr
 from markov.rule import MODELS, load_model
 
 UPDATES = nr.UPDATES
@@ -127,13 +128,13 @@ def test_parallel_tasep_phases_at_moderate_L():
     # alpha (q - alpha)/(q - alpha^2), J_8 - J_inf = 8.6e-5 (boundary layer at the exit)
     J = [tasep(L, 0.2, 0.6, q, "parallel")[0] for L in range(4, 8)]
     J_ld = 0.2 * (q - 0.2) / (q - 0.2 ** 2)
-    assert all(a > b > J_ld for a, b in zip(J, J[1:]))
+    assert all(a > b > J_ld for a, b in itertools.pairwise(J))
     assert J[-1] == pytest.approx(J_ld, abs=3e-4)
     # maximal current (alpha, beta > 1 - sqrt(1 - q)): J_L falls like 1/L towards
     # (1 - sqrt(1 - q))/2 = 0.1838; L = 7 is still 20 % above it
     J = [tasep(L, 0.9, 0.9, q, "parallel")[0] for L in range(4, 8)]
     J_mc = (1 - math.sqrt(1 - q)) / 2
-    assert all(a > b > J_mc for a, b in zip(J, J[1:]))
+    assert all(a > b > J_mc for a, b in itertools.pairwise(J))
     assert J[-1] == pytest.approx(J_mc, rel=0.25)
     # and the mid-road density is 1/2 at alpha = beta (particle-hole symmetry)
     assert tasep(7, 0.9, 0.9, q, "parallel")[1][3] == pytest.approx(0.5, abs=1e-13)
@@ -480,6 +481,25 @@ def test_solve_interface():
     assert nr.solve_one(bare)["distribution"] == pytest.approx(c["distribution"], abs=1e-15)
 
 
+def test_readings_where_the_text_leaves_a_choice():
+    # (1) reservoir with vmax of cell 1 above L, exit open: the virtual car drives
+    # through (counted as entering and leaving).  L = 1, vmax 2, p = 0: open (beta):
+    # u = min(3, 2, inf) = 2 > L; shut: gap 1, u = 1, it enters cell 1.
+    a, b = 0.3, 0.6
+    road = nr.Road(L=1, model=nasch(2, 0.0), entry="reservoir", exit="wall", alpha=a, beta=b)
+    out = nr.step(road, (_,))
+    assert out == pytest.approx({((_,), nr.Counts(0, 0, (), ())): 1 - a,
+                                 ((_,), nr.Counts(1, 1, (), ())): a * b,
+                                 ((1,), nr.Counts(0, 1, (), ())): a * (1 - b)}, abs=1e-15)
+    # (2) two ramps on one cell act in list order: the second only if the first put no car
+    road = nr.Road(L=1, model=nasch(1, 0.2), entry="site1", exit="sink", alpha=0.0, beta=b,
+                   ramps=[(1, 0.3, 0), (1, 0.5, 1)])
+    out = nr.step(road, (_,))
+    assert out == pytest.approx({((_,), nr.Counts(0, 0, (0, 0), ())): 0.7 * 0.5,
+                                 ((0,), nr.Counts(0, 0, (1, 0), ())): 0.3,
+                                 ((1,), nr.Counts(0, 0, (0, 1), ())): 0.7 * 0.5}, abs=1e-15)
+
+
 @pytest.mark.parametrize("update", UPDATES)
 def test_all_configurations_give_the_reachable_class(update):
     # from every configuration (velocities 0..2 on 2 cells) the chain still has one
@@ -501,7 +521,7 @@ def test_defaults_and_refusals():
         nr.Road(L=2, model=nasch(3, 0.2), entry="insert")
     with pytest.raises(ValueError, match="overlaps"):
         nr.Road(L=4, model=nasch(2, 0.2), stretches=[(1, 2, {"p": 0.1}), (2, 3, {"p": 0.2})])
-    with pytest.raises(Exception):
+    with pytest.raises(ValueError, match="nope"):
         nr.Road(L=4, model=nasch(2, 0.2), stretches=[(1, 2, {"nope": 0.1})])
     with pytest.raises(ValueError, match="ramp"):
         nr.Road(L=4, model=nasch(2, 0.2), ramps=[(5, 0.1, 0)])
