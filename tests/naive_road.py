@@ -79,7 +79,7 @@ class Road:
     ----------
     L : int
         Number of cells, ``1..L`` from the entry.
-    model : markov.rule.Model or callable
+    model : markov.model.load.Model or callable
         The bulk model.  A ``Model`` gives the rule (``model.spec.function``)
         and its parameters; a bare rule function needs ``params``.
     params : dict, optional
@@ -127,7 +127,7 @@ class Road:
         L = self.L
         if not (isinstance(L, int) and L >= 1):
             raise ValueError(f"L must be an integer >= 1, got {L!r}")
-        if callable(getattr(self.model, "with_params", None)):         # a markov.rule.Model
+        if callable(getattr(self.model, "with_params", None)):         # a markov.model.load.Model
             model = self.model.with_params(**self.params) if self.params else self.model
             rule, bulk = model.spec.function, dict(model.params)
 
@@ -144,7 +144,7 @@ class Road:
                     raise ValueError(f"stretch sets unknown parameters {sorted(unknown)}")
                 return {**bulk, **values}
         else:
-            raise TypeError(f"model must be a markov.rule.Model or a rule function, got {self.model!r}")
+            raise TypeError(f"model must be a markov.model.load.Model or a rule function, got {self.model!r}")
         object.__setattr__(self, "rule", rule)
         object.__setattr__(self, "bulk", bulk)
         vmax = bulk["vmax"]
@@ -714,7 +714,7 @@ def solve(road, states="reachable"):
     Parameters
     ----------
     road : Road or dict
-        The fields of :class:`Road`: ``L``, ``model`` (a ``markov.rule.Model``
+        The fields of :class:`Road`: ``L``, ``model`` (a ``markov.model.load.Model``
         or a rule function), ``params`` (with a rule function: all of them;
         with a Model: changes), ``update`` (``"parallel"``,
         ``"random-sequential"``, ``"ordered-sequential"``), ``entry``

@@ -16,7 +16,7 @@ import naive_road as nr
 import numpy as np
 import pytest
 
-from markov.rule import MODELS, load_model
+from markov.model.load import MODELS, load_model
 
 UPDATES = nr.UPDATES
 CONVENTIONS = [(e, x) for e in nr.ENTRIES for x in nr.EXITS]
