@@ -16,8 +16,8 @@ the coarse matrix a by-product of one product ``x P``
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
 
+from ._jit import njit, prange
 from ._kernels import cars_of, smallest_rotation
 from .encoding import unique_keys
 from .errors import InvalidParameterError

@@ -68,8 +68,8 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
-from numba import njit, prange
 
+from ._jit import njit, prange
 from ._chain_operator import ChainOperator
 from ._kernels import (ahead_velocity, canonical, canonical_shift, cars_of, gap, rotate_mask,
                        shift_bits, term)

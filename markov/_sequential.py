@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from numba import njit, prange
 
 from ._chain_operator import ChainOperator
+from ._jit import njit, prange
 from ._kernels import canonical, canonical_shift, shift_bits, successor_row
 from .encoding import powers
 from .errors import InvalidParameterError

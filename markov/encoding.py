@@ -29,8 +29,8 @@ formatter.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
 
+from ._jit import njit, prange
 from ._kernels import canonical, digits_of, shift_bits
 from .errors import InvalidParameterError
 

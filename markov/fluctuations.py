@@ -50,8 +50,8 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from numba import njit
 
+from ._jit import njit
 from . import memory
 from ._kernels import cars_of
 from .chain import RingChain

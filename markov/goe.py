@@ -40,8 +40,8 @@ models" (``shared/paper``), inequalities (distcond1), (distcond2).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from ._jit import njit
 from ._kernels import cars_of, digits_of, gap
 from .encoding import check_encodable, encode, from_text, unique_keys
 from .errors import InvalidParameterError, StateSpaceTooLargeError

@@ -68,8 +68,8 @@ from dataclasses import asdict, dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from ._jit import njit
 from .errors import InvalidParameterError
 from .ring import PARALLEL, RANDOM_SEQUENTIAL, Ring
 from .progress import progress_bar

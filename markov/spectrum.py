@@ -39,8 +39,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from numba import njit
 
+from ._jit import njit
 from ._kernels import canonical_shift, orbit_size, shift_bits
 from .encoding import powers
 from .errors import ConvergenceError, InvalidParameterError

@@ -62,8 +62,8 @@ from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
-from numba import njit, prange
 
+from ._jit import njit, prange
 from .choices import SOLVERS
 from .errors import CorruptFileError, InvalidParameterError, StateSpaceTooLargeError
 from .files import write_bytes_atomic

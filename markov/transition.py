@@ -27,8 +27,8 @@ from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 
+from ._jit import njit
 from ._kernels import canonical, row_length, shift_bits, successor_row
 from .encoding import powers
 from .progress import progress_bar

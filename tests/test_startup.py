@@ -42,6 +42,14 @@ def test_solver_and_library_modules_load_neither_sympy_dask_nor_matplotlib():
     assert "numpy" in loaded   # the check itself works
 
 
+def test_kernel_modules_import_without_numba():
+    # markov._jit: numba is imported when a kernel first runs, not with its module
+    loaded = _top(_modules_after(
+        "import markov.chain, markov.transition, markov.encoding, markov._factored\n"
+        "import markov.observables, markov.montecarlo, markov.goe, markov.storage, markov.rules"))
+    assert "numpy" in loaded and not loaded & {"numba", "llvmlite"}
+
+
 def test_the_cli_module_loads_only_click():
     # nasch --help imports nasch.cli alone: no numpy, scipy, numba or sympy
     loaded = _top(_modules_after("import nasch.cli"))
