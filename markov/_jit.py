@@ -4,7 +4,9 @@ Every kernel of this package is decorated with :func:`njit` from here instead
 of numba's, so that importing a kernel module does not import numba: importing
 it costs about 0.2 s, and the first cached kernel about 0.2 s more (numba sets
 up its compiler: ``docs/performance.md``).  Until then a kernel is a
-:class:`Kernel`, whose first call makes every kernel a numba dispatcher
+:class:`Kernel`, which runs the call on an ahead-of-time compiled copy when
+one fits the arguments (:mod:`markov._aot`; a small ``nasch solve`` never
+imports numba), and otherwise makes every kernel a numba dispatcher
 (:func:`materialize`) and calls that.
 
 Kernels call kernels through their module globals, and numba compiles such a
@@ -52,7 +54,9 @@ _PRANGE = prange = _Prange()
 class Kernel:
     """A kernel of this package before numba is imported.
 
-    A call, or any numba attribute (``signatures``, ``stats``, ...), materializes.
+    Calls run on an ahead-of-time compiled copy when one was built for
+    exactly these argument types (:func:`markov._aot.entry`); any other call,
+    and any numba attribute (``signatures``, ``stats``, ...), materializes.
     """
 
     def __init__(self, func, options: dict):
@@ -62,10 +66,15 @@ class Kernel:
         self.name = f"{func.__module__}.{func.__qualname__}"
         self.dispatcher = None
 
-    def __call__(self, *args):
+    def __call__(self, *args, **kwargs):
         if self.dispatcher is None:
+            from ._aot import entry
+
+            compiled = None if kwargs else entry(self.name, args)
+            if compiled is not None:
+                return compiled(*args)
             materialize()
-        return self.dispatcher(*args)
+        return self.dispatcher(*args, **kwargs)
 
     def __getattr__(self, attr):
         if attr.startswith("__"):
