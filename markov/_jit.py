@@ -144,7 +144,9 @@ def materialize() -> None:
     """Import numba and turn every kernel into a numba dispatcher (once per process).
 
     Each global of this package's modules that names a :class:`Kernel`, an
-    intrinsic or :data:`prange` is rebound to numba's object.
+    intrinsic or :data:`prange` is rebound to numba's object.  A kernel that
+    is not in numba's cache then compiles on its first call, and the first
+    compile prints one line (:func:`markov.progress.note_compiling`).
     """
     global _numba, prange
     if _numba is not None:
@@ -153,6 +155,7 @@ def materialize() -> None:
         if _numba is not None:
             return
         import numba
+        from numba.core import event
         from numba.extending import intrinsic as numba_intrinsic
 
         for proxy in _pending:
@@ -168,9 +171,24 @@ def materialize() -> None:
                     setattr(module, attr, value.dispatcher)
                 elif value is _PRANGE:
                     setattr(module, attr, numba.prange)
+        event.register("numba:compile", _compile_listener(event))
         prange = numba.prange
         _pending.clear()
         _numba = numba
+
+
+def _compile_listener(event):
+    """A numba event listener: a kernel missing from the cache starts compiling."""
+    from .progress import note_compiling
+
+    class CompileNote(event.Listener):
+        def on_start(self, event) -> None:
+            note_compiling()
+
+        def on_end(self, event) -> None:
+            pass
+
+    return CompileNote()
 
 
 if DISABLE_JIT:
