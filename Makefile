@@ -38,6 +38,7 @@ test: $(KERNELS_STAMP)
 
 bench: $(BENCH_STAMP) $(KERNELS_STAMP)
 	$(BIN)/python benchmarks/run.py
+	$(BIN)/python benchmarks/startup.py
 
 bench-large: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/large.py
