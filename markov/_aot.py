@@ -11,8 +11,8 @@ so that a small solve imports neither numba nor llvmlite.
 
 Same numbers: the copies are the same Python functions compiled by the same
 numba.  They run serially (pycc has no threads), so :data:`KERNELS` lists only
-kernels whose result does not depend on the thread count (each output slot
-written by one iteration; no float reductions across threads), and a call
+kernels whose result does not depend on the thread count (serial ones, and
+parallel loops whose iterations write separate output slots), and a call
 uses a copy only while its arrays hold at most :data:`LIMIT` elements: larger
 work goes to numba's threaded kernels, whose 0.4 s start is small next to it.
 
@@ -38,9 +38,9 @@ import numpy as np
 
 __all__ = ["KERNELS", "LIMIT", "entry", "type_name", "build", "fingerprint", "cache_dir"]
 
-#: Kernels with compiled copies: those a small solve calls from Python (any
-#: update whose route has no thread-dependent sums: parallel and
-#: ordered-sequential), with their results independent of the thread count.
+#: Kernels with compiled copies: those a small parallel solve calls from
+#: Python; each is serial, or a parallel loop whose iterations write separate
+#: output slots (no sums across threads), so a serial copy gives numba's result.
 KERNELS = (
     "markov.encoding._canonical_many",
     "markov._factored._frame_words",
@@ -194,8 +194,6 @@ def build(dispatchers) -> Path:
     import tempfile
     import warnings
 
-    from .files import write_atomic
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")   # pycc is pending deprecation: said in the docstring
         from numba.pycc import CC
@@ -212,11 +210,14 @@ def build(dispatchers) -> Path:
             export = f"{name.replace('.', '_')}_{i}"
             cc.export(export, sig)(func)
             table.setdefault(name, {})[", ".join(str(t) for t in sig.args)] = export
+    # each file replaced whole: a process starting meanwhile sees the old or the new
     with tempfile.TemporaryDirectory(dir=library.parent) as tmp:
         cc.output_dir = tmp
         cc.compile()
         os.replace(Path(tmp) / cc.output_file, library)
-    write_atomic(index, json.dumps({"fingerprint": fp, "kernels": table}, indent=1))
+        (Path(tmp) / index.name).write_text(json.dumps({"fingerprint": fp, "kernels": table},
+                                                       indent=1))
+        os.replace(Path(tmp) / index.name, index)
     for old in library.parent.glob(f"{_MODULE}-*"):   # copies of older sources
         if old not in (library, index):
             old.unlink(missing_ok=True)
