@@ -96,10 +96,12 @@ def test_no_compile_note_with_quiet_or_without_a_terminal(tmp_path):
 
 
 @pytest.mark.slow
-def test_nasch_solve_says_compiling_once_on_its_first_run(tmp_path):
+def test_a_nasch_command_says_compiling_once_on_its_first_run(tmp_path):
+    # a small simulation compiles few kernels (a solve: 8, a minute under load);
     # a cache of its own: no ahead-of-time copies there either, so numba compiles
-    solve = [sys.executable, "-m", "nasch", "solve", "-L", "6", "-N", "3", "--vmax", "2",
-             "--p", "0.5"]
-    first = _on_terminal(solve, tmp_path)
+    simulate = [sys.executable, "-m", "nasch", "simulate", "-L", "100", "-c", "0.2", "--vmax",
+                "2", "--p", "0.5", "--steps", "100"]
+    first = _on_terminal(simulate, tmp_path)
     assert first.count(NOTE) == 1, first
-    assert NOTE not in _on_terminal(solve, tmp_path)
+    assert NOTE not in _on_terminal(simulate, tmp_path)
+    assert NOTE not in _on_terminal(simulate + ["--quiet"], tmp_path / "quiet")
