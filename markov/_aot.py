@@ -53,7 +53,8 @@ KERNELS = (
 )
 
 #: Largest array (elements) a call may pass to a compiled copy: the serial
-#: copies take milliseconds up to there (``docs/performance.md``).
+#: copies take tens of milliseconds at most up to there, less than starting
+#: numba (``docs/performance.md``).
 LIMIT = 1 << 20
 
 _MODULE = "markov_aot"   # the extension module's name (its PyInit_ symbol)
