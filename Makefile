@@ -4,6 +4,7 @@ PYTHON ?= python3.11
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
+KERNELS_STAMP := $(VENV)/.kernels
 BENCH_STAMP := $(VENV)/.installed-bench
 # pytest-xdist runs one worker per core; BLAS threads on top would oversubscribe them
 SINGLE_THREADED := OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
@@ -18,18 +19,26 @@ $(STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
+# The kernels compiled once here, not on a user's first run: numba's cache for
+# the common routes and the ahead-of-time copies a small solve runs on
+# (python -m markov.warmup; again when a source of markov changes).
+$(KERNELS_STAMP): $(STAMP) $(wildcard markov/*.py markov/*/*.py markov/*/*/*.py)
+	$(BIN)/python -m markov.warmup
+	touch $(KERNELS_STAMP)
+
 $(BENCH_STAMP): pyproject.toml $(STAMP)
 	$(BIN)/python -m pip install --quiet -e '.[test,bench]'
 	touch $(BENCH_STAMP)
 
-demo: $(STAMP)
+demo: $(KERNELS_STAMP)
 	$(BIN)/python examples/flux_table.py
 
-test: $(STAMP)
+test: $(KERNELS_STAMP)
 	$(SINGLE_THREADED) $(BIN)/python -m pytest -q -n 2
 
-bench: $(BENCH_STAMP)
+bench: $(BENCH_STAMP) $(KERNELS_STAMP)
 	$(BIN)/python benchmarks/run.py
+	$(BIN)/python benchmarks/startup.py
 
 bench-large: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/large.py

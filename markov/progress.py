@@ -3,9 +3,14 @@ from __future__ import annotations
 
 import sys
 
-__all__ = ["progress_bar", "set_quiet"]
+__all__ = ["progress_bar", "set_quiet", "note_compiling"]
 
 _quiet = False
+_noted_compiling = False
+
+#: Seconds the first run of a common command spends compiling its kernels
+#: into numba's cache (2-core VM, ``docs/performance.md``).
+COMPILE_SECONDS = 20
 
 
 def set_quiet(quiet: bool) -> None:
@@ -64,3 +69,25 @@ def progress_bar(total=None, desc: str = "", unit: str = "it"):
 
     return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr,
                 leave=False, dynamic_ncols=True)
+
+
+def note_compiling() -> None:
+    """One line on stderr, once per process, when numba starts compiling a kernel.
+
+    numba compiles a kernel that is not in its on-disk cache (a fresh
+    install, a changed source, ``NUMBA_CACHE_DIR`` pointing elsewhere); the
+    first command then pauses for seconds, so it says why.  Shown like a
+    progress bar: on a terminal and not with ``quiet``.
+    """
+    global _noted_compiling
+    if _noted_compiling or not progress_enabled():
+        return
+    _noted_compiling = True
+    line = f"compiling kernels once (about {COMPILE_SECONDS} s); later runs start at once"
+    if "tqdm.std" in sys.modules:   # a bar may be drawn: print above it
+        from tqdm.std import tqdm
+
+        tqdm.write(line, file=sys.stderr)
+    else:
+        sys.stderr.write(line + "\n")
+        sys.stderr.flush()

@@ -9,6 +9,7 @@ process of the group still running.
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -165,4 +166,7 @@ def test_ctrl_c_while_numba_compiles_the_kernels(tmp_path, delay):
         env_extra={"NUMBA_CACHE_DIR": str(cache)})
     if proc.returncode == 0:
         pytest.skip("the solve finished before the interrupt")
-    _check(proc, err, tmp_path, scratch, expected_files=("tmp", "numba-cache"))
+    # numba makes its cache directory when its kernels are first needed (markov._jit):
+    # there or not yet, depending on how far the start got
+    shutil.rmtree(cache, ignore_errors=True)
+    _check(proc, err, tmp_path, scratch)

@@ -50,8 +50,8 @@ import numpy as np
 import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from numba import njit
 
+from markov._jit import njit
 from markov import memory
 from markov.analysis.correlations import MAX_LAGS, StationaryChain, prepare, sub_steps
 from markov.chain.encoding import canonical_keys

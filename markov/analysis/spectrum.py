@@ -39,8 +39,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from numba import njit
 
+from markov._jit import njit
 from markov.chain.encoding import powers
 from markov.chain.kernels import canonical_shift, orbit_size, shift_bits
 from markov.chain.transition import state_indices, successors

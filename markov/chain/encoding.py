@@ -29,8 +29,8 @@ formatter.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
 
+from markov._jit import njit, prange
 from markov.chain.kernels import canonical, digits_of, shift_bits
 from markov.errors import InvalidParameterError
 

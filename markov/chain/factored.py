@@ -68,8 +68,8 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 
 import numpy as np
-from numba import njit, prange
 
+from markov._jit import njit, prange
 from markov.chain.encoding import powers, unique_keys
 from markov.chain.kernels import (
     ahead_velocity,

@@ -24,11 +24,9 @@ rules car by car instead of row by row; it shares :func:`cars_of`,
 """
 from __future__ import annotations
 
-import numba
 import numpy as np
-from numba import njit
-from numba.core import cgutils, types
-from numba.extending import intrinsic
+
+from markov._jit import DISABLE_JIT, intrinsic, njit
 
 __all__ = ["digits_of", "cars_of", "gap", "term", "rotate", "shift_bits",
            "canonical", "canonical_shift", "orbit_size", "rotate_mask", "smallest_rotation", "ahead_velocity",
@@ -101,7 +99,7 @@ def shift_bits(vmax: int) -> int:
     return b.bit_length() - 1 if b & (b - 1) == 0 else 0
 
 
-if numba.config.DISABLE_JIT:
+if DISABLE_JIT:
     # NUMBA_DISABLE_JIT=1 (debugging, coverage): an intrinsic has no Python
     # body, so count the trailing zeros in Python.
     def _cttz(x):
@@ -112,6 +110,8 @@ else:
     @intrinsic
     def _cttz(typingctx, x):
         """Count trailing zeros of an int64 (LLVM ``cttz``; the argument is nonzero)."""
+        from numba.core import cgutils, types
+
         sig = types.int64(types.int64)
 
         def codegen(context, builder, signature, args):

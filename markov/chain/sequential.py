@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import numba
 import numpy as np
-from numba import njit, prange
 
+from markov._jit import njit, prange
 from markov.chain.encoding import powers
 from markov.chain.kernels import canonical, canonical_shift, shift_bits, successor_row
 from markov.chain.operator import ChainOperator

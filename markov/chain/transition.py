@@ -27,8 +27,8 @@ from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 
+from markov._jit import njit
 from markov.chain.encoding import powers
 from markov.chain.kernels import canonical, row_length, shift_bits, successor_row
 from markov.model.ring import PARALLEL, RANDOM_SEQUENTIAL, Ring

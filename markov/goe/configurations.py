@@ -40,8 +40,8 @@ models" (``shared/paper``), inequalities (distcond1), (distcond2).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from markov._jit import njit
 from markov.chain.encoding import check_encodable, encode, from_text, unique_keys
 from markov.chain.kernels import cars_of, digits_of, gap
 from markov.chain.statespace import all_keys, count_all, recurrent_keys

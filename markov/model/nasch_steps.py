@@ -22,7 +22,7 @@ models" (``shared/paper``), rules R1-R4.
 """
 from __future__ import annotations
 
-from numba import njit
+from markov._jit import njit
 
 __all__ = [
     "accelerate",

@@ -68,8 +68,8 @@ from dataclasses import asdict, dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
 
+from markov._jit import njit
 from markov.errors import InvalidParameterError
 from markov.model.ring import PARALLEL, RANDOM_SEQUENTIAL, Ring
 from markov.progress import progress_bar

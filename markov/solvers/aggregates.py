@@ -16,8 +16,8 @@ the coarse matrix a by-product of one product ``x P``
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
 
+from markov._jit import njit, prange
 from markov.chain.encoding import unique_keys
 from markov.chain.kernels import cars_of, smallest_rotation
 from markov.errors import InvalidParameterError

@@ -19,8 +19,8 @@ Definitions, for a ring of ``L`` cells with ``N`` cars:
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
+from markov._jit import njit
 from markov.chain.kernels import ahead_velocity, cars_of, digits_of, gap
 from markov.errors import InvalidParameterError
 from markov.model.ring import Ring

@@ -62,8 +62,8 @@ from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
-from numba import njit, prange
 
+from markov._jit import njit, prange
 from markov.chain.encoding import base, check_encodable, decode, powers, to_text
 from markov.chain.kernels import orbit_size, rotate, shift_bits
 from markov.choices import SOLVERS
