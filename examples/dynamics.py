@@ -16,12 +16,9 @@ import time
 
 import numpy as np
 
-from markov import Ring, RingChain
-from markov.analysis.correlations import autocorrelation_time
-from markov.analysis.fluctuations import current_fluctuations
-from markov.simulation.montecarlo import integrated_autocorrelation_time, trajectory
-from markov.analysis.sensitivity import sensitivity
-from markov.analysis.spectrum import relaxation_spectrum
+from markov import (Ring, RingChain, autocorrelation_time, current_fluctuations,
+                    relaxation_spectrum, sensitivity, trajectory)
+from markov.simulation.montecarlo import integrated_autocorrelation_time
 
 
 def main(length: int = 14, cars: int = 7, vmax: int = 2, p: float = 0.5) -> None:

@@ -2,9 +2,8 @@
 
 Use it with any command or function that takes a rule::
 
-    from markov.model.load import load_model
+    from markov import load_model, tabulate
 
-    from markov.model.table import tabulate
     model = load_model("examples/my_rule.py:rule", {"vmax": 3, "p": 0.2, "r": 0.05})
     table = tabulate(model)
 
@@ -15,14 +14,14 @@ probability ``p`` (NaSch R3), or, with probability ``r``, stops dead
 coincide (merged by the library); a car with ``u = 0`` stays.  ``r = 0`` is
 NaSch.
 
-The :func:`markov.model.spec.rule` decorator declares the parameters and their
+The :func:`markov.rule` decorator declares the parameters and their
 defaults: an int default is an integer parameter, a float default a
 probability; ``constraint`` refuses ``p + r > 1`` with one line.  The function
 branches only on the integers ``v`` and ``gap``, so it also works with sympy
 symbols for ``p`` and ``r`` (:func:`markov.model.table.symbolic_outcomes`).  Keep
 such a file free of heavy imports: it is imported every time a model is loaded.
 """
-from markov.model.spec import rule as _declare
+from markov import rule as _declare
 
 
 def _at_most_one(params):

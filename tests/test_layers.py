@@ -1,4 +1,4 @@
-"""The three layers (docs/architecture.md): arrows point down, and no module cycle.
+"""The three layers and markov's pipeline (docs/architecture.md): arrows point down, no cycle.
 
 Every import of every module is read from the source (``ast``), including the
 imports inside functions, which run later but are dependencies all the same.
