@@ -14,8 +14,8 @@ Methods (see ``docs/symbolic.md``):
 Every method reads the update rule: NaSch by default, any
 :class:`markov.rule.Model` with ``model=`` (pMF and pMF2 remove the model's
 own Garden of Eden patterns and refuse a rule whose patterns of that order are
-infinitely many: fi at vmax >= 2, kkw for pMF2; COMF refuses rules that read
-the car ahead).  See
+infinitely many (kkw for pMF2) or whose equations keep the jam as a solution
+(fi at vmax >= 2); COMF refuses rules that read the car ahead).  See
 ``docs/symbolic.md``, "Approximations of the other models".
 
 Quick start
@@ -287,9 +287,9 @@ def approximate(method: str, vmax: int | None, p: float | None, density,
         Unknown method, unsupported ``vmax`` (MF: above 100, COMF: above 10),
         a cluster too large to enumerate, ``p`` or ``density`` outside
         ``(0, 1)``, COMF below ``c = 0.005``, pMF for a rule with infinitely
-        many GoE patterns of its order (fi at vmax >= 2, refused after the
-        GoE search measured it; kkw for pMF2), COMF for a rule that reads the
-        car ahead; all before any work.
+        many GoE patterns of its order (kkw for pMF2) or whose pMF equations
+        have the jam as a solution at every density (fi at vmax >= 2), COMF
+        for a rule that reads the car ahead; all before any work.
 
     Examples
     --------
