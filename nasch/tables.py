@@ -472,11 +472,13 @@ def flux_table(vmax: int | None = None, p=None, lengths: Sequence[int] | None = 
                 except NaschError as exc:   # refused for this model: said, never guessed
                     approx[method, m, c] = None
                     refused.setdefault(method, str(exc))
+    grouped = {}    # one note per reason (pMF and pMF2 often share theirs)
     for method, reason in refused.items():
-        if all(approx[method, m, c] is None for m in models for c in fractions):
-            notes.append(f"{_LABELS[method]} left out: {reason}")
-        else:
-            notes.append(f"{_LABELS[method]} -- where refused: {reason}")
+        whole = all(approx[method, m, c] is None for m in models for c in fractions)
+        grouped.setdefault((reason, whole), []).append(_LABELS[method])
+    for (reason, whole), labels in grouped.items():
+        notes.append(f"{' and '.join(labels)} {'left out' if whole else '-- where refused'}:"
+                     f" {reason}")
     methods = tuple(x for x in methods if x not in refused
                     or any(approx[x, m, c] is not None for m in models for c in fractions))
 
