@@ -299,11 +299,11 @@ def approximate(method: str, vmax: int | None, p: float | None, density,
     """
     from markov.validate import ensure_open_probability, ensure_open_unit
 
-    from .solve import flux_of, solve_mf, solve_pmf
-
     model, vmax, p = _resolve_model(model, vmax, p)
     base, order, vmax = _ensure_method(method, vmax, order)
     _ensure_model_method(base, model)
+
+    from .solve import flux_of, solve_mf, solve_pmf   # sympy: after the refusals
     p_val = ensure_open_probability(p) if model is None else p
     p_arg = p_val if model is None else None
     c_arr = np.asarray(ensure_open_unit("density", density), dtype=float)

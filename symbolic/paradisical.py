@@ -166,7 +166,6 @@ def ensure_pmf_model(model, second_order: bool = False) -> None:
 
     from .ruleview import structure
 
-    structure(model)     # refuses a rule reading the car ahead beyond its horizon
     clash = [n for n in model.spec.probability_parameters()
              if n in ("c", "d", "q") or re.fullmatch(r"c_\d+", n)]
     if clash:
@@ -184,6 +183,7 @@ def ensure_pmf_model(model, second_order: bool = False) -> None:
                 f" {'have' if ' and ' in name else 'has'} no unique solution:"
                 " the jam c_0 = c (flux 0) solves them at every density, as every gap ahead of"
                 " a stopped car in it starts a Garden of Eden pattern")
+    structure(model)     # refuses a rule reading the car ahead beyond its horizon (sympy: last)
 
 
 def keeps_the_jam(model, patterns) -> bool:
