@@ -304,7 +304,7 @@ def _minimise(delta: np.ndarray) -> np.ndarray:
     The start state keeps label 0; the other blocks are numbered in order of
     their first state.
     """
-    n, k = delta.shape
+    n = delta.shape[0]
     block = np.zeros(n, dtype=np.int64)
     n_blocks = 1
     safe, dead = np.maximum(delta, 0), delta < 0

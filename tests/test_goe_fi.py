@@ -24,11 +24,17 @@ import pytest
 from click.testing import CliRunner
 
 import markov.goe_patterns as gp
-from markov.encoding import EMPTY, from_text, to_text
+from markov.encoding import EMPTY, to_text
 from markov.errors import InvalidParameterError
 from markov.goe import census
-from markov.goe_patterns import (elementary_patterns, limit_order, never_stabilises,
-                                 order_automaton, rule_support, settling_order)
+from markov.goe_patterns import (
+    elementary_patterns,
+    limit_order,
+    never_stabilises,
+    order_automaton,
+    rule_support,
+    settling_order,
+)
 from markov.rule import MODELS, load_model
 from nasch.cli import main
 
@@ -52,7 +58,7 @@ def allowed(word, V, n=None):
     cars = [(x, v) for x, v in enumerate(word) if v != EMPTY]
     if not cars:
         return True
-    for (x, v), (x2, v2) in zip(cars, cars[1:]):   # order 1: the old gap gave the move
+    for (x, v), (x2, v2) in itertools.pairwise(cars):   # order 1: the old gap gave the move
         d = x2 - x - 1
         if d < v2 or (v <= V - 2 and d != v2):
             return False
@@ -65,7 +71,7 @@ def allowed(word, V, n=None):
     # the word at the largest velocity order 1 allows, then stopped cars
     ahead = e if v <= V - 2 else min(e, V)
     old = [x - v for x, v in cars] + [end + 1 - ahead] + [end + 2 + r for r in range(len(cars) + 1)]
-    gaps = [b - a - 1 for a, b in zip(old, old[1:])]
+    gaps = [b - a - 1 for a, b in itertools.pairwise(old)]
     for j in range(len(cars)):
         if gaps[j] <= V - 2:                       # a car that moved exactly its gap
             total = 0
