@@ -475,12 +475,13 @@ def flux_table(vmax: int | None = None, p=None, lengths: Sequence[int] | None = 
                 except NaschError as exc:   # refused for this model: said, never guessed
                     approx[method, m, c] = None
                     refused.setdefault(method, str(exc))
-    said: dict[tuple[str, str], list[str]] = {}   # one note per reason, naming its methods
+    grouped = {}    # one note per reason (pMF and pMF2 often share theirs)
     for method, reason in refused.items():
-        where = "left out" if all(approx[method, m, c] is None for m in models
-                                  for c in fractions) else "-- where refused"
-        said.setdefault((where, reason), []).append(_LABELS[method])
-    notes += [f"{', '.join(labels)} {where}: {reason}" for (where, reason), labels in said.items()]
+        whole = all(approx[method, m, c] is None for m in models for c in fractions)
+        grouped.setdefault((reason, whole), []).append(_LABELS[method])
+    for (reason, whole), labels in grouped.items():
+        notes.append(f"{' and '.join(labels)} {'left out' if whole else '-- where refused'}:"
+                     f" {reason}")
     methods = tuple(x for x in methods if x not in refused
                     or any(approx[x, m, c] is not None for m in models for c in fractions))
 

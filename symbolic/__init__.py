@@ -14,8 +14,8 @@ Methods (see ``docs/symbolic.md``):
 Every method reads the update rule: NaSch by default, any
 :class:`markov.model.load.Model` with ``model=`` (pMF and pMF2 remove the model's
 own Garden of Eden patterns and refuse a rule whose patterns of that order are
-infinitely many: fi at vmax >= 2, kkw for pMF2; COMF refuses rules that read
-the car ahead).  See
+infinitely many (kkw for pMF2) or whose equations keep the jam as a solution
+(fi at vmax >= 2); COMF refuses rules that read the car ahead).  See
 ``docs/symbolic.md``, "Approximations of the other models".
 
 Quick start
@@ -287,9 +287,9 @@ def approximate(method: str, vmax: int | None, p: float | None, density,
         Unknown method, unsupported ``vmax`` (MF: above 100, COMF: above 10),
         a cluster too large to enumerate, ``p`` or ``density`` outside
         ``(0, 1)``, COMF below ``c = 0.005``, pMF for a rule with infinitely
-        many GoE patterns of its order (fi at vmax >= 2, refused after the
-        GoE search measured it; kkw for pMF2), COMF for a rule that reads the
-        car ahead; all before any work.
+        many GoE patterns of its order (kkw for pMF2) or whose pMF equations
+        have the jam as a solution at every density (fi at vmax >= 2), COMF
+        for a rule that reads the car ahead; all before any work.
 
     Examples
     --------
@@ -299,11 +299,11 @@ def approximate(method: str, vmax: int | None, p: float | None, density,
     """
     from markov.validate import ensure_open_probability, ensure_open_unit
 
-    from .solve import flux_of, solve_mf, solve_pmf
-
     model, vmax, p = _resolve_model(model, vmax, p)
     base, order, vmax = _ensure_method(method, vmax, order)
     _ensure_model_method(base, model)
+
+    from .solve import flux_of, solve_mf, solve_pmf   # sympy: after the refusals
     p_val = ensure_open_probability(p) if model is None else p
     p_arg = p_val if model is None else None
     c_arr = np.asarray(ensure_open_unit("density", density), dtype=float)

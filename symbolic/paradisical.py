@@ -52,7 +52,7 @@ from .meanfield import (ANY_CAR, c, car_events, d, gap_horizons, p, q, velocity_
                         word_weight)
 
 __all__ = [
-    "GOE_PATTERNS", "SECOND_ORDER_PATTERNS", "goe_patterns", "ensure_pmf_model",
+    "GOE_PATTERNS", "SECOND_ORDER_PATTERNS", "goe_patterns", "ensure_pmf_model", "keeps_the_jam",
     "pmf_rhs", "pmf_normalisation", "pmf_equations",
     "paper_pmf_equations", "paper_pmf_normalisation", "paper_c2", "paper_cubic",
 ]
@@ -82,7 +82,9 @@ def goe_patterns(vmax: int, second_order: bool = False,
     (2).  Such a word lies outside ``L_1`` (``L_2``) with its proper factors
     inside, so it is a minimal forbidden word of ``L_1`` (``L_2``): the longest
     of those bounds the search, which is then complete for these orders even
-    where the patterns of higher order are infinitely many (kkw).
+    where the patterns of higher order are infinitely many (kkw) or the
+    languages never stabilise (fi, where ``L_inf`` is decided on words of that
+    length by :func:`markov.goe.patterns.settling_order`).
 
     Parameters
     ----------
@@ -99,10 +101,11 @@ def goe_patterns(vmax: int, second_order: bool = False,
     Raises
     ------
     InvalidParameterError
-        The rule's languages ``L_n`` do not stabilise (fi at vmax >= 2: GoE
-        patterns of every order), or its minimal forbidden words of order
-        ``<= 2`` are infinitely many (kkw, ``second_order``), or a pattern does
-        not start with a car (the construction anchors patterns at a car).
+        The automaton search cannot decide the rule's limit language (a rule
+        whose languages have not stabilised by the state cap), or its minimal
+        forbidden words of order ``<= 2`` are infinitely many (kkw,
+        ``second_order``), or a pattern does not start with a car (the
+        construction anchors patterns at a car).
 
     Examples
     --------
@@ -112,7 +115,7 @@ def goe_patterns(vmax: int, second_order: bool = False,
     (0, -1, -1, 2)
     """
     from markov.errors import StateSpaceTooLargeError
-    from markov.goe.patterns import limit_order, minimal_forbidden_words, order_automaton
+    from markov.goe.patterns import minimal_forbidden_words, order_automaton
 
     from .ruleview import nasch
 
@@ -123,18 +126,18 @@ def goe_patterns(vmax: int, second_order: bool = False,
         model = nasch(vmax)
     top, name = (2 if second_order else 1), _label(second_order)
     try:
-        last = limit_order(None, model)
+        _, finite, longest = minimal_forbidden_words(order_automaton(None, top, model), 2)
+        if not finite:
+            raise InvalidParameterError(
+                f"{name} needs the Garden of Eden patterns of order <= {top} of rule {model.name}"
+                f" (vmax = {model.vmax}); its forbidden words of order {top} are infinitely many"
+                f" (patterns of every length), so no finite word sees them all")
+        # their proper factors must lie in L_inf: decided on words of `longest` cells
+        search = elementary_patterns(None, max(longest, 2), model)
     except StateSpaceTooLargeError as exc:
         raise InvalidParameterError(
-            f"{name} needs the elementary Garden of Eden patterns of the rule, and these are"
-            f" infinitely many (GoE patterns of every order): {exc}") from None
-    _, finite, longest = minimal_forbidden_words(order_automaton(None, min(top, last), model), 2)
-    if not finite:
-        raise InvalidParameterError(
-            f"{name} needs the Garden of Eden patterns of order <= {top} of rule {model.name}"
-            f" (vmax = {model.vmax}); its forbidden words of order {top} are infinitely many"
-            f" (patterns of every length), so no finite word sees them all")
-    search = elementary_patterns(None, max(longest, 2), model)
+            f"pMF and pMF2 need the rule's elementary Garden of Eden patterns (their proper"
+            f" factors must occur at arbitrarily late times), and {exc}") from None
     found = tuple(tuple(from_text(pt.pattern, model.vmax)) for pt in search.patterns
                   if pt.order <= top)
     if any(pat[0] == EMPTY for pat in found):
@@ -145,13 +148,14 @@ def goe_patterns(vmax: int, second_order: bool = False,
 
 
 def ensure_pmf_model(model, second_order: bool = False) -> None:
-    """Refuse, in one line, a model whose pMF (pMF2) cannot be derived; cheap except for fi.
+    """Refuse, in one line, a model whose pMF (pMF2) cannot be derived or has no unique solution.
 
     Checks what :func:`pmf_rhs` needs: the rule ignores the car ahead beyond its
     horizon (as for MF), its probability parameters do not clash with the
     symbols ``c``, ``d``, ``q``, ``c_v`` of the equations, and
-    :func:`goe_patterns` succeeds (fi at vmax >= 2 is refused after the GoE
-    search has measured it: about 45 s).
+    :func:`goe_patterns` succeeds (the automaton search of the patterns: up to
+    a second for vmax <= 5 and fi, a few seconds for vmax 6); then that the
+    jam is no solution (:func:`keeps_the_jam`: fi's pMF has it at every density).
 
     Parameters
     ----------
@@ -162,14 +166,64 @@ def ensure_pmf_model(model, second_order: bool = False) -> None:
 
     from .ruleview import structure
 
-    structure(model)     # refuses a rule reading the car ahead beyond its horizon
     clash = [n for n in model.spec.probability_parameters()
              if n in ("c", "d", "q") or re.fullmatch(r"c_\d+", n)]
     if clash:
         raise InvalidParameterError(
-            f"{_label(second_order)}: the probability parameter {clash[0]!r} of rule"
+            f"pMF and pMF2: the probability parameter {clash[0]!r} of rule"
             f" {model.name} clashes with a symbol of the equations (c, d, q, c_v); rename it")
-    goe_patterns(model.vmax, second_order, model)
+    # one message for both where the order-1 patterns already keep the jam
+    # (pMF2 removes more words): a table names the reason once
+    for order2, name in ((False, "pMF and pMF2"), (True, "pMF2")):
+        if order2 and not second_order:
+            break
+        if keeps_the_jam(model, goe_patterns(model.vmax, order2, model)):
+            raise InvalidParameterError(
+                f"{name} of rule {model.name} (vmax = {model.vmax})"
+                f" {'have' if ' and ' in name else 'has'} no unique solution:"
+                " the jam c_0 = c (flux 0) solves them at every density, as every gap ahead of"
+                " a stopped car in it starts a Garden of Eden pattern")
+    structure(model)     # refuses a rule reading the car ahead beyond its horizon (sympy: last)
+
+
+def keeps_the_jam(model, patterns) -> bool:
+    """Whether every car stopped (``c_0 = c``) solves the pMF equations with these patterns.
+
+    Under the product measure of ``c_v = (c, 0, ..., 0)`` the word ahead of a
+    stopped car is ``0 .^g 0`` (``g`` empty cells, or ``g >= H`` of them); the
+    state is a fixed point of ``c <- N F(c)`` iff every such word with
+    ``g >= 1`` either starts with a pattern (weight 0) or lets the car only
+    stay stopped, while ``00`` stays.  fi (vmax >= 2): a stopped car needs
+    exactly ``v_ahead`` empty cells ahead (``0.0``, ``0..0``, ``0...`` are
+    patterns), so its pMF and pMF2 keep the jam at every density; NaSch's
+    car accelerates from any gap.
+
+    Parameters
+    ----------
+    model : markov.model.load.Model
+    patterns : tuple of tuple of int
+        As :func:`goe_patterns` returns them.
+
+    Returns
+    -------
+    bool
+    """
+    from .ruleview import numeric_moves
+
+    table, _ = numeric_moves(model)
+    horizon = table.shape[1] - 1
+
+    def removed(word):
+        return any(tuple(word[:len(pt)]) == tuple(pt) for pt in patterns)
+
+    if removed((0, 0)):
+        return False                 # nothing left to normalise
+    longest = max((len(pt) for pt in patterns), default=2)
+    # beyond max(H, longest) neither the rule nor the patterns tell gaps apart
+    for g in range(1, max(horizon, longest) + 1):
+        if not removed((0,) + (EMPTY,) * g + (0,)) and table[0, min(g, horizon), 0, 1:].any():
+            return False
+    return True
 
 
 def _meet(ahead, pattern):

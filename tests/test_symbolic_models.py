@@ -97,6 +97,53 @@ def test_vmax1_nasch_through_fi_is_exact_and_tt_is_not_for_2_cluster_or_comf():
     assert f["comf"] < float(solve(Ring(14, 7, model=tt)).flux)
 
 
+def _ring_over_chain(model, L, N, c_ref):
+    """Largest relative gap between the exact ring state and the 2-cluster chain on the ring.
+
+    The chain: cell to cell with the transition ``P2(a, b) / P1(a)`` of the
+    2-cluster fixed point at density ``c_ref``, closed around the ring and
+    normalised over the configurations of ``N`` cars (any ``c_ref``: changing
+    it only multiplies every car's weight by one factor).  Also whether its
+    support is the exact state's.
+    """
+    from markov.chain.encoding import decode
+    from markov.chain.statespace import all_keys
+    from symbolic.cluster import cluster_fixed_point
+
+    pair = cluster_fixed_point(1, 2, None, c_ref, model=model)[0].reshape(3, 3)
+    single = pair.sum(axis=1)
+    step = np.divide(pair, single[:, None], out=np.zeros_like(pair), where=single[:, None] > 0)
+    ring = Ring(L, N, model=model)
+    sol = solve(ring, lump=False)
+    exact = dict(zip(map(int, sol.keys), np.asarray(sol.pi)))
+    chain = {}
+    for key in map(int, all_keys(ring, lump=False)):
+        cells = [0 if x < 0 else x + 1 for x in decode(key, L, 1)]   # 0 empty, v + 1 a car
+        w = float(np.prod([step[cells[i], cells[(i + 1) % L]] for i in range(L)]))
+        if w > 0:
+            chain[key] = w
+    z = sum(chain.values())
+    gap = max(abs(exact.get(k, 0.0) - chain.get(k, 0.0) / z) / exact.get(k, chain.get(k, 0.0) / z)
+              for k in set(exact) | set(chain))
+    return gap, set(chain) == {k for k, v in exact.items() if v > 0}
+
+
+@pytest.mark.parametrize("params", [{"p": 0.25, "p0": 0.75}, {"p": 0.5, "p0": 0.1}])
+def test_vdr_vmax1_ring_state_is_the_2_cluster_chain(params):
+    # docs/symbolic.md: the 2-cluster is exact for VDR at vmax 1 -- every ring's exact
+    # stationary state is the 2-cluster chain measure conditioned on the ring
+    vdr = load_model("vdr", {"vmax": 1, **params})
+    for L, N in [(10, 5), (11, 4), (12, 3)]:
+        for c_ref in (N / L, 0.3):
+            gap, same_support = _ring_over_chain(vdr, L, N, c_ref)
+            assert same_support and gap < 1e-9, (L, N, c_ref, gap)
+    flux = [approximate(f"cluster{n}", None, None, 0.5, model=vdr).flux for n in (2, 3, 4, 5)]
+    assert max(flux) - min(flux) < 1e-12
+    # the same test fails for TT at vmax 1, whose 2-cluster is not exact (above)
+    tt = load_model("tt", {"vmax": 1, "p": 0.25, "pt": 0.5})
+    assert _ring_over_chain(tt, 10, 5, 0.5)[0] > 0.1
+
+
 @pytest.mark.parametrize("call,words", [
     (lambda: approximate("comf", None, None, C, model=load_model("kkw", {})),
      ["COMF", "kkw", "car ahead"]),

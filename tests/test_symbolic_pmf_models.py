@@ -146,14 +146,49 @@ def test_refusals_are_one_line(call, words):
     assert "\n" not in text and all(w in text for w in words), text
 
 
-def test_fi_refusal_names_the_unsettled_orders(monkeypatch):
-    # the real refusal takes the GoE search 45 s to measure; a lower cap gives it in seconds
+@pytest.mark.parametrize("vmax", [2, 3])
+def test_fi_pmf_is_refused_at_once_because_the_jam_solves_it(vmax):
+    # before, the refusal waited for the GoE search to hit its state cap: 10-16 s
+    import time
+
     import markov.goe.patterns as gp
-    monkeypatch.setattr(gp, "_MAX_STATES", 3000)
-    with pytest.raises(InvalidParameterError) as err:
-        approximate("pmf", None, None, C, model=load_model("fi", {"vmax": 2}))
-    text = str(err.value)
-    assert "\n" not in text and "pMF" in text and "fi" in text and "stabilised" in text, text
+    gp._sequence.cache_clear()
+    gp._orders.cache_clear()
+    goe_patterns.cache_clear()
+    fi = load_model("fi", {"vmax": vmax})
+    for method in ("pmf", "pmf2"):
+        start = time.perf_counter()
+        with pytest.raises(InvalidParameterError) as err:
+            approximate(method, None, None, C, model=fi)
+        assert time.perf_counter() - start < 5.0
+        text = str(err.value)
+        assert "\n" not in text and "pMF and pMF2" in text and "fi" in text and "jam" in text
+
+
+@pytest.mark.parametrize("second_order", [False, True])
+def test_fi_pmf_has_the_jam_and_a_moving_state_as_solutions(second_order):
+    # the reason of the refusal, by the word-by-word push-forward (not the equations)
+    from symbolic.paradisical import keeps_the_jam
+    from symbolic.solve import solve_pmf
+    fi = load_model("fi", {"vmax": 2})
+    assert keeps_the_jam(fi, goe_patterns(2, second_order, fi))
+    for c in (0.25, 0.7):
+        jam = np.array([c, 0.0, 0.0])
+        pushed, _ = _brute_force_pmf(fi, jam, c, second_order)
+        np.testing.assert_allclose(pushed, jam, atol=1e-15)
+    moving = solve_pmf(2, None, 0.25, second_order, model=fi)   # bypasses the refusal
+    pushed, _ = _brute_force_pmf(fi, moving, 0.25, second_order)
+    np.testing.assert_allclose(pushed, moving, atol=1e-12)
+    assert moving[1] + 2 * moving[2] > 0.4                # a second solution, flux 0.419
+
+
+@pytest.mark.parametrize("name", ["nasch", "vdr", "tt", "bjh", "cc", "kkw"])
+def test_the_other_models_move_out_of_the_jam(name):
+    from symbolic.paradisical import keeps_the_jam
+    model = load_model(name, {"vmax": 2})
+    assert not keeps_the_jam(model, goe_patterns(2, False, model))
+    pushed, _ = _brute_force_pmf(model, np.array([C, 0.0, 0.0]), C, False)
+    assert pushed[1] > 1e-3                                # stopped cars start
 
 
 def test_cli_approx_pmf_with_a_model():
@@ -170,6 +205,9 @@ def test_cli_approx_pmf_with_a_model():
     r = CliRunner().invoke(main, ["approx", "--method", "pmf2", "--model", "kkw",
                                   "--param", "vmax=2", "-c", "0.25"])
     assert r.exit_code == 2 and r.output.startswith("error: ") and "infinitely many" in r.output
+    r = CliRunner().invoke(main, ["approx", "--method", "pmf", "--model", "fi", "-c", "0.25"])
+    assert r.exit_code == 2 and r.output.startswith("error: ") and r.output.count("\n") == 1
+    assert "no unique solution" in r.output
 
 
 def test_docs_table_pmf_columns():

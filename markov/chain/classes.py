@@ -28,6 +28,7 @@ import numpy as np
 from markov.errors import StateSpaceTooLargeError
 from markov.memory import gib, memory_limit
 from markov.model.ring import Ring
+from markov.chain.statespace import contains_nasch_support
 
 __all__ = ["closed_classes", "all_configurations_classes", "support_graph_bytes",
            "known_irreducible", "contains_nasch_support", "search_all_fits", "ClassCensus",
@@ -104,43 +105,6 @@ class ClassCensus:
         """
         return {"count": self.count, "scope": self.scope, "complete": self.complete,
                 "configurations": self.configurations}
-
-
-def contains_nasch_support(ring: Ring) -> bool:
-    """Whether every outcome NaSch with ``0 < p < 1`` allows, the ring's rule allows too.
-
-    NaSch's outcomes at ``(v, gap)`` are ``u - 1`` and ``u`` for
-    ``u = min(v + 1, vmax, gap) > 0``, else ``0``.  A rule whose support
-    contains them at every ``(v, gap, v_ahead)`` has every transition of
-    NaSch's chain (under each update: a step is made of the cars' outcomes),
-    so every configuration reaches what NaSch's chain reaches from it.
-
-    Parameters
-    ----------
-    ring : Ring
-
-    Returns
-    -------
-    bool
-
-    Examples
-    --------
-    >>> from markov import load_model
-    >>> contains_nasch_support(Ring(8, 4, model=load_model("vdr", {"p0": 0.75})))
-    True
-    >>> contains_nasch_support(Ring(8, 4, model=load_model("fi")))
-    False
-    """
-    table = ring.table()
-    vmax = ring.vmax
-    for v in range(vmax + 1):
-        for gap in range(max(table.max_gap, vmax) + 1):
-            u = min(v + 1, vmax, gap)
-            need = {u - 1, u} if u else {0}
-            for a in range(vmax + 1):
-                if not need <= set(table.support(v, gap, a)):
-                    return False
-    return True
 
 
 def known_irreducible(ring: Ring) -> bool:

@@ -29,7 +29,7 @@ from markov.memory import gib, memory_limit, search_bytes_per_state
 from markov.model.ring import PARALLEL, Ring
 from markov.progress import progress_bar
 
-__all__ = ["recurrent_keys", "all_keys", "count_all"]
+__all__ = ["recurrent_keys", "all_keys", "count_all", "contains_nasch_support"]
 
 # States per call of the successor kernels: bounds the frontier's transient
 # arrays (words of every level, successor keys) to a few hundred MB.
@@ -48,6 +48,43 @@ def count_all(ring: Ring) -> int:
     int
     """
     return math.comb(ring.length, ring.cars) * (ring.vmax + 1) ** ring.cars
+
+
+def contains_nasch_support(ring: Ring) -> bool:
+    """Whether every outcome NaSch with ``0 < p < 1`` allows, the ring's rule allows too.
+
+    NaSch's outcomes at ``(v, gap)`` are ``u - 1`` and ``u`` for
+    ``u = min(v + 1, vmax, gap) > 0``, else ``0``.  A rule whose support
+    contains them at every ``(v, gap, v_ahead)`` has every transition of
+    NaSch's chain (under each update: a step is made of the cars' outcomes),
+    so every configuration reaches what NaSch's chain reaches from it.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    bool
+
+    Examples
+    --------
+    >>> from markov import load_model
+    >>> contains_nasch_support(Ring(8, 4, model=load_model("vdr", {"p0": 0.75})))
+    True
+    >>> contains_nasch_support(Ring(8, 4, model=load_model("fi")))
+    False
+    """
+    table = ring.table()
+    vmax = ring.vmax
+    for v in range(vmax + 1):
+        for gap in range(max(table.max_gap, vmax) + 1):
+            u = min(v + 1, vmax, gap)
+            need = {u - 1, u} if u else {0}
+            for a in range(vmax + 1):
+                if not need <= set(table.support(v, gap, a)):
+                    return False
+    return True
 
 
 def _merge(visited: np.ndarray, new: np.ndarray) -> np.ndarray:
@@ -144,12 +181,14 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
     per_state = max(search_bytes_per_state(), per_state or 0.0)
     if start is not None:
         pass
-    elif not (ring.is_nasch and ring.cars == 1):
+    elif not (ring.cars == 1 and contains_nasch_support(ring)):
         start = compact_jam_key(ring.length, ring.cars, ring.vmax)
     else:
         # A lone car sees the gap L - 1 forever, so R1+R2 push its velocity up to
         # w = min(vmax, L - 1) and R3 takes it at most one below: only w - 1 and
-        # w are recurrent; the stopped car (the "jam") is transient once w >= 2.
+        # w are recurrent under NaSch; the stopped car (the "jam") is transient
+        # once w >= 2.  A rule with NaSch's outcomes (and more) reaches w from
+        # everywhere too, so w lies in its one closed class.
         top = min(ring.vmax, ring.length - 1)
         start = encode([top] + [-1] * (ring.length - 1), ring.vmax)
     visited = np.array([start], dtype=np.int64)

@@ -37,7 +37,7 @@ def approx(method, order, vmax, p, density, model, params, as_json):
 
     The update rule is NaSch unless --model is given (every method for any
     model; pMF/pMF2 remove the model's own GoE patterns and refuse fi at
-    vmax >= 2, kkw for pMF2; COMF not for rules that read the velocity of
+    vmax >= 2 (the jam solves its equations), kkw for pMF2; COMF not for rules that read the velocity of
     the car ahead; docs/symbolic.md).
 
     \b

@@ -34,7 +34,8 @@ def goe(vmax, model, params, max_cells, do_census, length, cars, update, as_json
     that velocity, cars moving to the right; order n means the pattern cannot
     occur at any time t >= n.  Any model (--model, --param) can be analysed;
     only the support of its rule matters (which new velocities have positive
-    probability).
+    probability).  A rule with infinitely many patterns (kkw; fi, whose are of
+    every order) gets all of those inside the window.
 
     \b
     Example:
@@ -87,7 +88,11 @@ def goe(vmax, model, params, max_cells, do_census, length, cars, update, as_json
         click.echo(f"  order {order} ({len(words)}): " + "  ".join(words))
     if result.complete:
         click.echo(f"  complete: no elementary pattern is longer than {result.longest} cells")
+    elif result.limit_order is None:
+        click.echo(f"  infinitely many elementary patterns, of every order (the languages never"
+                   f" stabilise, docs/goe.md section 9): these are all of up to {max_cells} cells")
     elif result.longest is None:
-        click.echo("  infinitely many elementary patterns: longer ones exist beyond any window")
+        click.echo(f"  infinitely many elementary patterns: these are all of up to {max_cells}"
+                   " cells, longer ones exist beyond any window")
     else:
-        click.echo("  longer patterns exist beyond the search window")
+        click.echo(f"  these are all of up to {max_cells} cells; longer patterns exist beyond")

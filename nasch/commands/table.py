@@ -114,8 +114,9 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
             scheduler=scheduler, n_workers=workers)
     for w in caught:
         click.echo(f"warning: {w.message}", err=True)
-    for note in t.notes:   # in the footnote too; here so that -o does not hide them
-        click.echo(f"note: {note}", err=True)
+    if output or fmt == "csv":   # else the footnote on stdout says them, once
+        for note in t.notes:
+            click.echo(f"note: {note}", err=True)
     flagged = {(r.p, r.density): r.mc_warning for r in t.rows if r.mc_reliable is False}
     if flagged:
         click.echo(f"warning: {len(flagged)} Monte Carlo value(s) marked * have no honest error"
