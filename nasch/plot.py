@@ -570,8 +570,17 @@ def models_figure(data: dict, width: float = 6.4, height: float = 5.2):
 
 # ------------------------------------------------------------- relaxation: exact spectra
 
-def relaxation_figure(data: dict, spectrum=None, width: float = 9.6, height: float = 4.2):
-    """``tau`` against density for several ``p`` (left) and one ring's spectrum (right).
+def _fixed_label(data: dict) -> str:
+    """``"NaSch (vmax = 2)"``: the model and every parameter that the curves do not vary."""
+    name = "NaSch" if data["model"]["name"] == "nasch" else data["model"]["name"]
+    fixed = ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else f"{k} = {v}"
+                      for k, v in data["fixed"].items())
+    return f"{name} ({fixed})"
+
+
+def relaxation_figure(data: dict, spectrum=None, notes: Sequence[str] = (),
+                      width: float = 9.6, height: float = 4.2):
+    """``tau`` against density per value of one parameter (left) and one ring's spectrum (right).
 
     Parameters
     ----------
@@ -579,7 +588,10 @@ def relaxation_figure(data: dict, spectrum=None, width: float = 9.6, height: flo
         From :func:`nasch.relaxation.relaxation_curves`.
     spectrum : markov.spectrum.Spectrum, optional
         Drawn in the complex plane (one colour per momentum sector, the unit
-        circle for reference); without it only the left panel is drawn.
+        circle for reference; the title names the value of the varied
+        parameter); without it only the left panel is drawn.
+    notes : sequence of str
+        Lines printed above the legend (e.g. rings left out).
     width, height : float
         Inches.
 
@@ -603,27 +615,30 @@ def relaxation_figure(data: dict, spectrum=None, width: float = 9.6, height: flo
                  layout="constrained")
     axes = fig.subplots(1, panels, squeeze=False)[0]
     ax = axes[0]
+    vary = data["vary"]
+    density = np.array(data["density"])
     for i, curve in enumerate(data["curves"]):
+        label = f"{vary} = {curve['value']:g}"
         tau = np.array(curve["tau"], dtype=float)
         finite = np.isfinite(tau)
-        ax.plot(np.array(data["density"])[finite], tau[finite], "o-", ms=3.5, lw=1,
-                color=f"C{i % 10}", label=f"$p = {curve['p']:g}$, all sectors")
+        ax.plot(density[finite], tau[finite], "o-", ms=3.5, lw=1, color=f"C{i % 10}",
+                label=f"{label}, all sectors")
         tau0 = np.array(curve["tau_sector0"], dtype=float)
         finite = np.isfinite(tau0)
-        ax.plot(np.array(data["density"])[finite], tau0[finite], "s--", ms=3, lw=0.9,
-                mfc="white", color=f"C{i % 10}", label=f"$p = {curve['p']:g}$, sector 0")
+        ax.plot(density[finite], tau0[finite], "s--", ms=3, lw=0.9, mfc="white",
+                color=f"C{i % 10}", label=f"{label}, sector 0")
     ax.set_xlabel("density $c = N/L$")
     ax.set_ylabel(r"relaxation time $\tau = -1/\ln|\lambda_2|$ (steps)")
-    name = "NaSch" if data["model"]["name"] == "nasch" else data["model"]["name"]
-    ax.set_title(f"exact, {name} $v_\\mathrm{{max}} = {data['vmax']}$, L = {data['length']},"
-                 f" {data['update']}", fontsize=9)
+    ax.set_title(f"exact, {_fixed_label(data)}, L = {data['length']}, {data['update']}",
+                 fontsize=9)
     ax.set_xlim(0, 1)
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.25, lw=0.5)
     handles, labels = ax.get_legend_handles_labels()
-    # below the axes: it never hides a curve
+    # below the axes: it never hides a curve; the notes head it (the layout makes room)
     fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 6),
-               fontsize=7, frameon=False)
+               fontsize=7, frameon=False, title="\n".join(notes) or None,
+               title_fontsize=7)
     if spectrum is not None:
         ax = axes[1]
         t = np.linspace(0, 2 * np.pi, 400)
@@ -641,8 +656,9 @@ def relaxation_figure(data: dict, spectrum=None, width: float = 9.6, height: flo
         ax.set_xlabel(r"Re $\lambda$")
         ax.set_ylabel(r"Im $\lambda$")
         per = max(1, len(values) // max(1, len(spectrum.sector_sizes)))
-        ax.set_title(f"leading eigenvalues ({per} per sector), L = {ring.length},"
-                     f" N = {ring.cars}, {ring.model.name}", fontsize=9)
+        ax.set_title(f"leading eigenvalues ({per} per sector) at {vary} ="
+                     f" {ring.model.params[vary]:g}\nL = {ring.length}, N = {ring.cars},"
+                     f" {ring.model.name}", fontsize=9)
         ax.grid(alpha=0.25, lw=0.5)
         ax.legend(fontsize=8, frameon=False, loc="lower left")
     return fig
