@@ -37,9 +37,11 @@ def plot():
               help="Candidate rings of the L -> infinity extrapolation [chosen per density"
                    " by --budget].")
 @click.option("--budget", "budget_text", default=None,
-              help="Time for the exact rings of each extrapolated density, e.g. 30s: the"
-                   " largest rings that fit it and 75% of the memory, named on stderr"
-                   " (instead of --extrapolation-lengths) [10s, as in table and study].")
+              help="Time for the whole command, e.g. 30s: every stage is predicted first"
+                   " (refused at once if they exceed it), and what the curves, Monte Carlo,"
+                   " --lengths and drawing leave goes to the largest extrapolation rings"
+                   " that fit, evenly per density (instead of --extrapolation-lengths)"
+                   " [none: 10 s of rings per density, as in table and study].")
 @click.option("--mc-length", type=int, default=3000, show_default=True,
               help="Monte Carlo ring length.")
 @click.option("--mc-steps", type=int, default=2000, show_default=True,
@@ -59,7 +61,9 @@ def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc
                 methods_text, output, serial, scheduler):
     """Fundamental diagram (the paper's Fig. 2): approximations, Monte Carlo, exact rings.
 
-    Rings too large for the exact solver are left out with a warning.
+    Before the work one line on stderr predicts each stage (one core); on a
+    terminal every stage shows a progress bar.  Rings too large for the exact
+    solver are left out with a warning.
 
     \b
     Example:
@@ -68,12 +72,15 @@ def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc
       nasch plot fundamental --vmax 2 --p 0.5 --budget 20s --output fig.png
       nasch plot fundamental --p 0.5 --methods pmf,mf,cluster2,cluster4,comf -o fig.png
     """
+    import time
+
     from symbolic import method_name
 
-    from ..budget import parse_budget
+    from ..budget import STARTUP_SECONDS, parse_budget
     from markov.files import check_output_path
     from ..plot import FIGURE_FORMATS, fundamental_data, fundamental_figure, save_figure
 
+    started = time.perf_counter() - STARTUP_SECONDS   # the budget counts the whole command
     check_output_path(output, suffixes=FIGURE_FORMATS)   # before the work
     if budget_text is not None and ext_text is not None:
         raise InvalidParameterError("give either --extrapolation-lengths or --budget, not both")
@@ -90,7 +97,7 @@ def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc
             extrapolation_lengths=(None if ext_text is None
                                    else number_list("--extrapolation-lengths", ext_text, int)),
             mc_length=mc_length, mc_steps=mc_steps, seed=seed, budget=budget, methods=methods,
-            serial=True if serial else None, scheduler=scheduler)
+            serial=True if serial else None, scheduler=scheduler, started=started)
     for w in caught:
         click.echo(f"warning: {w.message}", err=True)
     save_figure(fundamental_figure(panels), output)
