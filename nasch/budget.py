@@ -62,9 +62,11 @@ STARTUP_SECONDS = 0.3
 #: write the file (1.3 s measured with matplotlib loaded, 2.5 s without, on the
 #: 2-core VM under load).
 FIGURE_SECONDS = 2.5
-#: Seconds to start a local Dask cluster (3 s measured on the quiet 2-core VM,
-#: 14 s under load); a budget runs its jobs on one only where that pays.
-DASK_START_SECONDS = 5.0
+#: Seconds to start a local Dask cluster: 3 s measured on the quiet 2-core VM,
+#: 14 s while other work loads it (the README figure: 41 s with a cluster
+#: against 24 s without).  ``plot fundamental`` starts one only where the
+#: workers save more than that.
+DASK_START_SECONDS = 15.0
 
 # Measured on the 2-core VM (docs/performance.md): per state, the search and
 # the level build; per state and product, the factored product with the

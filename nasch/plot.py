@@ -255,8 +255,8 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
         jobs += [ExactJob(L, N, vmax, x) for L, N in points]
         jobs += monte_carlo(x, mc_c)
         spans.append((first, len(jobs), points))
-    # a local cluster only where its start-up pays: the jobs' time on one core
-    # must exceed what the workers save
+    # a local cluster only where its start-up pays: the w workers save S (1 - 1/w)
+    # of the jobs' S seconds on one core
     workers = default_workers()
     serial_below = (DASK_START_SECONDS * workers / (workers - 1) if workers > 1
                     else float("inf"))

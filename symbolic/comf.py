@@ -41,6 +41,7 @@ models" (``shared/paper``), its claims about COMF (``docs/symbolic.md``).
 """
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -63,8 +64,8 @@ _MAX_STEPS = 200       # self-consistency steps (4-20 needed where tried)
 _MAX_GAP = 2_000_000   # largest gap cut tried (c >= ~1e-5)
 
 #: Smallest density COMF is solved at: the gap cut grows like ``40 / c`` and the
-#: self-consistency slows with it (vmax 2, p 0.5: c = 0.005 in 3 s, 0.002 in
-#: 40 s, 0.001 over 2 minutes); c >= 0.005 is also the validated range.
+#: self-consistency slows with it (vmax 2, p 0.5, one core: c = 0.005 in 0.6 s,
+#: 0.002 in 3 s; vmax 5: c = 0.005 in 5 s); c >= 0.005 is the validated range.
 MIN_COMF_DENSITY = 0.005
 #: Largest vmax COMF is solved for: the banded matrix has about
 #: ``2 vmax (vmax + 1)`` diagonals on ``16 vmax (vmax + 1)`` states, so memory
@@ -523,8 +524,8 @@ def ensure_comf_size(vmax: int, density=None) -> None:
             f" vmax^4 in memory and vmax^6 in time), got vmax = {vmax}")
     if density is not None and np.size(density) and np.min(density) < MIN_COMF_DENSITY:
         raise InvalidParameterError(
-            f"COMF is solved for densities c >= {MIN_COMF_DENSITY:g} (its gap cut grows like"
-            f" 40 / c: c = 0.002 takes 40 s), got c = {float(np.min(density)):g}")
+            f"COMF is solved for densities c >= {MIN_COMF_DENSITY:g} (the validated range;"
+            f" its gap cut grows like 40 / c), got c = {float(np.min(density)):g}")
 
 
 def solve_comf(vmax: int, p_val, c_val, model=None) -> np.ndarray:
@@ -557,11 +558,13 @@ def solve_comf(vmax: int, p_val, c_val, model=None) -> np.ndarray:
         p_b, c_b = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
     ensure_comf_size(int(vmax), c_b)    # every point before the first solve
     out = []
-    # each density alone (~0.02 s at vmax 2, ~1 s at c = 0.005): a bar on a terminal
-    with progress_bar(c_b.size, "COMF", "density") as bar:
+    # each density alone (~0.01 s at vmax 2, 0.6 s at c = 0.005): a bar on a terminal,
+    # for a curve (one density draws none)
+    with progress_bar(c_b.size, "COMF", "density") if c_b.size > 1 else nullcontext() as bar:
         for pv, cv in zip(p_b.ravel(), c_b.ravel()):
             out.append(comf_state(vmax, pv, cv, model).c_v)
-            bar.update(1)
+            if bar is not None:
+                bar.update(1)
     return np.array(out).T.reshape((vmax + 1,) + c_b.shape)
 
 

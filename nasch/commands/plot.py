@@ -276,8 +276,9 @@ def relaxation(length, model, params, vmax, vary, values_text, p_text, update, s
     --spectrum-cars cars at the first value, in the complex plane (its title
     names the value).  The other parameters keep the model's defaults unless
     given with --param; the titles list them all.  A ring whose chain has
-    several closed classes (e.g. p = 0) is left out with a note on stderr and
-    in the figure.
+    several closed classes (e.g. TT at p = 0) is left out, and one with
+    |lambda_2| = 1 (NaSch at p = 0) has no finite tau: both are named in a
+    note on stderr and in the figure.
 
     \b
     Example:
