@@ -152,7 +152,8 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     import time
 
     from markov.encoding import max_length
-    from markov.validate import ensure_int
+    from markov.progress import progress_bar
+    from markov.validate import ensure_int, ensure_real
 
     started = time.perf_counter() if started is None else float(started)
     single = np.ndim(p) == 0
@@ -165,14 +166,20 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     mc_points = ensure_int("mc_points", mc_points, 1)
     curve_points = ensure_int("curve_points", curve_points, 1, 10_000)
     lengths = [ensure_int("ring length", L, 2) for L in lengths]
+    budget, ring_budget = (None if b is None else ensure_real(name, b, 0, low_open=True)
+                           for name, b in (("budget", budget), ("ring_budget", ring_budget)))
     if sum(x is not None for x in (extrapolation_lengths, budget, ring_budget)) > 1:
         raise InvalidParameterError("give at most one of the extrapolation lengths, a budget"
                                     " and a ring budget")
     # each curve once at one density: a method too large for vmax is refused here,
-    # not after the exact rings and Monte Carlo (and its derivation is done)
+    # not after the exact rings and Monte Carlo (and its derivation is done: sympy,
+    # seconds to minutes for a large cluster without the disk cache)
     chosen = [m for m in methods if supported(m, vmax)]
-    for m in chosen:
-        approximate(m, vmax, ps[0], 0.5)
+    with progress_bar(len(chosen), "deriving", "method") as bar:
+        for m in chosen:
+            bar.set_description(f"deriving {m}")
+            approximate(m, vmax, ps[0], 0.5)
+            bar.update(1)
     by_budget = extrapolation_lengths is None
     extrapolation_lengths = [ensure_int("ring length", L, 2)
                              for L in (extrapolation_lengths or ())]

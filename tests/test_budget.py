@@ -254,3 +254,16 @@ def test_plot_fundamental_shows_its_stages_when_progress_is_forced_on(tmp_path, 
     assert res.exit_code == 0, res.output
     for stage in ("curves, p = 0.5", "COMF", "fundamental diagram", "predicted, one free core"):
         assert stage in res.output, stage
+
+
+def test_fundamental_data_ring_budget_is_the_per_density_choice():
+    from nasch.plot import fundamental_data
+
+    d = fundamental_data(1, 0.5, lengths=[], extrapolation_densities=[Fraction(1, 4)],
+                         methods=(), mc_steps=0, serial=True, ring_budget=0.3)
+    t = flux_table(1, 0.5, densities=[0.25], mc_steps=0, methods=(), serial=True, budget=0.3)
+    assert list(d["extrapolated"][1]) == [r.flux for r in t.rows if r.kind == "extrapolated"]
+    for bad in ({"budget": float("nan")}, {"ring_budget": -1.0},
+                {"budget": 5.0, "ring_budget": 3.0}):
+        with pytest.raises(InvalidParameterError):
+            fundamental_data(1, 0.5, methods=(), mc_steps=0, serial=True, **bad)
