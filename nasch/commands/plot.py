@@ -305,8 +305,10 @@ def relaxation(length, model, params, vmax, vary, values_text, p_text, update, s
         vary, values_text, option = "p", p_text, "--p"
     else:
         option = "--values"
+    if vary is not None and not vary.strip():
+        raise InvalidParameterError("--vary needs the name of a probability parameter")
     vary_defaulted = vary is None
-    vary = vary or "p"
+    vary = "p" if vary is None else vary.strip()
     if vary in param_names(params):
         raise InvalidParameterError(f"--param {vary}=... sets the parameter the curves vary;"
                                     f" give its values with {option}")
