@@ -10,8 +10,9 @@ Run:  python examples/fundamental_diagram.py [OUTPUT_DIR]   (about 1-2 minutes o
 Writes OUTPUT_DIR/fig2_fundamental_vmax2.png and .pdf; OUTPUT_DIR defaults to
 the current directory (the figure in docs/ was made with
 ``python examples/fundamental_diagram.py docs/figures``).
-Same figure from the command line:
-      nasch plot fundamental --vmax 2 --p 0.5,0.1 --budget 15s --seed 1 --output fig2.png
+From the command line, --budget bounds the whole command (the rings get what
+the other stages leave, so they can differ from these):
+      nasch plot fundamental --vmax 2 --p 0.5,0.1 --budget 3m --seed 1 --output fig2.png
 """
 import os
 
@@ -32,7 +33,7 @@ def main(outdir: Path) -> None:
     start = time.perf_counter()
     for ext in (".png", ".pdf"):   # a bad directory is reported before the work
         check_output_path(outdir / f"fig2_fundamental_vmax2{ext}")
-    panels = fundamental_data(2, [0.5, 0.1], seed=1, budget=15.0)
+    panels = fundamental_data(2, [0.5, 0.1], seed=1, ring_budget=15.0)
     fig = fundamental_figure(panels)
     for ext in (".png", ".pdf"):
         path = save_figure(fig, outdir / f"fig2_fundamental_vmax2{ext}")

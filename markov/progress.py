@@ -35,6 +35,9 @@ class _NoBar:
     def update(self, n: int = 1) -> None:
         pass
 
+    def set_description(self, desc: str) -> None:
+        pass
+
     def close(self) -> None:
         pass
 
@@ -60,7 +63,7 @@ def progress_bar(total=None, desc: str = "", unit: str = "it"):
 
     Returns
     -------
-    tqdm.std.tqdm or a stand-in with ``update``, ``close`` and ``with``
+    tqdm.std.tqdm or a stand-in with ``update``, ``set_description``, ``close`` and ``with``
     """
     if not progress_enabled():
         return _NoBar()

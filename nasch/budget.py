@@ -29,6 +29,9 @@ from __future__ import annotations
 
 import math
 import re
+from typing import Mapping
+
+import numpy as np
 
 from markov.errors import InvalidParameterError
 from markov.model.ring import NASCH, PARALLEL, Ring
@@ -36,7 +39,9 @@ from markov.model.ring import NASCH, PARALLEL, Ring
 from .rings import density_fraction
 
 __all__ = ["parse_budget", "predicted_classes", "predicted_seconds", "predicted_bytes",
-           "lengths_within_budget", "choose_lengths", "MAX_BUDGET_LENGTH", "DEFAULT_BUDGET"]
+           "lengths_within_budget", "smallest_rings_seconds", "choose_lengths", "budget_share",
+           "curve_seconds", "COMF_PROBE_DENSITY", "PROBE_EVERY", "MAX_BUDGET_LENGTH",
+           "DEFAULT_BUDGET", "STARTUP_SECONDS", "FIGURE_SECONDS", "DASK_START_SECONDS"]
 
 #: Seconds of exact solving per density and ``p`` when neither ring lengths nor
 #: a budget are given: the one default ring choice of ``table``, ``study`` and
@@ -48,6 +53,20 @@ DEFAULT_BUDGET = 10.0
 #: Longest ring :func:`lengths_within_budget` considers (vmax = 1 reaches
 #: L = 24 at half filling in under a minute; beyond 40 no density fits).
 MAX_BUDGET_LENGTH = 40
+
+#: Seconds of a command before its body runs (interpreter, click, the command's
+#: module), counted against a budget of the whole command: 0.27 s measured for
+#: ``nasch plot fundamental --help`` on the 2-core VM.
+STARTUP_SECONDS = 0.3
+#: Seconds to import matplotlib, draw one panel of the fundamental diagram and
+#: write the file (1.3 s measured with matplotlib loaded, 2.5 s without, on the
+#: 2-core VM under load).
+FIGURE_SECONDS = 2.5
+#: Seconds to start a local Dask cluster: 3 s measured on the quiet 2-core VM,
+#: 14 s while other work loads it (the README figure: 41 s with a cluster
+#: against 24 s without).  ``plot fundamental`` starts one only where the
+#: workers save more than that.
+DASK_START_SECONDS = 15.0
 
 # Measured on the 2-core VM (docs/performance.md): per state, the search and
 # the level build; per state and product, the factored product with the
@@ -211,6 +230,48 @@ def _solvable(length: int, cars: int, vmax: int, update: str, model=None) -> boo
     return representable(_ring(length, cars, vmax, update, model))
 
 
+def _candidates(vmax: int, p, density, update: str, shortest: int, longest: int,
+                max_memory: float | None, model) -> tuple[list[int], list[float]]:
+    """Commensurate lengths the solver holds within the memory limit, and their predicted seconds."""
+    from markov.memory import memory_limit
+
+    c = density_fraction(density)
+    limit = memory_limit(max_memory)
+    candidates = []
+    for L in range(max(shortest, c.denominator), longest + 1):
+        if (c * L).denominator != 1 or not _solvable(L, int(c * L), vmax, update, model):
+            continue
+        if predicted_bytes(L, int(c * L), vmax, p, update, model) > limit:
+            break  # the memory only grows with L
+        candidates.append(L)
+    return candidates, [predicted_seconds(L, int(c * L), vmax, p, update, model)
+                        for L in candidates]
+
+
+def smallest_rings_seconds(vmax: int, p, density, count: int = 4, update: str = PARALLEL,
+                           model=None) -> float:
+    """Predicted seconds of the ``count`` smallest rings :func:`lengths_within_budget` considers.
+
+    The least a budget per density must allow (else :func:`lengths_within_budget` refuses).
+
+    Parameters
+    ----------
+    vmax, p, density, count, update, model
+        As for :func:`lengths_within_budget`.
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> smallest_rings_seconds(1, 0.5, 0.5) < 0.5
+    True
+    """
+    _, cost = _candidates(vmax, p, density, update, 4, MAX_BUDGET_LENGTH, None, model)
+    return float(sum(cost[:count]))
+
+
 def lengths_within_budget(vmax: int, p: float, density, budget: float, count: int = 4,
                           update: str = PARALLEL, shortest: int = 4,
                           longest: int = MAX_BUDGET_LENGTH,
@@ -256,20 +317,11 @@ def lengths_within_budget(vmax: int, p: float, density, budget: float, count: in
     >>> len(Ls), all(L % 2 == 0 for L in Ls), Ls == sorted(Ls)
     (4, True, True)
     """
-    from markov.memory import memory_limit
-
-    c = density_fraction(density)
-    limit = memory_limit(max_memory)
-    candidates = []
-    for L in range(max(shortest, c.denominator), longest + 1):
-        if (c * L).denominator != 1 or not _solvable(L, int(c * L), vmax, update, model):
-            continue
-        if predicted_bytes(L, int(c * L), vmax, p, update, model) > limit:
-            break  # the memory only grows with L
-        candidates.append(L)
+    candidates, cost = _candidates(vmax, p, density, update, shortest, longest, max_memory,
+                                   model)
     if len(candidates) <= count:
         return candidates
-    cost = [predicted_seconds(L, int(c * L), vmax, p, update, model) for L in candidates]
+    c = density_fraction(density)
     best = None
     for end in range(count, len(candidates) + 1):
         if sum(cost[end - count:end]) <= budget:
@@ -282,6 +334,121 @@ def lengths_within_budget(vmax: int, p: float, density, budget: float, count: in
             f" a budget of {budget:g} s (predicted {sum(cost[:count]):.3g} s)")
     return candidates[best - count:best]
 
+
+
+#: Density of the second timed COMF solve of :func:`curve_seconds` (a gap cut
+#: 19 times that at c = 1/2 for vmax 2: the solve, not its overhead).
+COMF_PROBE_DENSITY = 0.05
+#: A batch-solved curve is timed on every ``PROBE_EVERY``-th density.
+PROBE_EVERY = 8
+# COMF's densities cost more steps than c = 1/2 (measured: without it, 0.7-0.8 of the time)
+_COMF_SPREAD = 1.4
+
+
+def curve_seconds(method: str, vmax: int, densities, solve_seconds) -> float:
+    """Predicted seconds of one approximation curve, from timed solves of a few densities.
+
+    ``solve_seconds(cs)`` solves the method at the densities ``cs`` (its
+    derivation already done) and returns the seconds it took.  The
+    n-cluster, MF and pMF solve a batch of densities at once: timed on every
+    :data:`PROBE_EVERY`-th density and scaled up, or, where one density
+    already takes long, one density's time per density (a bound: measured,
+    120 densities of the 4-cluster take 17-58 single solves).  COMF solves
+    each density alone, at a cost that grows with its gap states
+    (:func:`symbolic.comf.comf_gap_states`): from the solves at ``c = 1/2`` and
+    :data:`COMF_PROBE_DENSITY`, the extra states priced to the power 1.1 (a
+    banded solve that outgrows the cache), times 1.4 for the densities
+    between, which take more self-consistency steps than ``c = 1/2`` (vmax
+    1-3, p = 0.5, 120 densities: 1.0-1.15 times the processor time measured).
+
+    Parameters
+    ----------
+    method : str
+        A name of :data:`symbolic.APPROXIMATIONS`.
+    vmax : int
+    densities : array_like
+    solve_seconds : callable
+        ``cs -> seconds``.
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    >>> curve_seconds("cluster4", 2, np.linspace(0.1, 0.9, 16), lambda cs: 0.01 * len(cs))
+    0.16
+    >>> round(curve_seconds("comf", 2, [0.5, 0.05],
+    ...                     lambda cs: 0.01 if cs[0] == 0.5 else 0.1), 6)   # 1.4 (0.01 + 0.1)
+    0.154
+    """
+    densities = np.ravel(densities)
+    half = solve_seconds(np.array([0.5]))
+    if method != "comf":
+        sample = densities[::PROBE_EVERY]
+        if half * len(sample) > 1.0:   # too slow to sample: a bound
+            return half * len(densities)
+        return solve_seconds(sample) * len(densities) / len(sample)
+    from symbolic.comf import comf_gap_states
+
+    low = solve_seconds(np.array([COMF_PROBE_DENSITY]))
+    extra = comf_gap_states(vmax, densities) - 1.0
+    (reference,) = comf_gap_states(vmax, [COMF_PROBE_DENSITY]) - 1.0
+    return _COMF_SPREAD * float(np.sum(half + max(0.0, low - half) * (extra / reference) ** 1.1))
+
+
+def budget_share(budget: float, stages: Mapping[str, float], shares: int,
+                 minimum: float = 0.0, hint: str = "") -> float:
+    """Seconds per share of the exact rings that a budget of the whole command leaves.
+
+    ``stages`` are the command's other costs (predicted, or already spent);
+    what is left is split into ``shares`` equal parts (one per extrapolated
+    density and ``p``), each given to :func:`choose_lengths`.
+
+    Parameters
+    ----------
+    budget : float
+        Seconds for the whole command.
+    stages : mapping of str to float
+        Seconds of every other stage, by name (for the message).
+    shares : int
+        How many equal parts the rest is split into (0: none needed).
+    minimum : float
+        Seconds one share must at least get (:func:`smallest_rings_seconds`).
+    hint : str
+        What the caller can leave out, appended to a refusal.
+
+    Returns
+    -------
+    float
+        Seconds per share (0 when ``shares`` is 0).
+
+    Raises
+    ------
+    InvalidParameterError
+        Before any work, when the stages and the shares' minimum exceed the
+        budget: one line naming the stages and the least budget that fits.
+
+    Examples
+    --------
+    >>> budget_share(10.0, {"curves": 2.0, "Monte Carlo": 1.0}, shares=7)
+    1.0
+    >>> budget_share(2.0, {"curves": 2.0, "Monte Carlo": 1.0}, shares=1, minimum=0.5)
+    Traceback (most recent call last):
+    ...
+    markov.errors.InvalidParameterError: a budget of 2 s is too small: this command needs about 3.5 s (curves 2 s, Monte Carlo 1 s, the smallest extrapolation rings 0.5 s)
+    """
+    fixed = float(sum(stages.values()))
+    needed = fixed + shares * minimum
+    if needed > budget:
+        parts = [f"{name} {seconds:.2g} s" for name, seconds in
+                 sorted(stages.items(), key=lambda item: -item[1]) if seconds >= 0.005]
+        if shares and minimum:
+            parts.append(f"the smallest extrapolation rings {shares * minimum:.2g} s")
+        raise InvalidParameterError(
+            f"a budget of {budget:g} s is too small: this command needs about {needed:.2g} s"
+            f" ({', '.join(parts)}){'; ' + hint if hint else ''}")
+    return (budget - fixed) / shares if shares else 0.0
 
 
 def choose_lengths(vmax: int, p: float, density, budget: float | None = None, *,
@@ -326,5 +493,6 @@ def choose_lengths(vmax: int, p: float, density, budget: float | None = None, *,
         note = (f"; model {model.name}: NaSch's cost per state on every configuration, an"
                 f" upper bound" if _general(model) else "")
         print(f"rings for {where}: L = {', '.join(map(str, lengths))}"
-              f" (predicted {seconds:.3g} s of a {budget:g} s budget{note})", file=sys.stderr)
+              f" (predicted {seconds:.3g} s of the {budget:.3g} s for this density{note})",
+              file=sys.stderr)
     return lengths

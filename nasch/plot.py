@@ -42,11 +42,13 @@ from markov.files import write_bytes_atomic
 from markov.validate import ensure_open_probability
 from symbolic import approximate, supported
 
+from .budget import (DASK_START_SECONDS, FIGURE_SECONDS, budget_share, curve_seconds,
+                     smallest_rings_seconds)
 from .extrapolate import extrapolate
 from .jobs import (ExactJob, MonteCarloJob, ensure_mc_steps, job_cost, monte_carlo_job,
                    preflight, run_job_keep_going)
 from .rings import commensurate_lengths
-from .sweep import run_jobs
+from .sweep import default_workers, run_jobs, runs_serially
 
 __all__ = ["fundamental_data", "fundamental_figure", "save_figure", "FIGURE_FORMATS",
            "EXTRAPOLATION_DENSITIES", "spacetime_figure", "ensure_spacetime_size",
@@ -72,8 +74,13 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
                      curve_points: int = 120, mc_length: int = 3000, mc_steps: int = 2000,
                      mc_points: int = 39,
                      seed: int = 0, serial: bool | None = None, scheduler: str | None = None,
-                     client=None, budget: float | None = None):
+                     client=None, budget: float | None = None,
+                     ring_budget: float | None = None, started: float | None = None):
     """All numbers of the fundamental diagram: one panel per braking probability.
+
+    Before any long work one line on stderr predicts every stage (curves,
+    exact rings, Monte Carlo, drawing); on a terminal each stage shows a
+    progress bar.
 
     Parameters
     ----------
@@ -85,8 +92,9 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
         Rings whose exact flux is shown for every ``0 < N < L``.
     extrapolation_lengths : sequence of int, optional
         Candidate rings for the extrapolation (those commensurate with each
-        density are used).  Default: the rings ``nasch table`` and ``nasch
-        study`` choose, by ``budget`` (:func:`nasch.budget.choose_lengths`).
+        density are used).  Default: the largest rings that fit
+        ``ring_budget`` per density and ``p`` (:func:`nasch.budget.choose_lengths`),
+        or those that ``budget`` leaves room for.
     extrapolation_densities : sequence of Fraction
         Densities to extrapolate (those with at least ``order + 1`` rings).
     order : int
@@ -104,17 +112,28 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     serial, scheduler, client
         See :func:`nasch.sweep.run_jobs`.
     budget : float, optional
-        Seconds of exact solving per extrapolated density and panel (default
-        :data:`nasch.budget.DEFAULT_BUDGET`): the ``order + 2`` largest rings of
-        each density that fit (:func:`nasch.budget.choose_lengths`), instead of
-        ``extrapolation_lengths``.
+        Seconds for the whole figure, counted from ``started``: every stage
+        is predicted first (:func:`nasch.budget.curve_seconds`,
+        :func:`nasch.budget.predicted_seconds`, :func:`nasch.jobs.job_cost`,
+        :data:`nasch.budget.FIGURE_SECONDS` per panel for drawing it), and
+        what is left is split evenly among the extrapolated densities and
+        panels, each taking the ``order + 2`` largest rings that fit
+        (:func:`nasch.budget.budget_share`); refused before any work when the
+        other stages alone exceed it.  Instead of ``extrapolation_lengths``
+        and ``ring_budget``.
+    ring_budget : float, optional
+        Seconds of exact rings per extrapolated density and ``p`` (default
+        :data:`nasch.budget.DEFAULT_BUDGET`: the rings ``nasch table`` and
+        ``nasch study`` choose), without a bound on the whole figure.
+    started : float, optional
+        :func:`time.perf_counter` at which the budget started (default: now).
 
     Raises
     ------
     InvalidParameterError
-        Before any work: both ``extrapolation_lengths`` and ``budget``, or a
+        Before any work: both ``extrapolation_lengths`` and ``budget``, a
         method that ``vmax`` does not support at its size (e.g. the 2-cluster
-        beyond vmax 5).
+        beyond vmax 5), a budget too small for the stages.
 
     Returns
     -------
@@ -130,9 +149,13 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     >>> [round(float(x), 6) for x in d["exact"][6][1]]
     [0.083333, 0.145833, 0.171053, 0.145833, 0.083333]
     """
-    from markov.chain.encoding import max_length
-    from markov.validate import ensure_int
+    import time
 
+    from markov.chain.encoding import max_length
+    from markov.progress import progress_bar
+    from markov.validate import ensure_int, ensure_real
+
+    started = time.perf_counter() if started is None else float(started)
     single = np.ndim(p) == 0
     ps = [ensure_open_probability(float(x)) for x in ([p] if single else p)]
     vmax = ensure_int("vmax", vmax, 1)
@@ -141,14 +164,22 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
     mc_steps = ensure_mc_steps(mc_steps)
     mc_length = ensure_int("mc_length", mc_length, 2)
     mc_points = ensure_int("mc_points", mc_points, 1)
+    curve_points = ensure_int("curve_points", curve_points, 1, 10_000)
     lengths = [ensure_int("ring length", L, 2) for L in lengths]
-    if extrapolation_lengths is not None and budget is not None:
-        raise InvalidParameterError("give either the extrapolation lengths or a budget")
-    # each curve once at one density: a method too large for vmax is refused
-    # here, not after the exact rings and Monte Carlo
-    for m in methods:
-        if supported(m, vmax):
+    budget, ring_budget = (None if b is None else ensure_real(name, b, 0, low_open=True)
+                           for name, b in (("budget", budget), ("ring_budget", ring_budget)))
+    if sum(x is not None for x in (extrapolation_lengths, budget, ring_budget)) > 1:
+        raise InvalidParameterError("give at most one of the extrapolation lengths, a budget"
+                                    " and a ring budget")
+    # each curve once at one density: a method too large for vmax is refused here,
+    # not after the exact rings and Monte Carlo (and its derivation is done: sympy,
+    # seconds to minutes for a large cluster without the disk cache)
+    chosen = [m for m in methods if supported(m, vmax)]
+    with progress_bar(len(chosen), "deriving", "method") as bar:
+        for m in chosen:
+            bar.set_description(f"deriving {m}")
             approximate(m, vmax, ps[0], 0.5)
+            bar.update(1)
     by_budget = extrapolation_lengths is None
     extrapolation_lengths = [ensure_int("ring length", L, 2)
                              for L in (extrapolation_lengths or ())]
@@ -161,43 +192,140 @@ def fundamental_data(vmax: int, p, *, lengths: Sequence[int] = (8, 12, 16),
                       RuntimeWarning, stacklevel=2)
         lengths = [L for L in lengths if L <= longest]
         extrapolation_lengths = [L for L in extrapolation_lengths if L <= longest]
-    shown = {(int(L), N) for L in lengths for N in range(1, int(L))}
+    shown = sorted({(int(L), N) for L in lengths for N in range(1, int(L))})
+    densities = [Fraction(c) for c in extrapolation_densities]
+    grid = np.linspace(0.005, 0.995, curve_points)
+    # Monte Carlo on a uniform grid plus the extrapolated densities, so that
+    # every extrapolated point has a simulation at exactly its density.
+    mc_grid = {Fraction(k, mc_points + 1) for k in range(1, mc_points + 1)} if mc_steps else set()
+
+    def monte_carlo(x, cs):
+        return [monte_carlo_job(c, vmax, x, mc_length=mc_length, steps=mc_steps,
+                                warmup=mc_steps // 2, seed=seed) for c in cs]
+
+    probed = [0.0, 0.0]   # wall and processor seconds of the timed solves
+
+    def solve_seconds(m):
+        # processor time: a probe of a few ms timed on the wall clock is mostly the
+        # load of that moment; the wall clock over all of them gives the load
+        def timed(cs):
+            wall, cpu = time.perf_counter(), time.process_time()
+            approximate(m, vmax, ps[0], cs)
+            probed[0] += time.perf_counter() - wall
+            probed[1] += time.process_time() - cpu
+            return time.process_time() - cpu
+        return timed
+
+    curve_stages = {f"{_STYLE.get(m, (m,))[0]} curve":
+                    len(ps) * curve_seconds(m, vmax, grid, solve_seconds(m)) for m in chosen}
+    drawing = {"drawing": FIGURE_SECONDS * len(ps)}
+    # how much longer than on a free core this process takes now (other work on the
+    # machine): the wall over the processor time of the timed solves, 1 to 10
+    slowdown = min(10.0, max(1.0, probed[0] / probed[1])) if probed[1] > 0.02 else 1.0
+    share = ring_budget
+    if budget is not None:
+        # every stage but the extrapolation's rings, at its largest (Monte Carlo at every
+        # extrapolated density), and the least those rings need, at the present load
+        others = {**curve_stages,
+                  "Monte Carlo": sum(job_cost(j) for x in ps
+                                     for j in monte_carlo(x, sorted(mc_grid | set(densities)))),
+                  f"exact rings L = {', '.join(map(str, lengths))}":
+                      len(ps) * sum(job_cost(ExactJob(L, N, vmax, ps[0])) for L, N in shown),
+                  **drawing}
+        others = {"start-up": time.perf_counter() - started,
+                  **{name: slowdown * seconds for name, seconds in others.items()}}
+        minimum = max((smallest_rings_seconds(vmax, x, c, order + 2) for x in ps
+                       for c in densities), default=0.0)
+        busy = (f"the machine is busy (this process runs at {100 / slowdown:.0f} % of a"
+                " core); " if slowdown > 1.2 else "")
+        share = budget_share(budget, others, len(ps) * len(densities), slowdown * minimum,
+                             hint=f"{busy}raise --budget, or drop methods, Monte Carlo"
+                                  " (--mc-steps 0) or rings (--lengths)") / slowdown
     groups = {}   # p -> {density: extrapolation lengths}
     for x in ps:
         groups[x] = {}
-        for c in map(Fraction, extrapolation_densities):
+        for c in densities:
             if by_budget:
                 from .budget import choose_lengths
 
-                Ls = choose_lengths(vmax, x, c, budget, order=order)
+                Ls = choose_lengths(vmax, x, c, share, order=order)
             else:
                 Ls = commensurate_lengths(c, extrapolation_lengths)
             if len(Ls) >= order + 1:
                 groups[x][c] = Ls
-    # Monte Carlo on a uniform grid plus the extrapolated densities, so that
-    # every extrapolated point has a simulation at exactly its density.
-    mc_c = sorted({Fraction(k, mc_points + 1) for k in range(1, mc_points + 1)}
-                  | {c for g in groups.values() for c in g}) if mc_steps else []
+    mc_c = sorted(mc_grid | {c for g in groups.values() for c in g}) if mc_steps else []
     jobs, spans = [], []
     for x in ps:
-        points = sorted(shown | {(L, int(c * L)) for c, Ls in groups[x].items() for L in Ls})
+        points = sorted(set(shown) | {(L, int(c * L)) for c, Ls in groups[x].items()
+                                      for L in Ls})
         first = len(jobs)
         jobs += [ExactJob(L, N, vmax, x) for L, N in points]
-        jobs += [monte_carlo_job(c, vmax, x, mc_length=mc_length, steps=mc_steps,
-                                 warmup=mc_steps // 2, seed=seed) for c in mc_c]
+        jobs += monte_carlo(x, mc_c)
         spans.append((first, len(jobs), points))
+    # a local cluster only where its start-up pays: the w workers save S (1 - 1/w)
+    # of the jobs' S seconds on one core
+    workers = default_workers()
+    serial_below = (DASK_START_SECONDS * workers / (workers - 1) if workers > 1
+                    else float("inf"))
+    serially = runs_serially(jobs, serial=serial, scheduler=scheduler, client=client,
+                             cost=job_cost, serial_below=serial_below)
+    _announce({**curve_stages,
+               "exact rings": sum(job_cost(j) for j in jobs if isinstance(j, ExactJob)),
+               "Monte Carlo": sum(job_cost(j) for j in jobs if isinstance(j, MonteCarloJob)),
+               **drawing}, budget, None if serially else workers, slowdown)
     # rings the exact solver refuses are left out of the figure, not refused up front
     preflight([job for job in jobs if isinstance(job, MonteCarloJob)])
-    results = run_jobs(run_job_keep_going, jobs, serial=serial, scheduler=scheduler,
-                       client=client, cost=job_cost, desc="fundamental diagram")
+    curves = [_curves(vmax, x, chosen, grid) for x in ps]
+    results = run_jobs(run_job_keep_going, jobs, serial=serially, scheduler=scheduler,
+                       client=client, desc="fundamental diagram")
     panels = [_panel(vmax, x, results[lo:hi], points, groups[x], mc_c, lengths, order,
-                     methods, mc_length, mc_steps, curve_points)
-              for x, (lo, hi, points) in zip(ps, spans)]
+                     mc_length, mc_steps, curve)
+              for x, (lo, hi, points), curve in zip(ps, spans, curves)]
     return panels[0] if single else panels
 
 
-def _panel(vmax, p, results, exact_points, groups, mc_c, lengths, order, methods,
-           mc_length, mc_steps, curve_points) -> dict:
+def _announce(stages: dict, budget: float | None, workers: int | None,
+              slowdown: float = 1.0) -> None:
+    """One line on stderr before the work: the predicted seconds of every stage.
+
+    ``workers``: the jobs (exact rings, Monte Carlo) run on a Dask cluster of
+    that many local workers (None: in this process); ``slowdown``: the
+    present load's factor on all of it.
+    """
+    import sys
+
+    parts = [f"{name} {seconds:.2g} s" for name, seconds in stages.items() if seconds >= 0.005]
+    total = sum(stages.values())
+    where = ""
+    if workers:
+        jobs = stages["exact rings"] + stages["Monte Carlo"]
+        total += DASK_START_SECONDS + jobs / workers - jobs
+        where = f"; the rings and Monte Carlo on {workers} Dask workers"
+    load = ""
+    if slowdown > 1.2:
+        load = (f"; the machine is busy (this process ran at {100 / slowdown:.0f} % of a core"
+                f" while timing the curves): about {slowdown * total:.2g} s here")
+    of = "" if budget is None else f" (budget {budget:g} s)"
+    print(f"predicted, one free core: {', '.join(parts)}{where}; about {total:.2g} s in"
+          f" all{load}{of}", file=sys.stderr)
+
+
+def _curves(vmax: int, p: float, methods: Sequence[str], grid: np.ndarray) -> dict:
+    """The approximation curves of one panel, closed at ``c = 0`` and ``1`` (``f = 0``)."""
+    from markov.progress import progress_bar
+
+    curves = {}
+    with progress_bar(len(methods), f"curves, p = {p:g}", "curve") as bar:
+        for m in methods:
+            bar.set_description(f"curves, p = {p:g}: {m}")
+            f = np.asarray(approximate(m, vmax, p, grid).flux, dtype=float)
+            curves[m] = (np.r_[0.0, grid, 1.0], np.r_[0.0, f, 0.0])
+            bar.update(1)
+    return curves
+
+
+def _panel(vmax, p, results, exact_points, groups, mc_c, lengths, order, mc_length, mc_steps,
+           curves) -> dict:
     exact_res = results[:len(exact_points)]
     flux = {pt: r.flux for pt, r in zip(exact_points, exact_res)}
     failed = [(pt, r.error) for pt, r in zip(exact_points, exact_res) if r.error]
@@ -218,24 +346,14 @@ def _panel(vmax, p, results, exact_points, groups, mc_c, lengths, order, methods
             ext.append((float(c), extrapolate(Ls, [flux[(L, int(c * L))] for L in Ls],
                                               order=order)))
     mc_res = results[len(exact_points):]
-    data = {
+    return {
         "vmax": int(vmax), "p": float(p), "order": order, "exact": exact,
         "extrapolated": (np.array([c for c, _ in ext]), np.array([e.f_inf for _, e in ext]),
                          np.array([e.error for _, e in ext])),
         "mc": (np.array([float(c) for c in mc_c]), np.array([r.flux for r in mc_res]),
                np.array([r.error for r in mc_res])),
-        "mc_length": mc_length, "mc_steps": mc_steps, "curves": {},
+        "mc_length": mc_length, "mc_steps": mc_steps, "curves": curves,
     }
-    # 120 points draw smooth curves: the n-cluster solves all at once (4-cluster: ~1 s),
-    # COMF one by one (~20 s for vmax 2, mostly the lowest densities).
-    grid = np.linspace(0.005, 0.995, int(curve_points))
-    for m in methods:
-        if supported(m, vmax):
-            # COMF solves each density alone (~0.2 s, several s below c = 0.02)
-            f = np.asarray(approximate(m, vmax, p, grid).flux, dtype=float)
-            # Close the curve at the end points, where every approximation has f = 0.
-            data["curves"][m] = (np.r_[0.0, grid, 1.0], np.r_[0.0, f, 0.0])
-    return data
 
 
 def fundamental_figure(panels: Sequence[dict], width: float = 4.6, height: float = 4.2):
@@ -570,8 +688,17 @@ def models_figure(data: dict, width: float = 6.4, height: float = 5.2):
 
 # ------------------------------------------------------------- relaxation: exact spectra
 
-def relaxation_figure(data: dict, spectrum=None, width: float = 9.6, height: float = 4.2):
-    """``tau`` against density for several ``p`` (left) and one ring's spectrum (right).
+def _fixed_label(data: dict) -> str:
+    """``"NaSch (vmax = 2)"``: the model and every parameter that the curves do not vary."""
+    name = "NaSch" if data["model"]["name"] == "nasch" else data["model"]["name"]
+    fixed = ", ".join(f"{k} = {v:g}" if isinstance(v, (int, float)) else f"{k} = {v}"
+                      for k, v in data["fixed"].items())
+    return f"{name} ({fixed})"
+
+
+def relaxation_figure(data: dict, spectrum=None, notes: Sequence[str] = (),
+                      width: float = 9.6, height: float = 4.2):
+    """``tau`` against density per value of one parameter (left) and one ring's spectrum (right).
 
     Parameters
     ----------
@@ -579,7 +706,10 @@ def relaxation_figure(data: dict, spectrum=None, width: float = 9.6, height: flo
         From :func:`nasch.relaxation.relaxation_curves`.
     spectrum : markov.analysis.spectrum.Spectrum, optional
         Drawn in the complex plane (one colour per momentum sector, the unit
-        circle for reference); without it only the left panel is drawn.
+        circle for reference; the title names the value of the varied
+        parameter); without it only the left panel is drawn.
+    notes : sequence of str
+        Lines printed above the legend (e.g. rings left out).
     width, height : float
         Inches.
 
@@ -603,27 +733,30 @@ def relaxation_figure(data: dict, spectrum=None, width: float = 9.6, height: flo
                  layout="constrained")
     axes = fig.subplots(1, panels, squeeze=False)[0]
     ax = axes[0]
+    vary = data["vary"]
+    density = np.array(data["density"])
     for i, curve in enumerate(data["curves"]):
+        label = f"{vary} = {curve['value']:g}"
         tau = np.array(curve["tau"], dtype=float)
         finite = np.isfinite(tau)
-        ax.plot(np.array(data["density"])[finite], tau[finite], "o-", ms=3.5, lw=1,
-                color=f"C{i % 10}", label=f"$p = {curve['p']:g}$, all sectors")
+        ax.plot(density[finite], tau[finite], "o-", ms=3.5, lw=1, color=f"C{i % 10}",
+                label=f"{label}, all sectors")
         tau0 = np.array(curve["tau_sector0"], dtype=float)
         finite = np.isfinite(tau0)
-        ax.plot(np.array(data["density"])[finite], tau0[finite], "s--", ms=3, lw=0.9,
-                mfc="white", color=f"C{i % 10}", label=f"$p = {curve['p']:g}$, sector 0")
+        ax.plot(density[finite], tau0[finite], "s--", ms=3, lw=0.9, mfc="white",
+                color=f"C{i % 10}", label=f"{label}, sector 0")
     ax.set_xlabel("density $c = N/L$")
     ax.set_ylabel(r"relaxation time $\tau = -1/\ln|\lambda_2|$ (steps)")
-    name = "NaSch" if data["model"]["name"] == "nasch" else data["model"]["name"]
-    ax.set_title(f"exact, {name} $v_\\mathrm{{max}} = {data['vmax']}$, L = {data['length']},"
-                 f" {data['update']}", fontsize=9)
+    ax.set_title(f"exact, {_fixed_label(data)}, L = {data['length']}, {data['update']}",
+                 fontsize=9)
     ax.set_xlim(0, 1)
     ax.set_ylim(bottom=0)
     ax.grid(alpha=0.25, lw=0.5)
     handles, labels = ax.get_legend_handles_labels()
-    # below the axes: it never hides a curve
+    # below the axes: it never hides a curve; the notes head it (the layout makes room)
     fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 6),
-               fontsize=7, frameon=False)
+               fontsize=7, frameon=False, title="\n".join(notes) or None,
+               title_fontsize=7)
     if spectrum is not None:
         ax = axes[1]
         t = np.linspace(0, 2 * np.pi, 400)
@@ -641,8 +774,9 @@ def relaxation_figure(data: dict, spectrum=None, width: float = 9.6, height: flo
         ax.set_xlabel(r"Re $\lambda$")
         ax.set_ylabel(r"Im $\lambda$")
         per = max(1, len(values) // max(1, len(spectrum.sector_sizes)))
-        ax.set_title(f"leading eigenvalues ({per} per sector), L = {ring.length},"
-                     f" N = {ring.cars}, {ring.model.name}", fontsize=9)
+        ax.set_title(f"leading eigenvalues ({per} per sector) at {vary} ="
+                     f" {ring.model.params[vary]:g}\nL = {ring.length}, N = {ring.cars},"
+                     f" {ring.model.name}", fontsize=9)
         ax.grid(alpha=0.25, lw=0.5)
         ax.legend(fontsize=8, frameon=False, loc="lower left")
     return fig

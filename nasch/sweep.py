@@ -47,8 +47,8 @@ from urllib.parse import urlsplit
 from markov.errors import InvalidParameterError, NaschError
 from markov.progress import progress_bar
 
-__all__ = ["run_jobs", "parse_scheduler_address", "single_threaded", "capped_workers",
-           "default_workers"]
+__all__ = ["run_jobs", "runs_serially", "parse_scheduler_address", "single_threaded",
+           "capped_workers", "default_workers"]
 
 #: Seconds allowed to reach a scheduler (the whole connection, probe included).
 CONNECT_TIMEOUT = 10.0
@@ -132,6 +132,35 @@ def capped_workers(n_workers: int | None) -> int:
     return cores if n_workers is None else max(1, min(int(n_workers), cores))
 
 
+def runs_serially(jobs: Sequence[Any], *, serial: bool | None = None,
+                  scheduler: str | None = None, client=None, n_workers: int | None = None,
+                  cost: Callable[[Any], float] | None = None,
+                  serial_below: float = 3.0) -> bool:
+    """Whether :func:`run_jobs` with these arguments runs ``jobs`` in this process.
+
+    Parameters
+    ----------
+    jobs, serial, scheduler, client, n_workers, cost, serial_below
+        As for :func:`run_jobs`.
+
+    Returns
+    -------
+    bool
+
+    Examples
+    --------
+    >>> runs_serially([0.5, 1], cost=float), runs_serially([0.5, 1], cost=float, serial_below=1)
+    (True, False)
+    """
+    if serial is not None:
+        return bool(serial)
+    if scheduler is not None or client is not None or n_workers is not None:
+        return False
+    if len(jobs) <= 1:
+        return True
+    return cost is not None and sum(cost(j) for j in jobs) < serial_below
+
+
 def run_jobs(func: Callable[[Any], Any], jobs: Sequence[Any], *, serial: bool | None = None,
              scheduler: str | None = None, client=None, n_workers: int | None = None,
              cost: Callable[[Any], float] | None = None, serial_below: float = 3.0,
@@ -173,13 +202,8 @@ def run_jobs(func: Callable[[Any], Any], jobs: Sequence[Any], *, serial: bool | 
     [1, 2, 3]
     """
     jobs = list(jobs)
-    if serial is None:
-        if scheduler is not None or client is not None or n_workers is not None:
-            serial = False
-        elif len(jobs) <= 1:
-            serial = True
-        else:
-            serial = cost is not None and sum(cost(j) for j in jobs) < serial_below
+    serial = runs_serially(jobs, serial=serial, scheduler=scheduler, client=client,
+                           n_workers=n_workers, cost=cost, serial_below=serial_below)
     if n_workers is not None:
         from markov.validate import ensure_int
         n_workers = ensure_int("n_workers", n_workers, 1)

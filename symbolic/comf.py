@@ -41,6 +41,7 @@ models" (``shared/paper``), its claims about COMF (``docs/symbolic.md``).
 """
 from __future__ import annotations
 
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -53,7 +54,7 @@ from markov.validate import ensure_open_unit
 
 __all__ = ["ComfState", "comf_state", "solve_comf", "comf_word_probability",
            "comf_equations", "comf_equation_terms", "ensure_comf_size", "ensure_comf_rule", "MIN_COMF_DENSITY",
-           "MAX_COMF_VMAX"]
+           "MAX_COMF_VMAX", "comf_gap_states"]
 
 _TAIL = 1e-15          # probability allowed beyond the gap cut
 # Largest residual of the outer equations accepted where rounding stops the descent:
@@ -63,8 +64,8 @@ _MAX_STEPS = 200       # self-consistency steps (4-20 needed where tried)
 _MAX_GAP = 2_000_000   # largest gap cut tried (c >= ~1e-5)
 
 #: Smallest density COMF is solved at: the gap cut grows like ``40 / c`` and the
-#: self-consistency slows with it (vmax 2, p 0.5: c = 0.005 in 3 s, 0.002 in
-#: 40 s, 0.001 over 2 minutes); c >= 0.005 is also the validated range.
+#: self-consistency slows with it (vmax 2, p 0.5, one core: c = 0.005 in 0.6 s,
+#: 0.002 in 3 s; vmax 5: c = 0.005 in 5 s); c >= 0.005 is the validated range.
 MIN_COMF_DENSITY = 0.005
 #: Largest vmax COMF is solved for: the banded matrix has about
 #: ``2 vmax (vmax + 1)`` diagonals on ``16 vmax (vmax + 1)`` states, so memory
@@ -149,22 +150,57 @@ def _operators(model, cut: int):
     return shift, moved, d
 
 
-def _pinned_solve(k: sp_sparse.coo_array, pin: int) -> np.ndarray | None:
-    """Solution of ``P = K P`` with ``P(pin) = 1`` by banded LU, or None if singular."""
+@lru_cache(maxsize=64)
+def _band_pieces(model, cut: int):
+    """The pieces of ``K = sum_a g_a shift[a]`` on one sparsity pattern, and its band layout.
+
+    Built once per gap cut, so that each evaluation of :func:`_stationary`
+    (~100 per density) is a weighted sum of ``vmax + 1`` data rows and one
+    scatter into LAPACK band storage, not a sparse sum and ``np.add.at``.
+    Returns ``(data, pattern, lower, upper, slots)``: ``data[a]`` the entries
+    of ``shift[a]`` on the union ``pattern`` (``indices, indptr``), the band
+    widths, and the flat band position of every entry of the pattern.
+    """
+    shift, _, _ = _operators(model, cut)
+    n = shift[0].shape[0]
+    union = sum(shift).tocsr()          # every entry is positive: no cancellation
+    union.sum_duplicates()
+    union.sort_indices()
+    rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(union.indptr))
+    cols = union.indices.astype(np.int64)
+    flat = rows * n + cols              # increasing: canonical CSR
+    data = np.zeros((len(shift), len(flat)))
+    for a, s in enumerate(shift):
+        s = s.tocoo()
+        np.add.at(data[a], np.searchsorted(flat, s.row.astype(np.int64) * n + s.col), s.data)
+    lower = int(max(0, (rows - cols).max()))
+    upper = int(max(0, (cols - rows).max()))
+    slots = (upper + rows - cols) * n + cols
+    return data, (union.indices, union.indptr), lower, upper, slots
+
+
+def _pinned_solve(k_data: np.ndarray, pieces, pin: int) -> np.ndarray | None:
+    """Solution of ``P = K P`` with ``P(pin) = 1`` by banded LU, or None if singular.
+
+    ``k_data``: the entries of ``K`` on the pattern of ``pieces``
+    (:func:`_band_pieces`); the balance row of ``pin`` (one is redundant)
+    becomes ``P(pin) = 1``.
+    """
     from scipy.linalg import LinAlgError, solve_banded
 
-    n = k.shape[0]
-    keep = k.row != pin
-    rows = np.concatenate([k.row[keep], np.arange(n)])
-    cols = np.concatenate([k.col[keep], np.arange(n)])
-    vals = np.concatenate([k.data[keep], np.where(np.arange(n) == pin, 1.0, -1.0)])
-    lower, upper = int(max(0, (rows - cols).max())), int(max(0, (cols - rows).max()))
-    band = np.zeros((lower + upper + 1, n))
-    np.add.at(band, (upper + rows - cols, cols), vals)
+    _, (_, indptr), lower, upper, slots = pieces
+    n = len(indptr) - 1
+    band = np.zeros((lower + upper + 1) * n)
+    band[slots] = k_data
+    band = band.reshape(lower + upper + 1, n)
+    band[upper] -= 1.0
+    j = np.arange(max(0, pin - lower), min(n, pin + upper + 1))
+    band[upper + pin - j, j] = 0.0
+    band[upper, pin] = 1.0
     rhs = np.zeros(n)
     rhs[pin] = 1.0
     try:
-        x = solve_banded((lower, upper), band, rhs, check_finite=False)
+        x = solve_banded((lower, upper), band, rhs, overwrite_ab=True, check_finite=False)
     except LinAlgError:
         return None
     x = np.maximum(x, 0.0)
@@ -183,10 +219,11 @@ def _stationary(model, cut: int, g: np.ndarray, pin: int) -> np.ndarray | None:
     fast car.  None when no pin gives a stationary vector (``g`` outside the
     physical range).
     """
-    shift, _, _ = _operators(model, cut)
+    pieces = _band_pieces(model, cut)
     vmax = model.vmax
-    k = sum(ga * s for ga, s in zip(g, shift)).tocsr()
-    coo = k.tocoo()
+    k_data = g @ pieces[0]
+    n = len(pieces[1][1]) - 1
+    k = sp_sparse.csr_array((k_data, *pieces[1]), shape=(n, n))
     tried = set()
     candidates = [pin]
     while candidates:
@@ -194,7 +231,7 @@ def _stationary(model, cut: int, g: np.ndarray, pin: int) -> np.ndarray | None:
         if pin in tried:
             continue
         tried.add(pin)
-        x = _pinned_solve(coo, pin)
+        x = _pinned_solve(k_data, pieces, pin)
         if x is None:
             candidates += [0, (cut // 2) * (vmax + 1) + vmax]
             continue
@@ -205,53 +242,72 @@ def _stationary(model, cut: int, g: np.ndarray, pin: int) -> np.ndarray | None:
 
 
 def _tilted(logw: np.ndarray, mean: float) -> np.ndarray | None:
-    """``g_a ∝ exp(logw_a + lam a)`` with ``sum_a a g_a = mean`` (``lam`` by bisection)."""
+    """``g_a ∝ exp(logw_a + lam a)`` with ``sum_a a g_a = mean``.
+
+    The mean of the tilted law increases with ``lam`` (its derivative is the
+    variance): Newton's method, kept inside a bracket that every iterate
+    narrows, with bisection where a step would leave it (5-8 evaluations
+    where the bisection alone took 60).
+    """
     a = np.arange(len(logw))
     if not 0 < mean < len(logw) - 1:
         return None
 
-    def dist(lam):
+    def moments(lam):
         z = logw + lam * a
         e = np.exp(z - z.max())
-        return e / e.sum()
+        g = e / e.sum()
+        m = float(a @ g)
+        return g, m, float((a * a) @ g) - m * m
 
-    lo, hi = -2000.0, 2000.0
-    for _ in range(200):       # the mean of the tilted law increases with lam
-        mid = 0.5 * (lo + hi)
-        if a @ dist(mid) < mean:
-            lo = mid
-        else:
-            hi = mid
-        if hi - lo < 1e-15 * max(1.0, abs(mid)):
+    lo, hi, lam = -2000.0, 2000.0, 0.0
+    for _ in range(200):
+        g, m, var = moments(lam)
+        if m == mean:
             break
-    return dist(0.5 * (lo + hi))
+        if m < mean:
+            lo = lam
+        else:
+            hi = lam
+        new = lam + (mean - m) / var if var > 0 else np.inf
+        if not lo < new < hi:
+            new = 0.5 * (lo + hi)
+        if abs(new - lam) <= 1e-15 * max(1.0, abs(lam)) or hi - lo <= 1e-15 * max(1.0, abs(lam)):
+            break
+        lam = new
+    return g
 
 
-def _gap_root(model, cut, shape, target, u, pin):
+def _gap_root(model, cut, shape, target, u, pin, width=0.5):
     """The logit ``u`` of the mean move ``m / (vmax - p)`` giving the target mean gap.
 
     ``g`` is ``shape`` tilted to mean ``m`` (:func:`_tilted`).  Far from the car
     ahead the gap walk drifts by ``-(vmax - p - m)``: the mean gap grows with
     ``m`` (like ``1 / (vmax - p - m)`` in free flow, where ``vmax - p - m`` is
     ~1e-12 at ``c = 0.005, p = 0.001``), so the logit is a smooth, monotone
-    unknown; bracketed, then Brent's method.  Returns ``(u, g, P_g)``.
+    unknown; bracketed from ``u +- width`` outwards, then Brent's method.
+    Returns ``(u, g, P_g)``.
     """
     from scipy.optimize import brentq
 
     free = _free(model)
     _, _, d = _operators(model, cut)
     logw = np.log(np.maximum(shape, 1e-300))
-    found = {}
+    found, values = {}, {}
 
     def f(uu):
+        if uu in values:      # the bracket's ends: brentq evaluates them again
+            return values[uu]
         g = _tilted(logw, free / (1.0 + np.exp(-uu)))
         x = None if g is None else _stationary(model, cut, g, pin)
         if x is None:         # outside the physical range: treat as too fast
-            return np.inf
-        found[uu] = (g, x)
-        return np.log(float(d @ x) / target)
+            values[uu] = np.inf
+        else:
+            found[uu] = (g, x)
+            values[uu] = np.log(float(d @ x) / target)
+        return values[uu]
 
-    lo, hi, step = u - 0.5, u + 0.5, 1.0
+    lo, hi, step = u - width, u + width, 1.0
     while f(lo) > 0:
         lo, step = lo - step, 2 * step
         if lo < -800:
@@ -284,12 +340,15 @@ def _solve_cut(model, c: float, cut: int, shape: np.ndarray):
 
     target = (1 - c) / c
     _, moved, _ = _operators(model, cut)
-    warm = {"u": 0.0, "pin": 0}
+    warm = {"u": 0.0, "pin": 0, "width": 0.5}
 
     def update(rows):
         out = np.empty_like(rows)
         for i, row in enumerate(rows):
-            u, g, x = _gap_root(model, cut, row, target, warm["u"], warm["pin"])
+            u, g, x = _gap_root(model, cut, row, target, warm["u"], warm["pin"],
+                                warm["width"])
+            # the root moves less each step: bracket the next one by the last move
+            warm.update(width=float(np.clip(4 * abs(u - warm["u"]), 1e-9, 0.5)))
             warm.update(u=u, pin=int(np.argmax(x)), x=x)
             out[i] = moved @ x
         return out
@@ -400,7 +459,7 @@ def comf_state(vmax: int, p: float | None, c: float, model=None) -> ComfState:
     # start: all moves equally likely (converged from several starts to the same point;
     # the MF solution would cost a sympy solve, 5 s for vmax 5)
     shape = np.full(vmax + 1, 1.0 / (vmax + 1))
-    cut = max(16 * vmax, int(np.ceil(40 * (1 - c) / c)))
+    cut = _first_cut(vmax, c)
     while True:
         shape, x = _solve_cut(model, c, cut, shape)
         tail = x[(cut + 1 - span) * (vmax + 1):].sum()
@@ -414,6 +473,36 @@ def comf_state(vmax: int, p: float | None, c: float, model=None) -> ComfState:
     probs = x.reshape(cut + 1, vmax + 1)
     _, moved, _ = _operators(model, cut)
     return ComfState(vmax, p, c, cut, probs, moved @ x, residual, model)
+
+
+def _first_cut(vmax: int, c: float) -> int:
+    """The first gap cut tried: 40 mean gaps, at least 16 vmax cells (doubled if too short)."""
+    return max(16 * vmax, int(np.ceil(40 * (1 - c) / c)))
+
+
+def comf_gap_states(vmax: int, densities) -> np.ndarray:
+    """Gap states of the first gap cut at each density, relative to those at ``c = 1/2``.
+
+    What a COMF solve costs grows with them (a banded solve over the gaps);
+    :func:`nasch.budget.curve_seconds` prices a curve from two timed solves.
+
+    Parameters
+    ----------
+    vmax : int
+    densities : array_like
+
+    Returns
+    -------
+    ndarray
+        At least 1 each.
+
+    Examples
+    --------
+    >>> comf_gap_states(2, [0.5, 0.25, 0.05]).tolist()      # 40 (1 - c) / c cells, >= 32
+    [1.0, 3.0, 19.0]
+    """
+    half = _first_cut(vmax, 0.5)
+    return np.array([max(1.0, _first_cut(vmax, float(c)) / half) for c in np.ravel(densities)])
 
 
 def ensure_comf_size(vmax: int, density=None) -> None:
@@ -435,8 +524,8 @@ def ensure_comf_size(vmax: int, density=None) -> None:
             f" vmax^4 in memory and vmax^6 in time), got vmax = {vmax}")
     if density is not None and np.size(density) and np.min(density) < MIN_COMF_DENSITY:
         raise InvalidParameterError(
-            f"COMF is solved for densities c >= {MIN_COMF_DENSITY:g} (its gap cut grows like"
-            f" 40 / c: c = 0.002 takes 40 s), got c = {float(np.min(density)):g}")
+            f"COMF is solved for densities c >= {MIN_COMF_DENSITY:g} (the validated range;"
+            f" its gap cut grows like 40 / c), got c = {float(np.min(density)):g}")
 
 
 def solve_comf(vmax: int, p_val, c_val, model=None) -> np.ndarray:
@@ -459,16 +548,24 @@ def solve_comf(vmax: int, p_val, c_val, model=None) -> np.ndarray:
     >>> solve_comf(2, 0.5, [0.25, 0.5]).shape
     (3, 2)
     """
+    from markov.progress import progress_bar
+
     if model is not None:
         ensure_comf_rule(model)
         c_b = np.asarray(c_val, float)
-        ensure_comf_size(int(vmax), c_b)
-        out = np.array([comf_state(vmax, None, cv, model).c_v for cv in c_b.ravel()])
-        return out.T.reshape((vmax + 1,) + c_b.shape)
-    p_b, c_b = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
+        p_b = np.full(c_b.shape, None)
+    else:
+        p_b, c_b = np.broadcast_arrays(np.asarray(p_val, float), np.asarray(c_val, float))
     ensure_comf_size(int(vmax), c_b)    # every point before the first solve
-    out = np.array([comf_state(vmax, pv, cv).c_v for pv, cv in zip(p_b.ravel(), c_b.ravel())])
-    return out.T.reshape((vmax + 1,) + c_b.shape)
+    out = []
+    # each density alone (~0.01 s at vmax 2, 0.6 s at c = 0.005): a bar on a terminal,
+    # for a curve (one density draws none)
+    with progress_bar(c_b.size, "COMF", "density") if c_b.size > 1 else nullcontext() as bar:
+        for pv, cv in zip(p_b.ravel(), c_b.ravel()):
+            out.append(comf_state(vmax, pv, cv, model).c_v)
+            if bar is not None:
+                bar.update(1)
+    return np.array(out).T.reshape((vmax + 1,) + c_b.shape)
 
 
 def comf_word_probability(state: ComfState, word: str, after_update: bool = False) -> float:

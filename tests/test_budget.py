@@ -149,3 +149,120 @@ def test_predicted_bytes_follow_the_chains_memory_model():
     assert predicted_bytes(16, 8, 2, 0.5) == n * memory.factored_bytes_per_state("bicgstab")
     assert predicted_bytes(16, 8, 2, 0.2) == n * memory.factored_bytes_per_state("aggregation")
     assert predicted_bytes(16, 0, 2, 0.5) == 0.0
+
+
+# ---------------------------------------------------------------- a budget of the whole command
+# (issue 23, item 4): plot fundamental predicts every stage before it starts, refuses a
+# budget the stages alone exceed, and gives what is left to the extrapolation's rings
+
+SMALL_FIGURE = ["plot", "fundamental", "--vmax", "1", "--p", "0.5", "--lengths", "6",
+                "--mc-length", "300", "--mc-steps", "200", "--methods", "pmf,mf",
+                "--serial"]
+
+
+def test_budget_share_splits_what_the_stages_leave():
+    from nasch.budget import budget_share
+
+    assert budget_share(10.0, {"a": 2.0, "b": 3.0}, shares=5) == pytest.approx(1.0)
+    assert budget_share(10.0, {"a": 2.0}, shares=0) == 0.0
+    with pytest.raises(InvalidParameterError) as err:
+        budget_share(4.0, {"COMF curve": 3.0, "drawing": 0.5}, shares=2, minimum=0.5,
+                     hint="raise --budget")
+    message = str(err.value)
+    assert "needs about 4.5 s" in message and "COMF curve 3 s" in message
+    assert message.endswith("raise --budget") and "\n" not in message
+
+
+def test_curve_seconds_samples_a_batch_and_prices_comf_by_its_gap_states():
+    import numpy as np
+
+    from nasch.budget import PROBE_EVERY, curve_seconds
+
+    grid = np.linspace(0.005, 0.995, 120)
+    asked = []
+
+    def solve(cs):
+        asked.append(len(cs))
+        return 0.001 * len(cs)
+
+    assert curve_seconds("cluster4", 2, grid, solve) == pytest.approx(0.12)
+    assert asked == [1, len(grid[::PROBE_EVERY])]
+    # one density already too slow to sample the curve: a bound, one solve per density
+    assert curve_seconds("cluster6", 5, grid, lambda cs: 2.0) == pytest.approx(240.0)
+    # COMF: each density costs the solve at c = 1/2 plus its extra gap states
+    comf = curve_seconds("comf", 2, [0.5, 0.25, 0.05],
+                         lambda cs: 0.01 if cs[0] == 0.5 else 0.19)
+    assert comf == pytest.approx(1.4 * (0.03 + 0.18 + 0.18 * (2 / 18) ** 1.1))
+
+
+def test_a_small_budget_is_refused_before_any_work(tmp_path, monkeypatch):
+    import time
+
+    import nasch.plot
+
+    monkeypatch.setattr(nasch.plot, "run_jobs", lambda *a, **k: pytest.fail("work started"))
+    out = tmp_path / "f.png"
+    tick = time.perf_counter()
+    res = CliRunner().invoke(main, [*SMALL_FIGURE, "--methods", "pmf,mf,comf",
+                                    "--budget", "0.5s", "-o", str(out)])
+    assert time.perf_counter() - tick < 20
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert res.output.startswith("error: a budget of 0.5 s is too small")
+    assert "COMF curve" in res.output and "drawing" in res.output
+    assert not out.exists()
+
+
+def test_a_budget_bounds_the_whole_figure(tmp_path, capsys):
+    """The rings chosen by a budget leave the predicted total within it, and the
+    command finishes within it (predictions err on the slow side)."""
+    import re
+    import time
+
+    out = tmp_path / "f.png"
+    tick = time.perf_counter()
+    res = CliRunner().invoke(main, [*SMALL_FIGURE, "--budget", "10s", "-o", str(out)])
+    elapsed = time.perf_counter() - tick
+    assert res.exit_code == 0, res.stderr
+    assert out.exists() and elapsed < 10
+    plan = [line for line in res.stderr.splitlines() if line.startswith("predicted")]
+    assert len(plan) == 1 and plan[0].endswith("(budget 10 s)")
+    total = re.search(r"about ([0-9.]+) s in all(; .* about ([0-9.]+) s here)?", plan[0])
+    assert float(total.group(3) or total.group(1)) <= 10
+    # each extrapolated density got rings within its even share of what was left
+    for line in res.stderr.splitlines():
+        if line.startswith("rings for"):
+            used, share = map(float, re.search(r"predicted ([0-9.e-]+) s of the ([0-9.e-]+) s",
+                                               line).groups())
+            assert used <= share
+
+
+@pytest.mark.parametrize("budget", ["nan", "inf", "1e400", "-3s", "0", "", "3 parsecs"])
+def test_plot_budget_bad_values_one_line(budget, tmp_path):
+    res = CliRunner().invoke(main, [*SMALL_FIGURE, "--budget", budget,
+                                    "-o", str(tmp_path / "f.png")])
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert "budget" in res.output
+
+
+def test_plot_fundamental_shows_its_stages_when_progress_is_forced_on(tmp_path, monkeypatch):
+    from markov import progress
+    monkeypatch.setattr(progress, "progress_enabled", lambda: True)
+    res = CliRunner().invoke(main, [*SMALL_FIGURE, "--methods", "mf,comf",
+                                    "--extrapolation-lengths", "6,8,10",
+                                    "-o", str(tmp_path / "f.png")])
+    assert res.exit_code == 0, res.output
+    for stage in ("curves, p = 0.5", "COMF", "fundamental diagram", "predicted, one free core"):
+        assert stage in res.output, stage
+
+
+def test_fundamental_data_ring_budget_is_the_per_density_choice():
+    from nasch.plot import fundamental_data
+
+    d = fundamental_data(1, 0.5, lengths=[], extrapolation_densities=[Fraction(1, 4)],
+                         methods=(), mc_steps=0, serial=True, ring_budget=0.3)
+    t = flux_table(1, 0.5, densities=[0.25], mc_steps=0, methods=(), serial=True, budget=0.3)
+    assert list(d["extrapolated"][1]) == [r.flux for r in t.rows if r.kind == "extrapolated"]
+    for bad in ({"budget": float("nan")}, {"ring_budget": -1.0},
+                {"budget": 5.0, "ring_budget": 3.0}):
+        with pytest.raises(InvalidParameterError):
+            fundamental_data(1, 0.5, methods=(), mc_steps=0, serial=True, **bad)

@@ -170,3 +170,24 @@ def test_ctrl_c_while_numba_compiles_the_kernels(tmp_path, delay):
     # there or not yet, depending on how far the start got
     shutil.rmtree(cache, ignore_errors=True)
     _check(proc, err, tmp_path, scratch)
+
+
+# the checkout under test, not whichever copy of the package is installed
+_HERE = {"PYTHONPATH": os.path.dirname(os.path.dirname(os.path.abspath(__file__)))}
+
+
+@pytest.mark.parametrize("delay", [1.5, 4.0])   # while numba loads / while the spectra run
+def test_ctrl_c_during_plot_relaxation(tmp_path, delay):
+    # L = 14 at three p takes well over 10 s here: every delay lands in the work
+    proc, _, err, scratch = _interrupt(["plot", "relaxation", "-L", "14", "--p", "0.25,0.5,0.75",
+                                        "-o", "tau.png"], tmp_path, None, delay, _HERE)
+    _check(proc, err, tmp_path, scratch)
+
+
+def test_ctrl_c_during_plot_fundamental(tmp_path):
+    # the stages are announced first; the interrupt lands in the curves or the rings
+    proc, _, err, scratch = _interrupt(["plot", "fundamental", "--p", "0.5", "--methods", "comf",
+                                        "--serial", "-o", "fig.png"], tmp_path, None, 4.0, _HERE)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "interrupted", err
+    assert sorted(os.listdir(tmp_path)) == ["tmp"] and os.listdir(scratch) == []

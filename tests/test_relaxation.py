@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 
 import numpy as np
 import pytest
@@ -61,8 +62,9 @@ def test_curves_sector_zero_is_never_slower():
     for curve in d["curves"]:
         for tau, tau0 in zip(curve["tau"], curve["tau_sector0"]):
             assert tau0 <= tau + 1e-12
-    with pytest.raises(InvalidParameterError):
-        relaxation_curves(7, [1.0])
+    for values, vary in (([1.5], "p"), ([0.5], "vmax"), ([0.5], "a"), ([], "p")):
+        with pytest.raises(InvalidParameterError):
+            relaxation_curves(7, values, vary=vary)
 
 
 def test_spectrum_cli_one_car_json():
@@ -122,10 +124,10 @@ def test_plot_relaxation(tmp_path):
     assert out.read_bytes()[:4] == b"\x89PNG"
     bad = run("plot", "relaxation", "-L", "5", "-o", str(tmp_path / "no" / "tau.png"))
     assert bad.exit_code == 2 and "tau.png" in bad.output
-    bad = run("plot", "relaxation", "-L", "5", "--p", "1", "-o", str(out))
-    assert bad.exit_code == 2
+    bad = run("plot", "relaxation", "-L", "5", "--p", "1", "-o", str(out))   # every tau infinite
+    assert bad.exit_code == 2 and "no finite relaxation time" in bad.output
     bad = run("plot", "relaxation", "-L", "5", "--model", "kkw", "-o", str(out))
-    assert bad.exit_code == 2 and "no parameter p" in bad.output
+    assert bad.exit_code == 2 and "no parameter p" in bad.output and "a, b" in bad.output
 
 
 def test_curves_of_another_model_and_update():
@@ -139,3 +141,102 @@ def test_curves_of_another_model_and_update():
     direct = relaxation_spectrum(Ring(6, 2, update="random-sequential",
                                       model=m.with_params(p=0.2)), count=1)
     assert d["curves"][0]["tau"][0] == pytest.approx(direct.relaxation_time, rel=1e-12)
+
+
+def test_curves_vary_any_probability_parameter_kkw(tmp_path):
+    """Issue 23, item 6: kkw has no p; --vary a draws it, the titles name every value."""
+    from markov.model.load import load_model
+    from nasch.plot import relaxation_figure
+
+    kkw = load_model("kkw", {"vmax": 2})
+    d = relaxation_curves(6, [0.1, 0.3], model=kkw, vary="a", cars=[2, 3])
+    assert d["vary"] == "a" and [c["value"] for c in d["curves"]] == [0.1, 0.3]
+    assert d["fixed"] == {"vmax": 2, "d": 1, "k": 1, "b": 0.2}
+    direct = relaxation_spectrum(Ring(6, 3, model=kkw.with_params(a=0.3)), count=1)
+    assert d["curves"][1]["tau"][1] == pytest.approx(direct.relaxation_time, rel=1e-12)
+    assert d["curves"][0]["tau"] != d["curves"][1]["tau"]
+    spectrum = relaxation_spectrum(Ring(6, 3, model=kkw.with_params(a=0.1)), count=2)
+    fig = relaxation_figure(d, spectrum)
+    left, right = fig.axes[0].get_title(), fig.axes[1].get_title()
+    assert "kkw (vmax = 2, d = 1, k = 1, b = 0.2)" in left and "at a = 0.1" in right
+    assert "a = 0.3, all sectors" in fig.axes[0].get_legend_handles_labels()[1]
+    out = tmp_path / "kkw.png"
+    res = run("plot", "relaxation", "-L", "6", "--model", "kkw", "--vmax", "2", "--vary", "a",
+              "--values", "0.1,0.2,0.3", "--count", "2", "-o", str(out))
+    assert res.exit_code == 0, res.output
+    assert out.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_reducible_rings_are_left_out_with_a_note(tmp_path):
+    """Issue 23, item 1: TT at p = 0 has several closed classes at N = 2, 3 of L = 8."""
+    from markov.errors import NoUniqueStationaryStateError
+    from markov.model.load import load_model
+    from nasch.plot import relaxation_figure
+    from nasch.relaxation import relaxation_notes
+
+    tt = load_model("tt")
+    d = relaxation_curves(8, [0.0, 0.5], model=tt)
+    zero, half = d["curves"]
+    assert zero["left_out"] == [2, 3] and half["left_out"] == []
+    assert all(math.isnan(zero["tau"][n - 1]) for n in (2, 3))
+    assert all(math.isfinite(t) for t in half["tau"])
+    notes = relaxation_notes(d)
+    assert len(notes) == 1 and notes[0].startswith("p = 0: N = 2..3 of L = 8 left out")
+    assert notes[0] in relaxation_figure(d, notes=notes).legends[0].get_title().get_text()
+    with pytest.raises(NoUniqueStationaryStateError, match="no ring"):
+        relaxation_curves(8, [0.0], model=tt, cars=[2, 3])
+    out = tmp_path / "tt.png"
+    res = run("plot", "relaxation", "-L", "8", "--model", "tt", "--p", "0,0.5",
+              "--spectrum-cars", "2", "-o", str(out))
+    assert res.exit_code == 0, res.output
+    assert f"note: {notes[0]}" in res.output and out.exists()
+
+
+def test_plot_relaxation_refuses_when_every_ring_is_left_out(tmp_path, monkeypatch):
+    from markov.errors import NoUniqueStationaryStateError
+
+    def reducible(ring, **kwargs):
+        raise NoUniqueStationaryStateError("several closed classes")
+
+    monkeypatch.setattr("markov.analysis.spectrum.relaxation_spectrum", reducible)
+    res = run("plot", "relaxation", "-L", "5", "--p", "0.5", "-o", str(tmp_path / "t.png"))
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert "no ring of nasch at L = 5" in res.output
+    assert not (tmp_path / "t.png").exists()
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--values", "nan"], "got nan"), (["--values", "inf"], "got inf"),
+    (["--p", "-0.1"], "got -0.1"), (["--values", "1e300"], "got 1e+300"),
+    (["--values", ","], "must not be empty"), (["--values", "0.1,x"], "comma-separated"),
+    (["--values", "0.1,0.1"], "twice"), (["--values", ",".join(["0.5"] * 11)], "at most 10"),
+    (["--vary", "vmax", "--values", "2"], "integer, not a probability"),
+    (["--model", "kkw", "--vary", "k", "--values", "1"], "probability parameters: a, b"),
+    (["--vary", "zz"], "no parameter zz"), (["--vary", " "], "--vary needs"),
+    (["--p", ""], "--p must not be empty"),
+    (["--p", "0.5", "--vary", "p"], "not both"),
+    (["--param", "p=0.5"], "--param p=... sets the parameter"),
+    (["--model", "kkw", "--vary", "a", "--values", "0.9"], "a + b must be <= 1"),
+    (["--vmax", "6"], "--vmax"), (["-L", "17"], "--length"), (["--count", "0"], "--count"),
+    (["--spectrum-cars", "-1"], "--spectrum-cars"),
+    (["-o", "missing/t.png"], "does not exist"), (["-o", "t.svg"], ".png or .pdf"),
+])
+def test_plot_relaxation_bad_input_one_line_before_work(args, words, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr("markov.analysis.spectrum.relaxation_spectrum",
+                        lambda *a, **k: pytest.fail("work started"))
+    res = run("plot", "relaxation", "-L", "6", *args, *(["-o", "t.png"] if "-o" not in args
+                                                        else []))
+    assert res.exit_code == 2, res.output
+    assert words in res.output and res.output.count("\n") == 1, res.output
+    assert os.listdir(tmp_path) == []
+
+
+def test_plot_relaxation_shows_progress_when_forced_on(tmp_path, monkeypatch):
+    from markov import progress
+    monkeypatch.setattr(progress, "progress_enabled", lambda: True)
+    res = run("plot", "relaxation", "-L", "5", "--vmax", "1", "--p", "0.3,0.6", "--count", "1",
+              "-o", str(tmp_path / "t.png"))
+    assert res.exit_code == 0, res.output
+    assert "relaxation, p = 0.3" in res.output and "relaxation, p = 0.6" in res.output
+    assert "spectrum" in res.output   # the panel's ring, sector by sector

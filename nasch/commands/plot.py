@@ -1,6 +1,8 @@
 """``nasch plot``: figures."""
 from __future__ import annotations
 
+import math
+
 import click
 
 from markov.errors import InvalidParameterError
@@ -35,9 +37,11 @@ def plot():
               help="Candidate rings of the L -> infinity extrapolation [chosen per density"
                    " by --budget].")
 @click.option("--budget", "budget_text", default=None,
-              help="Time for the exact rings of each extrapolated density, e.g. 30s: the"
-                   " largest rings that fit it and 75% of the memory, named on stderr"
-                   " (instead of --extrapolation-lengths) [10s, as in table and study].")
+              help="Time for the whole command, e.g. 30s: every stage is predicted first"
+                   " (refused at once if they exceed it), and what the curves, Monte Carlo,"
+                   " --lengths and drawing leave goes to the largest extrapolation rings"
+                   " that fit, evenly per density (instead of --extrapolation-lengths)"
+                   " [none: 10 s of rings per density, as in table and study].")
 @click.option("--mc-length", type=int, default=3000, show_default=True,
               help="Monte Carlo ring length.")
 @click.option("--mc-steps", type=int, default=2000, show_default=True,
@@ -57,7 +61,9 @@ def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc
                 methods_text, output, serial, scheduler):
     """Fundamental diagram (the paper's Fig. 2): approximations, Monte Carlo, exact rings.
 
-    Rings too large for the exact solver are left out with a warning.
+    Before the work one line on stderr predicts each stage (one core); on a
+    terminal every stage shows a progress bar.  Rings too large for the exact
+    solver are left out with a warning.
 
     \b
     Example:
@@ -66,12 +72,15 @@ def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc
       nasch plot fundamental --vmax 2 --p 0.5 --budget 20s --output fig.png
       nasch plot fundamental --p 0.5 --methods pmf,mf,cluster2,cluster4,comf -o fig.png
     """
+    import time
+
     from symbolic import method_name
 
-    from ..budget import parse_budget
+    from ..budget import STARTUP_SECONDS, parse_budget
     from markov.files import check_output_path
     from ..plot import FIGURE_FORMATS, fundamental_data, fundamental_figure, save_figure
 
+    started = time.perf_counter() - STARTUP_SECONDS   # the budget counts the whole command
     check_output_path(output, suffixes=FIGURE_FORMATS)   # before the work
     if budget_text is not None and ext_text is not None:
         raise InvalidParameterError("give either --extrapolation-lengths or --budget, not both")
@@ -88,7 +97,7 @@ def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc
             extrapolation_lengths=(None if ext_text is None
                                    else number_list("--extrapolation-lengths", ext_text, int)),
             mc_length=mc_length, mc_steps=mc_steps, seed=seed, budget=budget, methods=methods,
-            serial=True if serial else None, scheduler=scheduler)
+            serial=True if serial else None, scheduler=scheduler, started=started)
     for w in caught:
         click.echo(f"warning: {w.message}", err=True)
     save_figure(fundamental_figure(panels), output)
@@ -224,62 +233,123 @@ def models(models_text, vmax, params, update, length, densities, steps, replicas
     click.echo(f"wrote {output}", err=True)
 
 
+#: Most curves of ``plot relaxation`` (one colour each, ten colours).
+MAX_RELAXATION_CURVES = 10
+
+
 @plot.command(short_help="Exact relaxation time against density, and a spectrum.")
 @click.option("--length", "-L", type=int, default=12, show_default=True,
-              help="Ring length of the tau(c) curves.")
+              help="Ring length of the tau(c) curves (3..16).")
 @model_options
-@click.option("--vmax", type=int, default=2, show_default=True, help="Maximal velocity.")
-@click.option("--p", "p_text", default="0.25,0.5,0.75", show_default=True,
-              help="Values of the model's p (NaSch: braking probability), one curve each.")
+@click.option("--vmax", type=int, default=None,
+              help="Maximal velocity, 1..5 [the model's default; nasch: 2].")
+@click.option("--vary", "vary", default=None,
+              help="The probability parameter the curves vary: any of the model's (nasch: p;"
+                   " vdr: p, p0; kkw: a, b; docs/models.md) [p].")
+@click.option("--values", "values_text", default=None,
+              help="Values of --vary, comma-separated, one curve each (at most 10)"
+                   " [0.25,0.5,0.75].")
+@click.option("--p", "p_text", default=None,
+              help="Shorthand for --vary p --values LIST.")
 @click.option("--update", type=click.Choice(_UPDATES), default="parallel", show_default=True,
               help="Update order.")
 @click.option("--spectrum-cars", type=int, default=None,
               help="Cars of the ring whose spectrum is drawn (default L/2; 0: no panel).")
 @click.option("--count", type=int, default=6, show_default=True,
-              help="Eigenvalues per sector in the spectrum panel.")
+              help="Eigenvalues per sector in the spectrum panel (1..50).")
 @click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
               help="Figure file, .png or .pdf.")
 @quiet_option
 @handle_errors
-def relaxation(length, model, params, vmax, p_text, update, spectrum_cars, count, output):
-    """Relaxation time tau = -1/ln|lambda_2| against density, exactly, for several p.
+def relaxation(length, model, params, vmax, vary, values_text, p_text, update, spectrum_cars,
+               count, output):
+    """Relaxation time tau = -1/ln|lambda_2| against density, exactly, for several values
+    of one probability parameter.
 
-    Left: per p over N = 1..L-1 on a ring of L cells (any model with a
-    parameter p, --model; NaSch by default), the slowest
-    eigenvalue of all sectors (solid; usually k = 1, a density wave drifting
-    round the ring) and of sector 0 alone (dashed: what the flux and other
+    Left: per value of --vary (any probability parameter of --model; NaSch's p
+    by default) over N = 1..L-1 on a ring of L cells, the slowest eigenvalue
+    of all sectors (solid; usually k = 1, a density wave drifting round the
+    ring) and of sector 0 alone (dashed: what the flux and other
     translation-invariant observables see from a translation-invariant start,
-    as in the Monte Carlo relaxation-time curves of the literature).  Right: the leading eigenvalues of every momentum sector of
-    the ring with --spectrum-cars cars at the first p, in the complex plane.
+    as in the Monte Carlo relaxation-time curves of the literature).  Right:
+    the leading eigenvalues of every momentum sector of the ring with
+    --spectrum-cars cars at the first value, in the complex plane (its title
+    names the value).  The other parameters keep the model's defaults unless
+    given with --param; the titles list them all.  A ring whose chain has
+    several closed classes (e.g. TT at p = 0) is left out, and one with
+    |lambda_2| = 1 (NaSch at p = 0) has no finite tau: both are named in a
+    note on stderr and in the figure.
 
     \b
     Example:
       nasch plot relaxation -L 12 --vmax 2 --p 0.25,0.5,0.75 --output tau.png
       nasch plot relaxation -L 10 --model vdr --param p0=0.75 --p 0.1,0.3 -o vdr.png
+      nasch plot relaxation -L 10 --model kkw --vary a --values 0.1,0.2,0.3 -o kkw.png
     """
     from markov.files import check_output_path
     from markov.model.ring import Ring
-    from markov.analysis.spectrum import relaxation_spectrum
-    from markov.validate import ensure_int
+    from markov.validate import ensure_int, ensure_real
 
+    from ..model_options import build_model, param_names
     from ..plot import FIGURE_FORMATS, relaxation_figure, save_figure
-    from ..relaxation import relaxation_curves
+    from ..relaxation import probability_parameter, relaxation_curves, relaxation_notes
 
     check_output_path(output, suffixes=FIGURE_FORMATS)   # before the work
     length = ensure_int("--length", length, 3, 16)
-    vmax = ensure_int("--vmax", vmax, 1, 5)
-    ps = number_list("--p", p_text)
-    for p in ps:
-        if not 0 < p < 1:
-            raise InvalidParameterError(f"--p values must lie strictly between 0 and 1, got {p}")
+    if vmax is not None:
+        vmax = ensure_int("--vmax", vmax, 1, 5)
+    if p_text is not None:
+        if vary is not None or values_text is not None:
+            raise InvalidParameterError("give either --p LIST or --vary NAME --values LIST,"
+                                        " not both")
+        vary, values_text, option = "p", p_text, "--p"
+    else:
+        option = "--values"
+    if vary is not None and not vary.strip():
+        raise InvalidParameterError("--vary needs the name of a probability parameter")
+    vary_defaulted = vary is None
+    vary = "p" if vary is None else vary.strip()
+    if vary in param_names(params):
+        raise InvalidParameterError(f"--param {vary}=... sets the parameter the curves vary;"
+                                    f" give its values with {option}")
     count = ensure_int("--count", count, 1, 50)
     cars = length // 2 if spectrum_cars is None else ensure_int("--spectrum-cars",
                                                                 spectrum_cars, 0, length - 1)
-    from ..model_options import build_model
-
     m = build_model(model, params, vmax=vmax)
-    data = relaxation_curves(length, ps, model=m, update=update)   # checks m has a p first
-    spec = relaxation_spectrum(Ring(length, cars, update=update, model=m.with_params(p=ps[0])),
-                               count=count) if cars else None
-    save_figure(relaxation_figure(data, spec), output)
+    if m.vmax > 5:
+        raise InvalidParameterError(f"--vmax must be at most 5 here, got {m.name}'s"
+                                    f" vmax = {m.vmax}")
+    if vary_defaulted and "p" not in m.params:
+        names = ", ".join(m.spec.probability_parameters()) or "none"
+        raise InvalidParameterError(f"rule {m.name} has no parameter p to vary; choose one of"
+                                    f" its probability parameters ({names}) with --vary NAME"
+                                    " --values LIST")
+    probability_parameter(m, vary)
+    values = number_list(option, "0.25,0.5,0.75" if values_text is None else values_text)
+    values = [ensure_real(f"every {option} value", v, 0, 1) for v in values]
+    if len(values) > MAX_RELAXATION_CURVES:
+        raise InvalidParameterError(f"{option} takes at most {MAX_RELAXATION_CURVES} values"
+                                    f" (one curve each), got {len(values)}")
+    if len(set(values)) < len(values):
+        raise InvalidParameterError(f"{option} names a value twice: {values_text}")
+    data = relaxation_curves(length, values, model=m, update=update, vary=vary)
+    notes = relaxation_notes(data)
+    if not any(math.isfinite(t) for c in data["curves"] for t in c["tau"]):
+        raise InvalidParameterError("no finite relaxation time to draw: " + "; ".join(notes))
+    spec = None
+    if cars:
+        # the first value at which the spectrum's ring has one stationary state
+        shown = [c["value"] for c in data["curves"] if cars not in c["left_out"]]
+        if shown:
+            from markov.analysis.spectrum import relaxation_spectrum
+
+            spec = relaxation_spectrum(Ring(length, cars, update=update,
+                                            model=m.with_params(**{vary: shown[0]})),
+                                       count=count)
+        else:
+            notes.append(f"no spectrum panel: the ring N = {cars} has several closed classes"
+                         f" at every value of {vary}")
+    for line in notes:
+        click.echo(f"note: {line}", err=True)
+    save_figure(relaxation_figure(data, spec, notes=notes), output)
     click.echo(f"wrote {output}", err=True)
