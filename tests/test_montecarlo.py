@@ -125,10 +125,12 @@ def test_replicas_combine_and_first_replica_is_the_plain_run():
     ring = Ring(300, 90, 2, 0.5)
     one = simulate(ring, steps=320, seed=9, warmup=0)  # 320 blocks of one step, none cut
     three = simulate(ring, steps=320, seed=9, warmup=0, replicas=3)
-    assert np.array_equal(three.batch_fluxes[:one.batches], one.batch_fluxes)
+    assert np.array_equal(three.batch_fluxes[0], one.batch_fluxes[0])
     assert three.flux == pytest.approx(np.mean(three.batch_fluxes))
     assert three.measured_steps == 3 * 320
-    spread = np.std(three.batch_fluxes.reshape(3, -1).mean(axis=1), ddof=1) / math.sqrt(3)
+    # 320 steps are far from relaxed on L = 300: the replicas' spread bounds the error
+    assert not three.relaxed
+    spread = np.std(three.batch_fluxes.mean(axis=1), ddof=1) / math.sqrt(3)
     assert three.flux_error >= spread - 1e-15
 
 
