@@ -99,8 +99,8 @@ __all__ = ["SimulationResult", "simulate", "evolve", "trajectory", "initial_conf
            "mser_truncation", "integrated_autocorrelation_time", "analyse_series",
            "simulation_bytes", "ensure_simulation_fits", "DEFAULT_BATCHES", "MIN_STEPS",
            "STARTS", "DEFAULT_START", "blocking_curve", "long_range_error", "start_bias",
-           "estimate_flux", "FluxEstimate", "block_edges", "relaxed_run", "stationary_start_known",
-           "resolve_start"]
+           "estimate_flux", "estimate_run", "FluxEstimate", "block_edges", "relaxed_run",
+           "stationary_start_known", "resolve_start", "stationary_flux"]
 
 #: Blocks of the recorded flux series of a run (fewer when a run has fewer steps).
 DEFAULT_BATCHES = 1024
@@ -129,8 +129,9 @@ KPZ_BLOCKING_SLOPE = 1 / 6
 #: The bias of a non-stationary start is taken to decay like ``t^-START_BIAS_DECAY``
 #: (measured 0.55-0.7 over four decades on L = 10^4, vmax = 1: slower is safer).
 START_BIAS_DECAY = 0.5
-#: ... fitted from this step on: the first steps (cars accelerating, the start's jams
-#: dissolving) are faster than the tail.
+#: ... fitted from this step on, or from half the discarded warm-up if that is later:
+#: the first steps (cars accelerating, the start's jams dissolving) are faster than
+#: the tail (local exponent 0.8-0.9 on L = 10^4, vmax = 2).
 START_BIAS_FROM = 8
 #: Largest memory of the per-block velocity histograms (bytes).
 _SNAPSHOT_BYTES = 64 * 2**20
@@ -543,13 +544,11 @@ def start_bias(fluxes, lengths, kept_from: int, offset: int = 0,
     under the noise of its blocks yet above its error bar on a big ring
     (issue 23: a random start on L = 10^4 covered the exact flux 14-49 % at
     1 sigma).  The early transient, strong and well measured, fixes the
-    amplitude: the block fluxes ``y`` of the whole run (warm-up blocks
-    included, ``offset`` steps before the first) from step
-    :data:`START_BIAS_FROM` on are fitted by least squares (weighted by the
-    block lengths) to ``f + A x`` with ``x`` the block's mean of ``t^-decay``, and
-    the bias of the kept blocks is bounded by ``|A|`` times their mean
-    ``x``.  ``decay`` = 1/2 lies below the measured 0.55-0.7, so the tail
-    is over- rather than under-estimated (``benchmarks/mc_coverage.py``).
+    amplitude (:func:`_transient_fit`, from step :data:`START_BIAS_FROM` or
+    half the discarded blocks, whichever is later), and the bias of the kept
+    blocks is bounded by ``|A|`` times their mean ``x``.  ``decay`` = 1/2 lies below
+    the measured 0.55-0.7, so the tail is over- rather than under-estimated
+    (``benchmarks/mc_coverage.py``).
 
     Parameters
     ----------
@@ -576,22 +575,36 @@ def start_bias(fluxes, lengths, kept_from: int, offset: int = 0,
     >>> bool(true < bound < 3 * true)
     True
     """
+    w = np.asarray(lengths, dtype=float)
+    if kept_from >= len(w):
+        return 0.0
+    amplitude, x = _transient_fit(fluxes, w, offset, decay,
+                                  (offset + float(w[:kept_from].sum())) / 2)
+    kept = slice(kept_from, None)
+    return abs(amplitude) * float(np.dot(x[kept], w[kept]) / w[kept].sum())
+
+
+def _transient_fit(fluxes, lengths, offset: int = 0, decay: float = START_BIAS_DECAY,
+                   fit_from: float = 0.0) -> tuple[float, np.ndarray]:
+    """``A`` of the least-squares fit ``f + A x`` to the block fluxes, and ``x`` per block.
+
+    ``x`` is the block's mean of ``t^-decay`` over its steps (``offset``
+    steps before the first block); only blocks from step ``fit_from`` (at
+    least :data:`START_BIAS_FROM`) on enter the fit, weighted by their
+    lengths.  ``A`` is 0 with fewer than three such blocks.
+    """
     y = np.asarray(fluxes, dtype=float)
     w = np.asarray(lengths, dtype=float)
-    if len(y) < 3 or kept_from >= len(y):
-        return 0.0
     edges = offset + np.concatenate(([0.0], np.cumsum(w)))
     # block mean of t^-decay over steps t = e + 1 .. e', by the integral from e + 1/2
     lo, hi = edges[:-1] + 0.5, edges[1:] + 0.5
     x = (hi ** (1 - decay) - lo ** (1 - decay)) / ((1 - decay) * (hi - lo))
-    fit = edges[:-1] >= START_BIAS_FROM
+    fit = edges[:-1] >= max(START_BIAS_FROM, fit_from)
     if fit.sum() < 3:
-        return 0.0
+        return 0.0, x
     sw = np.sqrt(w[fit])
     design = np.vstack([np.ones(int(fit.sum())), x[fit]]).T * sw[:, None]
-    amplitude = float(np.linalg.lstsq(design, y[fit] * sw, rcond=None)[0][1])
-    kept = slice(kept_from, None)
-    return abs(amplitude) * float(np.dot(x[kept], w[kept]) / w[kept].sum())
+    return float(np.linalg.lstsq(design, y[fit] * sw, rcond=None)[0][1]), x
 
 
 def stationary_start_known(ring: Ring) -> bool:
@@ -699,19 +712,67 @@ def initial_configuration(ring: Ring, seed: int, start: str = DEFAULT_START
     return pos, np.minimum(gap, ring.vmax).astype(np.int64)
 
 
+def _block_count_weights(n: int, length: int, p: float) -> tuple[np.ndarray, np.ndarray]:
+    """``m = 1 .. min(N, L - N)`` and the stationary probability of ``m`` blocks of cars
+    (NaSch, ``vmax = 1``, parallel; :func:`initial_configuration`), ``0 < N < L``."""
+    from scipy.special import gammaln
+
+    m = np.arange(1, min(n, length - n) + 1)
+    # log of p^-m (L/m) C(N-1, m-1) C(L-N-1, m-1), the constant log L left out; the
+    # terms overflow floats on long rings
+    logw = (-m * math.log(p) - np.log(m) - gammaln(m) * 2 - gammaln(n - m + 1)
+            - gammaln(length - n - m + 1))
+    w = np.exp(logw - logw.max())
+    return m, w / w.sum()
+
+
+def stationary_flux(ring: Ring) -> float:
+    """The exact flux of the finite ring where the stationary state is known in closed form.
+
+    NaSch, ``vmax = 1``, parallel update (:func:`stationary_start_known`):
+    the front car of each of the ``m`` blocks of cars moves with ``q = 1 -
+    p``, so ``f = q E[m] / L`` under the block-count weights of
+    :func:`initial_configuration` (Evans, Rajewsky and Speer 1999; the
+    references of the study, ``benchmarks/mc_coverage.py``, and checked
+    against the exact chain in ``tests/test_montecarlo.py``).
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    InvalidParameterError
+        Where the closed form does not apply.
+
+    Examples
+    --------
+    Half filling: ``(1 - sqrt(1 - q)) / 2`` on the infinite ring, approached like ``1/L``:
+
+    >>> round(stationary_flux(Ring(10**5, 5 * 10**4, 1, 0.5)), 6)
+    0.146448
+    >>> round((1 - math.sqrt(0.5)) / 2, 6)
+    0.146447
+    """
+    resolve_start(ring, "stationary")
+    n, length = int(ring.cars), int(ring.length)
+    if n in (0, length):
+        return 0.0
+    m, w = _block_count_weights(n, length, float(ring.p))
+    return (1 - float(ring.p)) * float(np.dot(m, w)) / length
+
+
 def _vmax1_stationary(n: int, length: int, p: float, rng) -> tuple[np.ndarray, np.ndarray]:
     """A draw from the stationary state of NaSch, ``vmax = 1``, parallel (see
     :func:`initial_configuration`)."""
     if n == 0 or n == length:
         return np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
-    from scipy.special import gammaln
-
-    m = np.arange(1, min(n, length - n) + 1)
-    # log of p^-m (L/m) C(N-1, m-1) C(L-N-1, m-1), the constant log L left out
-    logw = (-m * math.log(p) - np.log(m) - gammaln(m) * 2 - gammaln(n - m + 1)
-            - gammaln(length - n - m + 1))
-    w = np.exp(logw - logw.max())
-    blocks = int(rng.choice(m, p=w / w.sum()))
+    m, w = _block_count_weights(n, length, p)
+    blocks = int(rng.choice(m, p=w))
 
     def composition(total: int) -> np.ndarray:
         # uniform over the C(total - 1, blocks - 1) ways to write total as blocks positive parts
@@ -753,16 +814,22 @@ def _ensure_configuration(ring: Ring, positions, velocities) -> tuple[np.ndarray
     return np.ascontiguousarray(pos), np.ascontiguousarray(vel)
 
 
-def _ensure_steps(name: str, value, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise InvalidParameterError(f"{name} must be an integer >= {minimum}, got {value!r}")
+# step counts beyond 2**53 are not exact in the float arithmetic of the blocks (and
+# would run for millennia); replicas beyond this hold more block series than is sane
+_MAX_STEPS = 2**53
+_MAX_REPLICAS = 10_000
+
+
+def _ensure_steps(name: str, value, minimum: int, maximum: int = _MAX_STEPS) -> int:
+    if (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum
+            or value > maximum):
+        raise InvalidParameterError(
+            f"{name} must be an integer in [{minimum}, {maximum}], got {value!r}")
     return int(value)
 
 
 def _rng_state(seed: int) -> np.ndarray:
-    seed = _ensure_steps("seed", seed, 0)
-    if seed >= 2**64:
-        raise InvalidParameterError(f"seed must be below 2**64, got {seed}")
+    seed = _ensure_steps("seed", seed, 0, 2**64 - 1)
     state = np.empty(4, dtype=np.uint64)
     _seed_state(np.uint64(seed), state)
     return state
@@ -983,9 +1050,10 @@ def analyse_series(series, weights=None, truncate: bool = True, relaxed: bool = 
        not ``relaxed`` (shorter than :data:`RELAXED_RUN` ``L^(3/2)`` steps)
        has correlations as long as itself: the error is at least
        :func:`long_range_error` with the KPZ slope as the least slope.
-       With ``transient`` the start is not stationary and
-       :func:`start_bias` (fitted on the transient and the series) enters
-       in quadrature.
+       With ``transient`` the start is not stationary: its relaxation is
+       fitted on the transient and the series (:func:`start_bias`), the
+       noise is measured around the fit, and the bias bound enters in
+       quadrature.
     3. The bar is flagged (``reasons`` non-empty) when the kept series holds
        fewer than :data:`MIN_TAU_MULTIPLE` autocorrelation times or the
        window did not converge (then ``tau`` itself is too uncertain), when
@@ -1030,6 +1098,17 @@ def analyse_series(series, weights=None, truncate: bool = True, relaxed: bool = 
         reasons.append("the transient may last beyond half the run (MSER cut at the limit)")
     z, wz = y[cut:], w[cut:]
     mean = float(np.dot(z, wz) / wz.sum())
+    bias = 0.0
+    if transient is not None:
+        before_y, before_w = (np.asarray(x, dtype=float) for x in transient)
+        # the discarded steps' first half is the fast transient, not the tail
+        discarded = float(before_w.sum() + w[:cut].sum())
+        amplitude, x = _transient_fit(np.concatenate((before_y, y)),
+                                      np.concatenate((before_w, w)), fit_from=discarded / 2)
+        x = x[len(before_y) + cut:]
+        bias = abs(amplitude) * float(np.dot(x, wz) / wz.sum())
+        # the noise is judged around the fitted relaxation, which the bias term carries
+        z = z - amplitude * x
     tau, _, converged = integrated_autocorrelation_time(z)
     k = len(z)
     var = float(np.var(z, ddof=1)) if k > 1 else 0.0
@@ -1043,12 +1122,7 @@ def analyse_series(series, weights=None, truncate: bool = True, relaxed: bool = 
     if not relaxed and var > 0:
         extrapolated, slope = long_range_error(z, min_slope=KPZ_BLOCKING_SLOPE)
         error = max(error, extrapolated)
-    bias = 0.0
-    if transient is not None:
-        before_y, before_w = (np.asarray(x, dtype=float) for x in transient)
-        bias = start_bias(np.concatenate((before_y, y)), np.concatenate((before_w, w)),
-                          len(before_y) + cut)
-        error = math.hypot(error, bias)
+    error = math.hypot(error, bias)
     if not converged or k < MIN_TAU_MULTIPLE * tau:
         reasons.append(f"too short: {k} kept blocks are {k / tau:.0f} autocorrelation times"
                        f" (tau = {tau:.1f} blocks; at least {MIN_TAU_MULTIPLE} needed)")
@@ -1315,6 +1389,46 @@ def estimate_flux(series, sizes, truncate: bool = True, relaxed: bool = True,
                         tuple(int(k) for k in kept))
 
 
+def estimate_run(ring: Ring, series, sizes, start: str, warmup: int | None = None,
+                 transients=None, deterministic_from=None) -> FluxEstimate:
+    """:func:`estimate_flux` with the choices :func:`simulate` makes for a run of ``ring``.
+
+    No MSER cut after an explicit warm-up or from a stationary start; the
+    long-range extrapolation unless the run (warm-up included) is relaxed
+    (:func:`relaxed_run`); the start-bias term unless the start is
+    stationary or the run relaxed.  A study that recorded every step of a
+    long run regroups a prefix into :func:`block_edges` blocks and gets
+    exactly what :func:`simulate` of the shorter run gives (same seed).
+
+    Parameters
+    ----------
+    ring : Ring
+    series : (replicas, blocks) array of float
+    sizes : (blocks,) array of int
+    start : str
+        The start used (``SimulationResult.start``).
+    warmup : int, optional
+        None: automatic warm-up; else the steps run before the series.
+    transients : sequence of (fluxes, lengths), optional
+        The warm-up blocks per replica (default: none recorded, i.e. the
+        automatic warm-up's empty ones).
+    deterministic_from : sequence of int, optional
+        As for :func:`estimate_flux`.
+
+    Returns
+    -------
+    FluxEstimate
+    """
+    series = np.atleast_2d(np.asarray(series, dtype=float))
+    stationary = start == "stationary"
+    relaxed = relaxed_run(ring, (warmup or 0) + int(np.sum(sizes)))
+    if transients is None:
+        transients = [(np.zeros(0), np.zeros(0, dtype=np.int64))] * len(series)
+    return estimate_flux(series, sizes, truncate=warmup is None and not stationary,
+                         relaxed=relaxed, transients=None if stationary or relaxed else transients,
+                         deterministic_from=deterministic_from, update=ring.update)
+
+
 def _frozen_reason(step: int, update: str) -> str:
     if update == PARALLEL:
         return (f"deterministic from step {step} on: no car's update was random after it, the"
@@ -1419,7 +1533,7 @@ def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
     """
     steps = _ensure_steps("steps", steps, 1)
     batches = _ensure_steps("batches", batches, 2)
-    replicas = _ensure_steps("replicas", replicas, 1)
+    replicas = _ensure_steps("replicas", replicas, 1, _MAX_REPLICAS)
     start = resolve_start(ring, start)
     if initial is not None and replicas > 1:
         raise InvalidParameterError("an initial configuration allows only replicas = 1")
@@ -1476,9 +1590,8 @@ def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
         snapshots.append(snaps)
     bar.close()
     seconds = time.perf_counter() - start_time
-    est = estimate_flux(all_blocks, sizes, truncate=auto and not stationary, relaxed=relaxed,
-                        transients=None if stationary or relaxed else transients,
-                        deterministic_from=frozen, update=ring.update)
+    est = estimate_run(ring, all_blocks, sizes, start, None if auto else warmup, transients,
+                       frozen)
     flux, error, reasons = est.flux, est.error, list(est.reasons)
     static = _deterministic(ring)
     if ring.cars in (0, ring.length):
