@@ -836,7 +836,7 @@ def _rng_state(seed: int) -> np.ndarray:
 
 
 def _advance(ring: Ring, rule: tuple, pos, vel, steps: int, rng, counts, draws=None) -> int:
-    """Run ``steps`` time steps with ``rule = (horizon, cum, new_velocity)``; return the distance moved.
+    """Run ``steps`` time steps with ``rule = (horizon, cum, new_velocity)``; return the distance.
 
     ``draws[0]`` (when given) grows by the updates from a row with a random outcome.
     """
@@ -1320,7 +1320,10 @@ def estimate_flux(series, sizes, truncate: bool = True, relaxed: bool = True,
 
     Each replica is analysed by :func:`analyse_series`; the flux is the mean
     of the kept blocks of all replicas weighted by their lengths, the error
-    the combined one; in a run that is not ``relaxed`` it is at least the
+    the combined noise (independent replicas) and, added in quadrature, the
+    weighted mean of their start-bias terms (common to replicas from the same
+    kind of start, so it does not average out); in a run that is not
+    ``relaxed`` it is at least the
     standard error of the replica means (which sees correlations longer than
     one run).  Replicas whose means scatter beyond their bars (chi-square at
     :data:`DISAGREEMENT_LEVEL`) flag the result.  :func:`simulate` calls
@@ -1377,8 +1380,13 @@ def estimate_flux(series, sizes, truncate: bool = True, relaxed: bool = True,
     kept = np.array([sizes[a.cut:].sum() for a in analyses], dtype=float)
     means = np.array([a.mean for a in analyses])
     errs = np.array([a.error for a in analyses])
+    bias = np.array([a.bias for a in analyses])
     flux = float(np.dot(kept, means) / kept.sum())
-    error = float(math.sqrt(np.dot(kept ** 2, errs ** 2)) / kept.sum())
+    # the noise of the replicas averages out, their start bias (same start, same
+    # relaxation) does not
+    noise = np.sqrt(np.maximum(errs ** 2 - bias ** 2, 0.0))
+    error = math.hypot(math.sqrt(np.dot(kept ** 2, noise ** 2)) / kept.sum(),
+                       float(np.dot(kept, bias)) / kept.sum())
     if replicas > 1:
         if not relaxed:
             error = max(error, float(np.std(means, ddof=1) / math.sqrt(replicas)))

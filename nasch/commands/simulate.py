@@ -68,9 +68,9 @@ def simulate(length, density, cars, vmax, p, model, params, steps, warmup, start
 
     \b
     Example:
-      nasch simulate --length 100000 --density 0.2 --vmax 2 --p 0.5 --steps 5000
+      nasch simulate --length 100000 --density 0.2 --vmax 2 --p 0.5 --steps 10000
       nasch simulate -L 10000 -c 0.5 --vmax 1 --p 0.5 --json
-      nasch simulate -L 10000 -c 0.2 --model vdr --param p0=0.75 --p 0.1
+      nasch simulate -L 10000 -c 0.2 --model vdr --param p0=0.75 --update ordered-sequential
       nasch simulate -L 10000 -c 0.3 --model kkw --update ordered-sequential
     """
     from markov.ring import Ring
@@ -110,7 +110,8 @@ def simulate(length, density, cars, vmax, p, model, params, steps, warmup, start
     tau = (f"<= {r.tau_int:.3g} steps (one block: the blocks are uncorrelated)"
            if r.tau_int_is_bound else f"{r.tau_int:.3g} steps")
     click.echo(f"  tau_int        {tau}; {r.measured_steps} steps kept in all")
-    click.echo(f"  error bar      {'none: the run is deterministic' if r.deterministic else _bar_terms(r)}")
+    terms = "none: the run is deterministic" if r.deterministic else _bar_terms(r)
+    click.echo(f"  error bar      {terms}")
     if r.deterministic:
         bar = "deterministic: no error bar"
     else:
