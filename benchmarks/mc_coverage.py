@@ -340,14 +340,17 @@ def main(argv=None) -> None:
             else {}
         lengths = tuple(int(x) for x in args.large_lengths.split(",") if x.strip())
         started = time.perf_counter()
-        meta = {"date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-                "machine": "shared 2-core VM, one core",
+        when = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        load = " ".join(f"{x:.2f}" for x in os.getloadavg())
+        meta = {"machine": "shared 2-core VM, one core",
                 "runs": f"simulate(ring, steps, seed, replicas={REPLICAS}), defaults"
                         " otherwise (start: the row's)",
                 "reference": "L = 12 exact chain; vmax = 1 parallel exact finite ring;"
                              f" else {REF_REPLICAS} x {REF_STEPS} steps after a warm-up"
-                             " to 10 L^(3/2) steps in all (L = 20000: 20000 warm-up)",
-                "load average at start": " ".join(f"{x:.2f}" for x in os.getloadavg())}
+                             " to 10 L^(3/2) steps in all (L = 20000: 20000 warm-up)"}
+        # each part keeps its own date and load: they may come from different calls
+        for part in parts:
+            meta[f"{part}: date, load average at start"] = f"{when}, {load}"
         data = {"meta": {**old.get("meta", {}), **meta}, "points": old.get("points", []),
                 "large": old.get("large", [])}
         if "grid" in parts:
@@ -369,7 +372,6 @@ def main(argv=None) -> None:
         seconds = {"grid": sum(p["seconds"] for p in data["points"]),
                    "large": sum(p["seconds"] for p in data["large"])}
         data["meta"]["seconds"] = {k: round(v) for k, v in seconds.items()}
-        data["meta"]["wall seconds of this call"] = round(time.perf_counter() - started)
         write_atomic(store, json.dumps(data, indent=1))
     text = report(data)
     write_atomic(args.out / "mc_coverage.md", text)
