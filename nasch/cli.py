@@ -40,7 +40,7 @@ _LAZY = {
                "List the shipped models: parameters, defaults, conventions, references."),
     "plot": ("nasch.commands.plot", "plot", "Figures (PNG or PDF, by the file extension)."),
     "simulate": ("nasch.commands.simulate", "simulate",
-                 "Monte Carlo flux of a large ring, with an autocorrelation error bar."),
+                 "Monte Carlo flux of a large ring, with an error bar whose coverage is measured."),
     "solve": ("nasch.commands.solve", "solve",
               "Exact stationary state of one ring: flux, c_v; --json adds the gap distribution."),
     "spectrum": ("nasch.commands.spectrum", "spectrum",

@@ -572,7 +572,7 @@ def models_data(models: Sequence, *, length: int = 1000, densities: int = 21,
         round(c L)`` cars, and the density drawn is ``N / L``.
     steps : int
         Recorded steps per run (at least :data:`markov.simulation.montecarlo.MIN_STEPS`);
-        the warm-up is cut from the data (MSER).
+        the start and warm-up are :func:`markov.simulation.montecarlo.simulate`'s defaults.
     update : str
     seed : int
         Each point has its own seed, derived from ``(seed, model, density)``.

@@ -327,8 +327,9 @@ class FluxTable(RenderedTable):
         if self.mc_steps:
             parts.append(f"Monte Carlo: {self.mc_steps} steps per replica on a ring of the same"
                          " density (length in the JSON/CSV), shown once per density,"
-                         " 1-sigma error (integrated autocorrelation time after an MSER"
-                         " warm-up cut, and the spread of independent replicas)")
+                         " 1-sigma error (integrated autocorrelation time; below 10 L^(3/2)"
+                         " steps extrapolated for long correlations, plus the start's"
+                         " remaining relaxation unless it starts stationary; docs/validation.md)")
             if any(r.mc_reliable is False for r in self.rows):
                 parts.append("*: Monte Carlo run too short for an honest error bar (reason in"
                              " the JSON, mc_warning); use more --mc-steps")

@@ -27,8 +27,12 @@ def patterns(vmax):
 
 
 def monte_carlo(vmax, pv, c, length, steps, seed=1):
+    # the automatic warm-up: the start's relaxation is fitted from the early
+    # transient; after an explicit warm-up that fit sees only the tail and its
+    # bias term is noise-sized (about 1.5x wider bars)
     L, N = mc_ring(Fraction(c).limit_denominator(100), length)
-    r = simulate(Ring(L, N, vmax, pv), steps=steps, warmup=steps, seed=seed, replicas=2)
+    r = simulate(Ring(L, N, vmax, pv), steps=steps, seed=seed, replicas=2)
+    assert r.reliable, r.warning
     return r.flux, r.flux_error
 
 
@@ -58,7 +62,7 @@ def test_four_cluster_against_long_monte_carlo_at_p_half():
     f4 = approximate("cluster4", 2, 0.5, cs).flux
     f2 = approximate("cluster2", 2, 0.5, cs).flux
     for c, a4, a2 in zip(cs, f4, f2):
-        mc, err = monte_carlo(2, 0.5, c, 3000, 3000)
+        mc, err = monte_carlo(2, 0.5, c, 3000, 6000)
         dev4, dev2 = abs(a4 - mc) / mc, abs(a2 - mc) / mc
         assert dev4 < (0.045 if c < 0.25 else 0.015)
         assert dev4 < dev2 / 3
@@ -105,7 +109,7 @@ def test_comf_against_the_three_cluster_at_p_half():
     three = approximate("cluster3", 2, 0.5, cs).flux
     dev = {}
     for c, a, b in zip(cs, comf, three):
-        mc, _ = monte_carlo(2, 0.5, c, 3000, 3000)
+        mc, _ = monte_carlo(2, 0.5, c, 3000, 6000)
         dev[c] = ((a - mc) / mc, (b - mc) / mc)
     assert abs(dev[0.1][0]) < 0.01 < abs(dev[0.1][1])              # COMF better
     assert dev[0.25][0] > 0.06 and dev[0.25][1] < -0.02             # opposite sides
@@ -132,7 +136,7 @@ def test_comf_becomes_exact_as_p_goes_to_zero_unlike_the_two_cluster():
 def test_comf_and_two_cluster_against_long_monte_carlo_at_small_p(c):
     # p = 0.01: COMF is exact to 1e-4 in free flow (c = 0.2) and 1.6 % low in the jammed
     # phase (c = 0.4), the 2-cluster 12 % low at both; the 4-cluster is within 0.03 %
-    mc, err = monte_carlo(2, 0.01, c, 3000, 20000, seed=3)
+    mc, err = monte_carlo(2, 0.01, c, 3000, 40000, seed=3)
     comf = approximate("comf", 2, 0.01, c).flux
     two = approximate("cluster2", 2, 0.01, c).flux
     four = approximate("cluster4", 2, 0.01, c).flux

@@ -25,29 +25,42 @@ place and velocity), then the car behind it and so on upstream, each seeing
 the car ahead already moved.  A lone car is its own car ahead (``gap = L -
 1``).
 
-Measurement (issue 17: error bars that cover the truth).  Each replica
-records the flux of every block of its run (up to 1024 blocks, at most one
-per step).  With the default automatic warm-up the run is recorded from its
-start and :func:`mser_truncation` cuts the transient from the data; the error
-of the mean of the kept blocks is ``sqrt(tau var / n)`` with ``tau`` the
-integrated autocorrelation time (Sokal's window, never below what blocking
-with >= 32 blocks shows), plus in quadrature the difference of the two
-halves' means, which catches the slow, power-law relaxation (jams coarsening)
-that lies under the noise of every block.  :func:`analyse_series` flags a
-run whose kept part holds fewer than 100 autocorrelation times, whose MSER
-optimum sits at the end of its search, or whose first and last parts differ
-(drift test); replicas whose means disagree beyond their bars (chi-square)
-flag the result too.  A flagged result carries ``reliable = False`` and the
-reason; the CLI prints it on stderr.  ``benchmarks/mc_coverage.py`` measures
-how often the bars cover exact and long-run values (``docs/validation.md``).
+Measurement (issues 17 and 23: error bars that cover the truth).  Each
+replica records the flux of every block of its run (up to 1024 blocks, at
+most one per step).  With the default automatic warm-up the run is recorded
+from its start and :func:`mser_truncation` cuts the transient from the data
+(not needed, and not done, for a start drawn from the stationary state).
+The error of the mean of the kept blocks is ``sqrt(tau var / n)`` with
+``tau`` the integrated autocorrelation time (Sokal's window, never below
+what blocking with >= 32 blocks shows).  A run shorter than
+:data:`RELAXED_RUN` ``L^(3/2)`` steps has not outlived the ring's longest
+density waves, which make the flux's correlations as long as the run (KPZ:
+the blocking error grows like ``b^(1/6)`` with the block length ``b``,
+measured on L = 10^4): there the error is extrapolated to the whole run
+(:func:`long_range_error`), and a start that is not stationary adds the
+bias its slow relaxation (a tail like ``t^-0.6``) leaves in the mean,
+fitted from the transient (:func:`start_bias`).  :func:`analyse_series`
+flags a run whose kept part holds fewer than 100 autocorrelation times,
+whose MSER optimum sits at the end of its search, or, where no start-bias
+term explains it, whose first and last parts differ (drift test); replicas
+whose means disagree beyond their bars (chi-square) flag the result too,
+and so does a deterministic rule or a replica whose last blocks had no
+random update at all (:func:`estimate_flux`).  A flagged result carries
+``reliable = False`` and the reason; the CLI prints it on stderr.
+``benchmarks/mc_coverage.py`` measures how often the bars cover exact and
+long-run values (``docs/validation.md``).
 
-Start configuration: random cells, all cars at rest.  Measured against the
-alternative, cars evenly spaced at velocity ``min(gap, vmax)`` (the p = 0
-state): on L = 1000 the uniform start was still biased high after 2000 steps
-at nearly every point (by up to 1.3e-3, several error bars), the random
-start much less.  The random start has the long-wavelength density
-fluctuations of a disordered state from the first step, the uniform one
-lacks them and builds them up only slowly (``docs/validation.md``).
+Start configuration (:func:`initial_configuration`): by default the exact
+stationary state where it is known in closed form (NaSch, ``vmax = 1``,
+parallel update: no warm-up bias at all), else random cells with all cars
+at rest.  Measured against the alternative, cars evenly spaced at velocity
+``min(gap, vmax)`` (the p = 0 state): on L = 1000 the uniform start was
+still biased high after 2000 steps at nearly every point (by up to 1.3e-3,
+several error bars), the random start much less.  The random start has the
+long-wavelength density fluctuations of a disordered state from the first
+step, the uniform one lacks them and builds them up only slowly; neither
+has the stationary amplitude, and on L = 10^4 the random start was still
+1e-4 low after 10^4 steps (``docs/validation.md``).
 
 References
 ----------
@@ -57,6 +70,13 @@ K. P. White, Simulation 69, 323 (1997) (MSER).
 A. D. Sokal, in *Functional Integration*, Plenum (1997) (integrated
 autocorrelation time, automatic window).
 J. Geweke, in *Bayesian Statistics 4*, Oxford (1992) (first vs last part).
+M. R. Evans, N. Rajewsky and E. R. Speer, J. Stat. Phys. 95, 45 (1999)
+(the stationary state of vmax = 1 on a ring).
+B. Derrida and J. L. Lebowitz, Phys. Rev. Lett. 80, 209 (1998) (TASEP ring:
+current fluctuations, relaxation in L^(3/2) steps); M. Prahofer and H. Spohn,
+J. Stat. Phys. 115, 255 (2004) (KPZ scaling t^(2/3)).  The exponents used
+here (1/6 of the blocking error, 0.55-0.7 of the start's tail) are measured
+in ``benchmarks/mc_coverage.py``.
 D. Blackman and S. Vigna, "Scrambled linear pseudorandom number generators",
 ACM Trans. Math. Softw. 47, 36 (2021) (xoshiro256**).
 """
@@ -78,15 +98,17 @@ __all__ = ["SimulationResult", "simulate", "evolve", "trajectory", "initial_conf
            "blocking_error", "MAX_TRAJECTORY_CELLS",
            "mser_truncation", "integrated_autocorrelation_time", "analyse_series",
            "simulation_bytes", "ensure_simulation_fits", "DEFAULT_BATCHES", "MIN_STEPS",
-           "STARTS", "DEFAULT_START"]
+           "STARTS", "DEFAULT_START", "blocking_curve", "long_range_error", "start_bias",
+           "estimate_flux", "estimate_run", "FluxEstimate", "block_edges", "relaxed_run",
+           "stationary_start_known", "resolve_start", "stationary_flux"]
 
 #: Blocks of the recorded flux series of a run (fewer when a run has fewer steps).
 DEFAULT_BATCHES = 1024
 #: Fewest steps a table, figure or study accepts (shorter runs are always flagged).
 MIN_STEPS = 32
 #: Start configurations (:func:`initial_configuration`) and the default.
-STARTS = ("random", "uniform")
-DEFAULT_START = "random"
+STARTS = ("auto", "stationary", "random", "uniform")
+DEFAULT_START = "auto"
 #: Replicas whose means scatter beyond their bars at this chi-square level flag a run.
 DISAGREEMENT_LEVEL = 0.01
 #: A kept series shorter than this many autocorrelation times is flagged.
@@ -95,6 +117,22 @@ MIN_TAU_MULTIPLE = 100
 BLOCKING_MIN_BLOCKS = 32
 #: |z| of the drift test (first 20 % against last 50 % of the kept series) that flags.
 DRIFT_Z = 3.0
+#: A run (warm-up included) of this many ``L^(3/2)`` time steps counts as *relaxed*: the
+#: longest density waves of the ring have relaxed many times (their relaxation
+#: time grows like ``L^(3/2)``, KPZ), so the start is forgotten and the flux's
+#: correlations are shorter than the run.
+RELAXED_RUN = 10.0
+#: Below a relaxed run the blocking error still grows like ``b^(1/6)`` with the block
+#: length ``b`` (KPZ: the variance of a mean over ``T`` steps falls like ``T^(-2/3)``;
+#: measured 1/6 on L = 10^4, vmax = 1); the error is extrapolated with at least this.
+KPZ_BLOCKING_SLOPE = 1 / 6
+#: The bias of a non-stationary start is taken to decay like ``t^-START_BIAS_DECAY``
+#: (measured 0.55-0.7 over four decades on L = 10^4, vmax = 1: slower is safer).
+START_BIAS_DECAY = 0.5
+#: ... fitted from this step on, or from half the discarded warm-up if that is later:
+#: the first steps (cars accelerating, the start's jams dissolving) are faster than
+#: the tail (local exponent 0.8-0.9 on L = 10^4, vmax = 2).
+START_BIAS_FROM = 8
 #: Largest memory of the per-block velocity histograms (bytes).
 _SNAPSHOT_BYTES = 64 * 2**20
 
@@ -144,8 +182,12 @@ def _next_uniform(s):
 
 
 @njit(cache=True, inline="always")
-def _draw(cum, new_velocity, v, gap, v_ahead, x):
+def _draw(cum, new_velocity, v, gap, v_ahead, x, draws):
     """The outcome of uniform ``x`` at ``(v, gap, v_ahead)``: the first ``k`` with ``x < cum[k]``.
+
+    ``draws[0]`` counts the updates from a row with more than one outcome
+    (its first entry is finite): a run in which it stops growing has become
+    deterministic (:func:`simulate`).
 
     ``cum`` is non-decreasing along ``k`` with the last outcome's entry and
     the padding at infinity (:func:`_cumulative`), so that ``k`` is the number
@@ -153,6 +195,7 @@ def _draw(cum, new_velocity, v, gap, v_ahead, x):
     of stopping at the first, leaves no data-dependent branch: a two-outcome
     row (NaSch) costs one comparison, as the NaSch-only kernel did.
     """
+    draws[0] += cum[v, gap, v_ahead, 0] < np.inf
     k = 0
     for j in range(cum.shape[3] - 1):
         k += x >= cum[v, gap, v_ahead, j]
@@ -160,7 +203,7 @@ def _draw(cum, new_velocity, v, gap, v_ahead, x):
 
 
 @njit(cache=True)
-def _parallel_steps(pos, vel, length, horizon, cum, new_velocity, steps, rng, counts):
+def _parallel_steps(pos, vel, length, horizon, cum, new_velocity, steps, rng, counts, draws):
     """``steps`` parallel updates in place; ``counts[v]`` += cars ending at velocity v.
 
     Cars are stored in driving order (car ``i + 1`` is ahead of car ``i``,
@@ -181,7 +224,8 @@ def _parallel_steps(pos, vel, length, horizon, cum, new_velocity, steps, rng, co
             gap = ahead_x - pos[i] - 1
             if gap < 0:
                 gap += length
-            u = _draw(cum, new_velocity, vel[i], min(gap, horizon), ahead_v, _next_uniform(rng))
+            u = _draw(cum, new_velocity, vel[i], min(gap, horizon), ahead_v, _next_uniform(rng),
+                      draws)
             vel[i] = u
             x = pos[i] + u
             if x >= length:
@@ -191,13 +235,13 @@ def _parallel_steps(pos, vel, length, horizon, cum, new_velocity, steps, rng, co
 
 
 @njit(cache=True, inline="always")
-def _update_car(pos, vel, i, n, length, horizon, cum, new_velocity, rng):
+def _update_car(pos, vel, i, n, length, horizon, cum, new_velocity, rng, draws):
     """Car ``i`` draws its new velocity from where the others are now and moves; returns it."""
     j = i + 1 if i + 1 < n else 0
     gap = pos[j] - pos[i] - 1
     if gap < 0:
         gap += length
-    u = _draw(cum, new_velocity, vel[i], min(gap, horizon), vel[j], _next_uniform(rng))
+    u = _draw(cum, new_velocity, vel[i], min(gap, horizon), vel[j], _next_uniform(rng), draws)
     vel[i] = u
     x = pos[i] + u
     if x >= length:
@@ -208,7 +252,7 @@ def _update_car(pos, vel, i, n, length, horizon, cum, new_velocity, rng):
 
 @njit(cache=True)
 def _random_sequential_steps(pos, vel, length, horizon, cum, new_velocity, steps, rng, counts,
-                             moved):
+                             draws, moved):
     """``steps`` time steps of ``L`` random-sequential sub-steps each, in place.
 
     A sub-step draws a cell uniformly; it holds a car with probability
@@ -224,13 +268,15 @@ def _random_sequential_steps(pos, vel, length, horizon, cum, new_velocity, steps
             i = int(_next_uniform(rng) * length)
             if i >= n:
                 continue
-            moved[0] += _update_car(pos, vel, i, n, length, horizon, cum, new_velocity, rng)
+            moved[0] += _update_car(pos, vel, i, n, length, horizon, cum, new_velocity, rng,
+                                    draws)
         for i in range(n):
             counts[vel[i]] += 1
 
 
 @njit(cache=True)
-def _ordered_sequential_steps(pos, vel, length, horizon, cum, new_velocity, steps, rng, counts):
+def _ordered_sequential_steps(pos, vel, length, horizon, cum, new_velocity, steps, rng, counts,
+                              draws):
     """``steps`` backward ordered-sequential updates in place; ``counts`` as for parallel.
 
     Each step draws a start car uniformly; it updates first, seeing the car
@@ -246,7 +292,8 @@ def _ordered_sequential_steps(pos, vel, length, horizon, cum, new_velocity, step
             i = s - d
             if i < 0:
                 i += n
-            counts[_update_car(pos, vel, i, n, length, horizon, cum, new_velocity, rng)] += 1
+            counts[_update_car(pos, vel, i, n, length, horizon, cum, new_velocity, rng,
+                               draws)] += 1
 
 
 def _cumulative(ring: Ring) -> tuple[np.ndarray, np.ndarray]:
@@ -369,13 +416,43 @@ def integrated_autocorrelation_time(series, window_factor: float = 5.0) -> tuple
     return max(1.0, float(taus[m])), int(lags[m]), True
 
 
+def blocking_curve(batch_means, min_blocks: int = 8) -> list[tuple[int, int, float]]:
+    """The blocking levels of a series: ``(merged, blocks, naive error)`` per level.
+
+    The batch means are merged in neighbouring pairs repeatedly (Flyvbjerg and
+    Petersen 1989); level ``j`` merges ``2^j`` batches into each block and
+    reports ``std(blocks) / sqrt(blocks)``.  Levels with fewer than
+    ``min_blocks`` blocks are left out (the first level is always there).
+
+    Parameters
+    ----------
+    batch_means : sequence of float
+    min_blocks : int
+
+    Returns
+    -------
+    list of (int, int, float)
+
+    Examples
+    --------
+    >>> [(m, b, round(e, 4)) for m, b, e in blocking_curve([1.0, 3.0] * 8)]
+    [(1, 16, 0.2582), (2, 8, 0.0)]
+    """
+    x = np.asarray(batch_means, dtype=float)
+    out = [(1, len(x), float(np.std(x, ddof=1) / math.sqrt(len(x))) if len(x) > 1 else 0.0)]
+    merged = 1
+    while len(x) // 2 >= min_blocks:
+        x = 0.5 * (x[0:len(x) // 2 * 2:2] + x[1:len(x) // 2 * 2:2])
+        merged *= 2
+        out.append((merged, len(x), float(np.std(x, ddof=1) / math.sqrt(len(x)))))
+    return out
+
+
 def blocking_error(batch_means, min_blocks: int = 8) -> float:
     """Standard error of the mean of correlated batch means, by blocking.
 
-    The batch means are merged in neighbouring pairs repeatedly; at each level
-    with at least ``min_blocks`` blocks the naive standard error
-    ``std(blocks) / sqrt(n_blocks)`` is computed, and the largest is returned
-    (it grows with the block length until blocks are independent).  With fewer
+    The largest naive error over the levels of :func:`blocking_curve` (it
+    grows with the block length until blocks are independent).  With fewer
     than ``min_blocks`` batches the naive error of the batches is returned.
     :func:`analyse_series` uses it as a floor under the autocorrelation error.
 
@@ -397,12 +474,185 @@ def blocking_error(batch_means, min_blocks: int = 8) -> float:
     >>> round(blocking_error([1.0, 3.0] * 8), 6)
     0.258199
     """
-    x = np.asarray(batch_means, dtype=float)
-    best = float(np.std(x, ddof=1) / math.sqrt(len(x))) if len(x) > 1 else 0.0
-    while len(x) // 2 >= min_blocks:
-        x = 0.5 * (x[0:len(x) // 2 * 2:2] + x[1:len(x) // 2 * 2:2])
-        best = max(best, float(np.std(x, ddof=1) / math.sqrt(len(x))))
-    return best
+    return max(e for _, _, e in blocking_curve(batch_means, min_blocks))
+
+
+def long_range_error(batch_means, min_blocks: int = BLOCKING_MIN_BLOCKS, levels: int = 4,
+                     min_slope: float = 0.0) -> tuple[float, float]:
+    """Error of the mean when the blocking error has not levelled off: extrapolated.
+
+    A series with correlations longer than its blocks (the flux of a ring
+    shorter-lived than ``L^(3/2)`` steps: KPZ, variance of a ``T``-step mean
+    falling like ``T^(-2/3)``) has a blocking error growing like ``b^s``
+    with the block length ``b`` up to the whole run.  ``s`` is fitted (least
+    squares, weighted by the number of blocks) to the last ``levels`` levels
+    of :func:`blocking_curve` with at least ``min_blocks`` blocks, clipped to
+    ``[min_slope, 1/2]``, and the last level's error is carried to one block
+    of the whole series: ``error(last) * blocks(last)^s``.  On a series whose
+    blocks are independent ``s`` is near 0 and so is the correction.
+
+    Parameters
+    ----------
+    batch_means : sequence of float
+    min_blocks : int
+    levels : int
+    min_slope : float
+        Lower bound of ``s`` (:data:`KPZ_BLOCKING_SLOPE` where the physics
+        says the correlations outlast the run).
+
+    Returns
+    -------
+    error : float
+    slope : float
+        The ``s`` used.
+
+    Examples
+    --------
+    Independent data: little to extrapolate (the fitted slope is noise
+    about 0); a random walk (``s`` = 1/2) is carried to the error of its
+    whole length:
+
+    >>> rng = np.random.default_rng(0)
+    >>> e, s = long_range_error(rng.normal(size=4096))
+    >>> s < 0.2, 0.7 < e * 64 < 1.6
+    (True, True)
+    >>> e, s = long_range_error(np.cumsum(rng.normal(size=4096)))
+    >>> round(s, 1)
+    0.5
+    """
+    curve = blocking_curve(batch_means, min_blocks)
+    merged, blocks, last = curve[-1]
+    use = curve[-levels:]
+    if len(use) < 2 or last <= 0:
+        return last, 0.0
+    weight = np.sqrt([b for _, b, _ in use])
+    lb = np.log([m for m, _, _ in use])
+    le = np.log([max(e, 1e-300) for _, _, e in use])
+    design = np.vstack([np.ones_like(lb), lb]).T * weight[:, None]
+    slope = float(np.linalg.lstsq(design, le * weight, rcond=None)[0][1])
+    slope = min(max(slope, min_slope), 0.5)
+    return last * blocks ** slope, slope
+
+
+def start_bias(fluxes, lengths, kept_from: int, offset: int = 0,
+               decay: float = START_BIAS_DECAY) -> float:
+    """How far the mean of the kept blocks may still be from stationarity, from the transient.
+
+    A start that is not a draw from the stationary state relaxes with a
+    slow power-law tail (density waves longer than ``t^(2/3)`` cells have
+    not relaxed after ``t`` steps): the mean of a run keeps a bias far
+    under the noise of its blocks yet above its error bar on a big ring
+    (issue 23: a random start on L = 10^4 covered the exact flux 14-49 % at
+    1 sigma).  The early transient, strong and well measured, fixes the
+    amplitude (:func:`_transient_fit`, from step :data:`START_BIAS_FROM` or
+    half the discarded blocks, whichever is later), and the bias of the kept
+    blocks is bounded by ``|A|`` times their mean ``x``.  ``decay`` = 1/2 lies below
+    the measured 0.55-0.7, so the tail is over- rather than under-estimated
+    (``benchmarks/mc_coverage.py``).
+
+    Parameters
+    ----------
+    fluxes, lengths : sequences
+        Every block of the run from its start, in order, and its steps.
+    kept_from : int
+        First block of the kept part.
+    offset : int
+        Steps run before the first block.
+    decay : float
+
+    Returns
+    -------
+    float
+
+    Examples
+    --------
+    A transient ``0.1 t^-0.6``: the bound covers its remaining mean.
+
+    >>> t = np.arange(1, 2001)
+    >>> y = 1 - 0.1 * t ** -0.6
+    >>> bound = start_bias(y, np.ones(2000), kept_from=50)
+    >>> true = abs(y[50:].mean() - 1)
+    >>> bool(true < bound < 3 * true)
+    True
+    """
+    w = np.asarray(lengths, dtype=float)
+    if kept_from >= len(w):
+        return 0.0
+    amplitude, x = _transient_fit(fluxes, w, offset, decay,
+                                  (offset + float(w[:kept_from].sum())) / 2)
+    kept = slice(kept_from, None)
+    return abs(amplitude) * float(np.dot(x[kept], w[kept]) / w[kept].sum())
+
+
+def _transient_fit(fluxes, lengths, offset: int = 0, decay: float = START_BIAS_DECAY,
+                   fit_from: float = 0.0) -> tuple[float, np.ndarray]:
+    """``A`` of the least-squares fit ``f + A x`` to the block fluxes, and ``x`` per block.
+
+    ``x`` is the block's mean of ``t^-decay`` over its steps (``offset``
+    steps before the first block); only blocks from step ``fit_from`` (at
+    least :data:`START_BIAS_FROM`) on enter the fit, weighted by their
+    lengths.  ``A`` is 0 with fewer than three such blocks.
+    """
+    y = np.asarray(fluxes, dtype=float)
+    w = np.asarray(lengths, dtype=float)
+    edges = offset + np.concatenate(([0.0], np.cumsum(w)))
+    # block mean of t^-decay over steps t = e + 1 .. e', by the integral from e + 1/2
+    lo, hi = edges[:-1] + 0.5, edges[1:] + 0.5
+    x = (hi ** (1 - decay) - lo ** (1 - decay)) / ((1 - decay) * (hi - lo))
+    fit = edges[:-1] >= max(START_BIAS_FROM, fit_from)
+    if fit.sum() < 3:
+        return 0.0, x
+    sw = np.sqrt(w[fit])
+    design = np.vstack([np.ones(int(fit.sum())), x[fit]]).T * sw[:, None]
+    return float(np.linalg.lstsq(design, y[fit] * sw, rcond=None)[0][1]), x
+
+
+def stationary_start_known(ring: Ring) -> bool:
+    """Whether :func:`initial_configuration` can draw from the exact stationary state.
+
+    True for NaSch with ``vmax = 1``, ``0 < p < 1`` and parallel update, whose
+    stationary measure is known in closed form (:func:`initial_configuration`).
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    bool
+    """
+    return (ring.is_nasch and ring.vmax == 1 and ring.update == PARALLEL
+            and ring.p is not None and 0 < float(ring.p) < 1)
+
+
+def resolve_start(ring: Ring, start: str) -> str:
+    """The start configuration ``start`` stands for: ``"auto"`` becomes ``"stationary"``
+    where :func:`stationary_start_known`, else ``"random"``; the others are checked.
+
+    Parameters
+    ----------
+    ring : Ring
+    start : {"auto", "stationary", "random", "uniform"}
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    InvalidParameterError
+        An unknown start, or ``"stationary"`` where the stationary state is not known.
+    """
+    if start not in STARTS:
+        raise InvalidParameterError(f"start must be one of {', '.join(STARTS)}, got {start!r}")
+    known = stationary_start_known(ring)
+    if start == "auto":
+        return "stationary" if known else "random"
+    if start == "stationary" and not known:
+        raise InvalidParameterError(
+            "the stationary start is known only for NaSch with vmax = 1, 0 < p < 1 and"
+            " parallel update; use the random or uniform start")
+    return start
 
 
 def initial_configuration(ring: Ring, seed: int, start: str = DEFAULT_START
@@ -412,14 +662,24 @@ def initial_configuration(ring: Ring, seed: int, start: str = DEFAULT_START
     ``"random"``: ``N`` distinct cells drawn uniformly, all cars at rest.
     ``"uniform"``: cars as evenly spaced as ``N`` and ``L`` allow (gaps
     differ by at most one; the offset is drawn from ``seed``), each at
-    velocity ``min(gap, vmax)``, i.e. the p = 0 stationary state.  See
-    :func:`simulate` for which relaxes faster.
+    velocity ``min(gap, vmax)``, i.e. the p = 0 stationary state.
+    ``"stationary"`` (NaSch, ``vmax = 1``, parallel update only): a draw
+    from the exact stationary state of the finite ring, so there is no
+    warm-up bias at all.  Its weight is ``(q/p)^(moving cars)`` on the
+    configurations in which every moving car has an empty cell behind it
+    (``tests/test_goe.py``), so an occupation pattern of ``m`` blocks of
+    cars weighs ``p^-m`` and there are ``(L/m) C(N-1, m-1) C(L-N-1, m-1)`` of
+    them: ``m`` is drawn from these weights, the block and gap lengths as
+    uniform compositions of ``N`` and ``L - N``, the offset uniformly, and
+    the rear car of each block moves (``v = 1``) with probability ``q``.
+    ``"auto"``: ``"stationary"`` where it is known, else ``"random"``
+    (:func:`resolve_start`).  See :func:`simulate` for how they relax.
 
     Parameters
     ----------
     ring : Ring
     seed : int
-    start : {"random", "uniform"}
+    start : {"auto", "stationary", "random", "uniform"}
 
     Returns
     -------
@@ -435,13 +695,14 @@ def initial_configuration(ring: Ring, seed: int, start: str = DEFAULT_START
     >>> sorted(((np.roll(pos, -1) - pos - 1) % 10).tolist()), sorted(vel.tolist())
     ([1, 1, 2, 2], [1, 1, 2, 2])
     """
-    if start not in STARTS:
-        raise InvalidParameterError(f"start must be one of {', '.join(STARTS)}, got {start!r}")
+    start = resolve_start(ring, start)
     rng = np.random.Generator(np.random.PCG64(seed))
     n, length = int(ring.cars), int(ring.length)
     if start == "random":
         pos = np.sort(rng.choice(length, size=n, replace=False)).astype(np.int64)
         return pos, np.zeros(n, dtype=np.int64)
+    if start == "stationary":
+        return _vmax1_stationary(n, length, float(ring.p), rng)
     # car i at floor(i L / N): gaps floor or ceil of L / N - 1, exact integers
     i = np.arange(n, dtype=np.int64)
     # floor(i L / N) without overflowing int64 for L near 2**62
@@ -449,6 +710,91 @@ def initial_configuration(ring: Ring, seed: int, start: str = DEFAULT_START
     pos = np.sort((pos + int(rng.integers(length))) % length) if n else pos
     gap = (np.roll(pos, -1) - pos - 1) % length if n > 1 else np.full(n, length - 1)
     return pos, np.minimum(gap, ring.vmax).astype(np.int64)
+
+
+def _block_count_weights(n: int, length: int, p: float) -> tuple[np.ndarray, np.ndarray]:
+    """``m = 1 .. min(N, L - N)`` and the stationary probability of ``m`` blocks of cars
+    (NaSch, ``vmax = 1``, parallel; :func:`initial_configuration`), ``0 < N < L``."""
+    from scipy.special import gammaln
+
+    m = np.arange(1, min(n, length - n) + 1)
+    # log of p^-m (L/m) C(N-1, m-1) C(L-N-1, m-1), the constant log L left out; the
+    # terms overflow floats on long rings
+    logw = (-m * math.log(p) - np.log(m) - gammaln(m) * 2 - gammaln(n - m + 1)
+            - gammaln(length - n - m + 1))
+    w = np.exp(logw - logw.max())
+    return m, w / w.sum()
+
+
+def stationary_flux(ring: Ring) -> float:
+    """The exact flux of the finite ring where the stationary state is known in closed form.
+
+    NaSch, ``vmax = 1``, parallel update (:func:`stationary_start_known`):
+    the front car of each of the ``m`` blocks of cars moves with ``q = 1 -
+    p``, so ``f = q E[m] / L`` under the block-count weights of
+    :func:`initial_configuration` (Evans, Rajewsky and Speer 1999; the
+    references of the study, ``benchmarks/mc_coverage.py``, and checked
+    against the exact chain in ``tests/test_montecarlo.py``).
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    InvalidParameterError
+        Where the closed form does not apply.
+
+    Examples
+    --------
+    Half filling: ``(1 - sqrt(1 - q)) / 2`` on the infinite ring, approached like ``1/L``:
+
+    >>> round(stationary_flux(Ring(10**5, 5 * 10**4, 1, 0.5)), 6)
+    0.146448
+    >>> round((1 - math.sqrt(0.5)) / 2, 6)
+    0.146447
+    """
+    resolve_start(ring, "stationary")
+    n, length = int(ring.cars), int(ring.length)
+    if n in (0, length):
+        return 0.0
+    m, w = _block_count_weights(n, length, float(ring.p))
+    return (1 - float(ring.p)) * float(np.dot(m, w)) / length
+
+
+def _vmax1_stationary(n: int, length: int, p: float, rng) -> tuple[np.ndarray, np.ndarray]:
+    """A draw from the stationary state of NaSch, ``vmax = 1``, parallel (see
+    :func:`initial_configuration`)."""
+    if n == 0 or n == length:
+        return np.arange(n, dtype=np.int64), np.zeros(n, dtype=np.int64)
+    m, w = _block_count_weights(n, length, p)
+    blocks = int(rng.choice(m, p=w))
+
+    def composition(total: int) -> np.ndarray:
+        # uniform over the C(total - 1, blocks - 1) ways to write total as blocks positive parts
+        cuts = np.sort(rng.choice(total - 1, size=blocks - 1, replace=False)) + 1
+        return np.diff(np.concatenate(([0], cuts, [total])))
+
+    cars, holes = composition(n), composition(length - n)
+    # car i sits at i plus the holes of the gaps behind its block (cells from block 0's rear)
+    rel = np.repeat(np.cumsum(holes) - holes, cars)
+    rel += np.arange(n, dtype=np.int64)
+    rear = np.cumsum(cars) - cars
+    del holes, cars
+    # shifted by a uniform offset; in driving order from the lowest cell, without copies
+    shift = int(rng.integers(length))
+    wrap = int(np.searchsorted(rel, length - shift))     # cars that stay below L
+    pos = np.empty(n, dtype=np.int64)
+    np.add(rel[wrap:], shift - length, out=pos[:n - wrap])
+    np.add(rel[:wrap], shift, out=pos[n - wrap:])
+    del rel
+    vel = np.zeros(n, dtype=np.int64)
+    vel[(rear - wrap) % n] = rng.random(blocks) < 1 - p   # the rear car of a block moves
+    return pos, vel
 
 
 def _ensure_configuration(ring: Ring, positions, velocities) -> tuple[np.ndarray, np.ndarray]:
@@ -468,25 +814,36 @@ def _ensure_configuration(ring: Ring, positions, velocities) -> tuple[np.ndarray
     return np.ascontiguousarray(pos), np.ascontiguousarray(vel)
 
 
-def _ensure_steps(name: str, value, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise InvalidParameterError(f"{name} must be an integer >= {minimum}, got {value!r}")
+# step counts beyond 2**53 are not exact in the float arithmetic of the blocks (and
+# would run for millennia); replicas beyond this hold more block series than is sane
+_MAX_STEPS = 2**53
+_MAX_REPLICAS = 10_000
+
+
+def _ensure_steps(name: str, value, minimum: int, maximum: int = _MAX_STEPS) -> int:
+    if (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum
+            or value > maximum):
+        raise InvalidParameterError(
+            f"{name} must be an integer in [{minimum}, {maximum}], got {value!r}")
     return int(value)
 
 
 def _rng_state(seed: int) -> np.ndarray:
-    seed = _ensure_steps("seed", seed, 0)
-    if seed >= 2**64:
-        raise InvalidParameterError(f"seed must be below 2**64, got {seed}")
+    seed = _ensure_steps("seed", seed, 0, 2**64 - 1)
     state = np.empty(4, dtype=np.uint64)
     _seed_state(np.uint64(seed), state)
     return state
 
 
-def _advance(ring: Ring, rule: tuple, pos, vel, steps: int, rng, counts) -> int:
-    """Run ``steps`` time steps with ``rule = (horizon, cum, new_velocity)``; return the distance moved."""
+def _advance(ring: Ring, rule: tuple, pos, vel, steps: int, rng, counts, draws=None) -> int:
+    """Run ``steps`` time steps with ``rule = (horizon, cum, new_velocity)``; return the distance.
+
+    ``draws[0]`` (when given) grows by the updates from a row with a random outcome.
+    """
     if ring.cars == 0 or steps == 0:
         return 0
+    if draws is None:
+        draws = np.zeros(1, dtype=np.int64)
     horizon, cum, new_velocity = rule
     work = ring.length if ring.update == RANDOM_SEQUENTIAL else ring.cars
     chunk = max(1, _CHUNK_UPDATES // work)
@@ -494,13 +851,13 @@ def _advance(ring: Ring, rule: tuple, pos, vel, steps: int, rng, counts) -> int:
         moved = np.zeros(1, dtype=np.int64)
         for done in range(0, steps, chunk):
             _random_sequential_steps(pos, vel, ring.length, horizon, cum, new_velocity,
-                                     min(chunk, steps - done), rng, counts, moved)
+                                     min(chunk, steps - done), rng, counts, draws, moved)
         return int(moved[0])
     kernel = _parallel_steps if ring.update == PARALLEL else _ordered_sequential_steps
     before = counts.copy()
     for done in range(0, steps, chunk):
         kernel(pos, vel, ring.length, horizon, cum, new_velocity, min(chunk, steps - done),
-               rng, counts)
+               rng, counts, draws)
     return int(np.dot(np.arange(len(counts)), counts - before))
 
 
@@ -510,29 +867,39 @@ def _kernel_rule(ring: Ring) -> tuple:
     return int(ring.table().horizon), cum, new_velocity
 
 
-def simulation_bytes(ring: Ring) -> int:
+def simulation_bytes(ring: Ring, start: str = DEFAULT_START) -> int:
     """Peak bytes of :func:`simulate` for this ring (a close upper estimate).
 
     Drawing the random start with numpy's ``Generator.choice`` without
     replacement permutes every cell index (``8 L`` bytes) when ``N > L / 50``
     and keeps a set of ``N`` indices otherwise; sorting and the car arrays
     (positions, velocities) add ``8 N`` each.  Measured: ``L = 10**9``,
-    ``N = 2 * 10**8`` peaked at 9.6 GB resident, this gives 9.6e9.
+    ``N = 2 * 10**8`` peaked at 9.6 GB resident, this gives 9.6e9.  The
+    stationary start (:func:`initial_configuration`) permutes the car and
+    the empty-cell indices in turn and holds a few arrays per car besides:
+    ``8 max(N, L - N) + 56 N``, measured (tracemalloc) 280 MB for
+    ``L = 10**7``, ``N = L / 2``, 140 MB for ``N = L / 5``.
 
     Parameters
     ----------
     ring : Ring
+    start : str
+        As for :func:`simulate`.
 
     Returns
     -------
     int
     """
     length, cars = int(ring.length), int(ring.cars)
-    draw = 8 * length + 8 * cars if cars > length // 50 else 24 * cars
+    if resolve_start(ring, start) == "stationary":
+        draw = 8 * max(cars, length - cars) + 56 * cars
+    else:
+        draw = 8 * length + 8 * cars if cars > length // 50 else 24 * cars
     return max(draw, 32 * cars) + 1_000_000
 
 
-def ensure_simulation_fits(ring: Ring, max_memory: float | None = None) -> None:
+def ensure_simulation_fits(ring: Ring, max_memory: float | None = None,
+                           start: str = DEFAULT_START) -> None:
     """Refuse a ring the simulator cannot hold, before allocating anything.
 
     Parameters
@@ -540,6 +907,8 @@ def ensure_simulation_fits(ring: Ring, max_memory: float | None = None) -> None:
     ring : Ring
     max_memory : float, optional
         Bytes allowed; default 75 % of physical memory.
+    start : str
+        The start configuration (:func:`simulation_bytes`).
 
     Raises
     ------
@@ -556,7 +925,7 @@ def ensure_simulation_fits(ring: Ring, max_memory: float | None = None) -> None:
             f"the simulator stores positions as 64-bit integers: L must be at most"
             f" {format_count(_MAX_LENGTH)}, got {format_count(ring.length)}")
     check_fits(f"a Monte Carlo run of L = {format_count(ring.length)} cells with"
-               f" N = {format_count(ring.cars)} cars", simulation_bytes(ring),
+               f" N = {format_count(ring.cars)} cars", simulation_bytes(ring, start),
                memory_limit(max_memory), "; use a smaller ring (or raise the limit with"
                " --max-memory)")
 
@@ -615,7 +984,7 @@ def trajectory(ring: Ring, steps: int, warmup: int = 0, seed: int = 0,
         same trajectory, and ``trajectory(ring, 0, warmup=t, seed=s)`` is
         the configuration the ``t``-th row of a run from ``warmup = 0``
         would show.
-    start : {"random", "uniform"}
+    start : {"auto", "stationary", "random", "uniform"}
 
     Returns
     -------
@@ -644,7 +1013,7 @@ def trajectory(ring: Ring, steps: int, warmup: int = 0, seed: int = 0,
             f"a trajectory of {steps + 1} rows of L = {ring.length} cells has {cells:,} cells,"
             f" more than {MAX_TRAJECTORY_CELLS:,}: record fewer steps or a smaller ring")
     rng = _rng_state(seed)
-    ensure_simulation_fits(ring)
+    ensure_simulation_fits(ring, None, start)
     pos, vel = initial_configuration(ring, seed, start)
     rule = _kernel_rule(ring)
     counts = np.zeros(ring.vmax + 1, dtype=np.int64)
@@ -662,34 +1031,50 @@ class SeriesAnalysis(NamedTuple):
 
     cut: int            # leading blocks dropped (MSER)
     mean: float         # weighted mean of the kept blocks
-    error: float        # 1-sigma error of that mean, sqrt(tau var / n)
+    error: float        # 1-sigma error of that mean
     tau: float          # integrated autocorrelation time, in blocks
     reasons: tuple      # why the error bar is not to be trusted; () when it is
+    bias: float = 0.0   # the start-bias term in the error (start_bias), 0 when none
+    slope: float = 0.0  # the blocking slope the error was extrapolated with (long_range_error)
 
 
-def analyse_series(series, weights=None, truncate: bool = True) -> SeriesAnalysis:
+def analyse_series(series, weights=None, truncate: bool = True, relaxed: bool = True,
+                   transient=None) -> SeriesAnalysis:
     """Warm-up cut, mean, error bar and honesty checks of one run's block series.
 
     1. ``truncate``: drop the first :func:`mser_truncation` blocks.
     2. Mean of the rest (weighted by ``weights``, the block lengths) and its
        error ``sqrt(tau var / n)``, ``tau`` from
        :func:`integrated_autocorrelation_time` (at least what
-       :func:`blocking_error` with 32 or more blocks implies), with the
-       difference of the two halves' means added in quadrature.
+       :func:`blocking_error` with 32 or more blocks implies).  A run that is
+       not ``relaxed`` (shorter than :data:`RELAXED_RUN` ``L^(3/2)`` steps)
+       has correlations as long as itself: the error is at least
+       :func:`long_range_error` with the KPZ slope as the least slope.
+       With ``transient`` the start is not stationary: its relaxation is
+       fitted on the transient and the series (:func:`start_bias`), the
+       noise is measured around the fit, and the bias bound enters in
+       quadrature.
     3. The bar is flagged (``reasons`` non-empty) when the kept series holds
        fewer than :data:`MIN_TAU_MULTIPLE` autocorrelation times or the
        window did not converge (then ``tau`` itself is too uncertain), when
        MSER's optimum is at the end of its search (the transient may last
-       beyond half the run), or when the means of the first 20 % and the last
-       50 % of the kept series differ by more than :data:`DRIFT_Z` of their
-       combined error (a trend that the cut did not remove; Geweke 1992).
+       beyond half the run), or, without a start-bias term, when the means
+       of the first 20 % and the last 50 % of the kept series differ by
+       more than :data:`DRIFT_Z` of their combined error (a trend that
+       nothing explains; Geweke 1992).
 
     Parameters
     ----------
     series : sequence of float
     weights : sequence of float, optional
     truncate : bool
-        False: keep every block (an explicit warm-up was run before).
+        False: keep every block (an explicit warm-up was run before, or the
+        start is a draw from the stationary state).
+    relaxed : bool
+        Whether the run is long against the ring's relaxation (see above).
+    transient : (fluxes, lengths), optional
+        The blocks of the warm-up run before the series (empty arrays when
+        the series starts with the run): given, the start-bias term is used.
 
     Returns
     -------
@@ -713,6 +1098,17 @@ def analyse_series(series, weights=None, truncate: bool = True) -> SeriesAnalysi
         reasons.append("the transient may last beyond half the run (MSER cut at the limit)")
     z, wz = y[cut:], w[cut:]
     mean = float(np.dot(z, wz) / wz.sum())
+    bias = 0.0
+    if transient is not None:
+        before_y, before_w = (np.asarray(x, dtype=float) for x in transient)
+        # the discarded steps' first half is the fast transient, not the tail
+        discarded = float(before_w.sum() + w[:cut].sum())
+        amplitude, x = _transient_fit(np.concatenate((before_y, y)),
+                                      np.concatenate((before_w, w)), fit_from=discarded / 2)
+        x = x[len(before_y) + cut:]
+        bias = abs(amplitude) * float(np.dot(x, wz) / wz.sum())
+        # the noise is judged around the fitted relaxation, which the bias term carries
+        z = z - amplitude * x
     tau, _, converged = integrated_autocorrelation_time(z)
     k = len(z)
     var = float(np.var(z, ddof=1)) if k > 1 else 0.0
@@ -722,25 +1118,20 @@ def analyse_series(series, weights=None, truncate: bool = True) -> SeriesAnalysi
         # block length, so the larger of the two is kept.
         tau = max(tau, k * blocking_error(z, BLOCKING_MIN_BLOCKS) ** 2 / var)
     error = math.sqrt(tau * var / k)
-    if k >= 4:
-        # A slow relaxation (jams coarsening after the start) leaves a trend
-        # far below the noise of one block that MSER cannot see, yet it biases
-        # the mean.  For a bias decaying like t^-1/2 the mean's remaining bias
-        # is 1.2x the difference between the halves' means, so that
-        # difference enters in quadrature.  On stationary data it is a
-        # N(0, 2 sigma) number: the bar grows about 2x there, the price of
-        # covering the relaxing runs (benchmarks/mc_coverage.py).
-        trend = abs(float(z[:k // 2].mean() - z[k // 2:].mean()))
-        error = math.hypot(error, trend)
+    slope = 0.0
+    if not relaxed and var > 0:
+        extrapolated, slope = long_range_error(z, min_slope=KPZ_BLOCKING_SLOPE)
+        error = max(error, extrapolated)
+    error = math.hypot(error, bias)
     if not converged or k < MIN_TAU_MULTIPLE * tau:
         reasons.append(f"too short: {k} kept blocks are {k / tau:.0f} autocorrelation times"
                        f" (tau = {tau:.1f} blocks; at least {MIN_TAU_MULTIPLE} needed)")
     head, tail = z[:max(1, k // 5)], z[k - max(1, k // 2):]
     spread = math.sqrt(tau * var * (1 / len(head) + 1 / len(tail)))
-    if spread > 0 and abs(head.mean() - tail.mean()) > DRIFT_Z * spread:
+    if transient is None and spread > 0 and abs(head.mean() - tail.mean()) > DRIFT_Z * spread:
         reasons.append(f"drift: the first 20 % and the last 50 % of the kept series differ by"
                        f" {abs(head.mean() - tail.mean()) / spread:.1f} sigma")
-    return SeriesAnalysis(cut, mean, error, tau, tuple(reasons))
+    return SeriesAnalysis(cut, mean, error, tau, tuple(reasons), bias, slope)
 
 
 @dataclass(frozen=True)
@@ -756,16 +1147,16 @@ class SimulationResult:
     warmup : int
         Time steps run before recording (0 with the automatic warm-up).
     batches : int
-        Blocks the recorded steps of each replica were split into.
+        Blocks the recorded steps of *each replica* were split into.
     seed : int
     flux : float
         Time average over the kept blocks of all replicas.
     flux_error : float
-        Its 1-sigma error (integrated autocorrelation time; replica spread).
+        Its 1-sigma error (:func:`analyse_series`; replica spread).
     c_v : (vmax + 1,) float array
         Fraction of cells holding a car of velocity ``v``, over the kept steps.
-    batch_fluxes : (replicas * batches,) float array
-        Every recorded block's flux, cut ones included, replica after replica.
+    batch_fluxes : (replicas, batches) float array
+        Every recorded block's flux, cut ones included, one row per replica.
     seconds : float
         Wall time of warm-up plus measurement.
     replicas : int
@@ -785,10 +1176,26 @@ class SimulationResult:
         steps (block time times block length: an upper bound when it is
         below a block).
     start : str
-        The start configuration.
+        The start configuration used (``"auto"`` resolved; ``"given"`` for
+        an ``initial`` configuration).
     model : dict
         The model that moved the cars (:meth:`markov.model.load.Model.describe`:
         name, parameter values, source; :func:`simulate` always sets it).
+    warmup_rule : str
+        How the warm-up was handled: ``"none (stationary start)"``,
+        ``"automatic (MSER cut)"`` or ``"explicit"``.
+    relaxed : bool
+        Whether the run (warm-up included) lasted :data:`RELAXED_RUN`
+        ``L^(3/2)`` steps: False means the bar was extrapolated for
+        correlations as long as the run (:func:`long_range_error`).
+    start_bias : float
+        The largest start-bias term (:func:`start_bias`) in a replica's bar;
+        0 for a stationary start or a relaxed run.
+    deterministic : bool
+        No randomness left: the rule has one outcome everywhere, or no car's
+        update was random in the last blocks of a replica (e.g. cruise
+        control frozen into free flow).  The flux is then that of the
+        deterministic cycle the run reached; ``reliable`` is False.
     """
 
     length: int
@@ -812,8 +1219,12 @@ class SimulationResult:
     warmup_used: int = 0
     measured_steps: int = 0
     tau_int: float = 1.0
-    start: str = DEFAULT_START
+    start: str = "random"
     model: dict | None = None
+    warmup_rule: str = "automatic (MSER cut)"
+    relaxed: bool = False
+    start_bias: float = 0.0
+    deterministic: bool = False
 
     @property
     def density(self) -> float:
@@ -835,6 +1246,8 @@ class SimulationResult:
     def to_dict(self) -> dict:
         """JSON-ready summary (the fields of ``nasch simulate --json``).
 
+        ``batch_fluxes`` is a list of ``replicas`` lists of ``batches`` fluxes.
+
         Returns
         -------
         dict
@@ -849,11 +1262,203 @@ class SimulationResult:
         return d
 
 
+class FluxEstimate(NamedTuple):
+    """What :func:`estimate_flux` makes of the replicas' block series."""
+
+    flux: float
+    error: float
+    reasons: tuple          # why the bar is not honest, () when it is
+    analyses: tuple         # SeriesAnalysis per replica
+    kept: tuple             # kept steps per replica
+
+
+def block_edges(steps: int, blocks: int) -> np.ndarray:
+    """Step indices where the blocks of a recorded run start, and its end.
+
+    Block ``b`` covers steps ``[edges[b], edges[b+1])``; sizes differ by at
+    most one.  A study that records every step can regroup it into exactly
+    the blocks :func:`simulate` would have made of a shorter run.
+
+    Parameters
+    ----------
+    steps, blocks : int
+
+    Returns
+    -------
+    (blocks + 1,) int64 array
+
+    Examples
+    --------
+    >>> block_edges(10, 4).tolist()
+    [0, 2, 5, 7, 10]
+    """
+    return np.linspace(0, steps, blocks + 1).astype(np.int64)
+
+
+def relaxed_run(ring: Ring, steps: int) -> bool:
+    """Whether ``steps`` time steps (warm-up included) make a relaxed run of the ring.
+
+    At least :data:`RELAXED_RUN` ``L^(3/2)`` steps: the time in which the
+    longest density wave of a KPZ ring relaxes, many times over.
+
+    Parameters
+    ----------
+    ring : Ring
+    steps : int
+
+    Returns
+    -------
+    bool
+    """
+    return steps >= RELAXED_RUN * float(ring.length) ** 1.5
+
+
+def estimate_flux(series, sizes, truncate: bool = True, relaxed: bool = True,
+                  transients=None, deterministic_from=None,
+                  update: str = PARALLEL) -> FluxEstimate:
+    """The flux and its error from the block series of independent replicas.
+
+    Each replica is analysed by :func:`analyse_series`; the flux is the mean
+    of the kept blocks of all replicas weighted by their lengths, the error
+    the combined noise (independent replicas) and, added in quadrature, the
+    weighted mean of their start-bias terms (common to replicas from the same
+    kind of start, so it does not average out); in a run that is not
+    ``relaxed`` it is at least the
+    standard error of the replica means (which sees correlations longer than
+    one run).  Replicas whose means scatter beyond their bars (chi-square at
+    :data:`DISAGREEMENT_LEVEL`) flag the result.  :func:`simulate` calls
+    this; a study that recorded every step can call it on regrouped series
+    (:func:`block_edges`) and get what :func:`simulate` of a shorter run
+    gives.
+
+    Parameters
+    ----------
+    series : (replicas, blocks) array of float
+    sizes : (blocks,) array of int
+        Steps per block.
+    truncate, relaxed : bool
+        As for :func:`analyse_series`.
+    transients : sequence of (fluxes, lengths), optional
+        Per replica, the warm-up blocks before its series: given, the
+        start-bias term is used (the start is not stationary).
+    deterministic_from : sequence of int, optional
+        Per replica, the first block after which no car's update was random
+        (``blocks`` when randomness lasted to the end): such a replica is
+        measured from there on and flagged as deterministic.
+    update : str
+        For the wording of the deterministic reason.
+
+    Returns
+    -------
+    FluxEstimate
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(2)
+    >>> e = estimate_flux(0.3 + 0.01 * rng.normal(size=(2, 1000)), np.ones(1000, int),
+    ...                   truncate=False)
+    >>> abs(e.flux - 0.3) < 3 * e.error, e.reasons, e.kept
+    (True, (), (1000, 1000))
+    """
+    series = np.atleast_2d(np.asarray(series, dtype=float))
+    sizes = np.asarray(sizes)
+    replicas, blocks = series.shape
+    analyses, reasons = [], []
+    for r in range(replicas):
+        tr = None if transients is None else transients[r]
+        frozen = blocks if deterministic_from is None else int(deterministic_from[r])
+        if frozen < blocks:
+            # measured where the cycle runs; nothing is random there to put a bar on
+            a = analyse_series(series[r, frozen:], sizes[frozen:], truncate=False)
+            a = a._replace(cut=frozen, reasons=(_frozen_reason(int(sizes[:frozen].sum()),
+                                                               update),))
+        else:
+            a = analyse_series(series[r], sizes, truncate=truncate, relaxed=relaxed,
+                               transient=tr)
+        analyses.append(a)
+        reasons += [f"replica {r}: {why}" if replicas > 1 else why for why in a.reasons]
+    kept = np.array([sizes[a.cut:].sum() for a in analyses], dtype=float)
+    means = np.array([a.mean for a in analyses])
+    errs = np.array([a.error for a in analyses])
+    bias = np.array([a.bias for a in analyses])
+    flux = float(np.dot(kept, means) / kept.sum())
+    # the noise of the replicas averages out, their start bias (same start, same
+    # relaxation) does not
+    noise = np.sqrt(np.maximum(errs ** 2 - bias ** 2, 0.0))
+    error = math.hypot(math.sqrt(np.dot(kept ** 2, noise ** 2)) / kept.sum(),
+                       float(np.dot(kept, bias)) / kept.sum())
+    if replicas > 1:
+        if not relaxed:
+            error = max(error, float(np.std(means, ddof=1) / math.sqrt(replicas)))
+        reasons += _replica_disagreement(means, errs)
+    # a deterministic replica says so first
+    reasons.sort(key=lambda why: "deterministic" not in why)
+    return FluxEstimate(flux, error, tuple(reasons), tuple(analyses),
+                        tuple(int(k) for k in kept))
+
+
+def estimate_run(ring: Ring, series, sizes, start: str, warmup: int | None = None,
+                 transients=None, deterministic_from=None) -> FluxEstimate:
+    """:func:`estimate_flux` with the choices :func:`simulate` makes for a run of ``ring``.
+
+    No MSER cut after an explicit warm-up or from a stationary start; the
+    long-range extrapolation unless the run (warm-up included) is relaxed
+    (:func:`relaxed_run`); the start-bias term unless the start is
+    stationary or the run relaxed.  A study that recorded every step of a
+    long run regroups a prefix into :func:`block_edges` blocks and gets
+    exactly what :func:`simulate` of the shorter run gives (same seed).
+
+    Parameters
+    ----------
+    ring : Ring
+    series : (replicas, blocks) array of float
+    sizes : (blocks,) array of int
+    start : str
+        The start used (``SimulationResult.start``).
+    warmup : int, optional
+        None: automatic warm-up; else the steps run before the series.
+    transients : sequence of (fluxes, lengths), optional
+        The warm-up blocks per replica (default: none recorded, i.e. the
+        automatic warm-up's empty ones).
+    deterministic_from : sequence of int, optional
+        As for :func:`estimate_flux`.
+
+    Returns
+    -------
+    FluxEstimate
+    """
+    series = np.atleast_2d(np.asarray(series, dtype=float))
+    stationary = start == "stationary"
+    relaxed = relaxed_run(ring, (warmup or 0) + int(np.sum(sizes)))
+    if transients is None:
+        transients = [(np.zeros(0), np.zeros(0, dtype=np.int64))] * len(series)
+    return estimate_flux(series, sizes, truncate=warmup is None and not stationary,
+                         relaxed=relaxed, transients=None if stationary or relaxed else transients,
+                         deterministic_from=deterministic_from, update=ring.update)
+
+
+def _frozen_reason(step: int, update: str) -> str:
+    if update == PARALLEL:
+        return (f"deterministic from step {step} on: no car's update was random after it, the"
+                " run is in a deterministic cycle whose flux depends on the start")
+    return (f"deterministic from step {step} on: no car's update was random after it, only the"
+            f" {update} order is; the flux may depend on the start")
+
+
 def _replica_seed(seed: int, r: int) -> int:
     # Replica 0 uses the seed itself (replicas=1 is the plain run); the others
     # derive theirs from (seed, r), independent of everything else.
     return int(seed) if r == 0 else int(
         np.random.SeedSequence([int(seed), r]).generate_state(1, np.uint64)[0])
+
+
+def _warmup_edges(warmup: int) -> np.ndarray:
+    """Doubling blocks ``[0, 1), [1, 2), [2, 4), ...`` of an explicit warm-up: few, and
+    enough to fit the start's relaxation (:func:`start_bias`)."""
+    if warmup == 0:
+        return np.zeros(1, dtype=np.int64)
+    return np.unique(np.r_[0, 2 ** np.arange(int(warmup).bit_length()), warmup]
+                     .clip(0, warmup)).astype(np.int64)
 
 
 def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
@@ -871,29 +1476,29 @@ def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
     steps : int
         Recorded time steps per replica.
     warmup : int, optional
-        None (default): automatic, the run is recorded from its start and the
-        warm-up is cut from the data (:func:`mser_truncation`).  An integer:
-        that many steps are run first and every recorded step is kept.
+        None (default): automatic: no warm-up for a stationary start, else
+        the run is recorded from its start and the warm-up is cut from the
+        data (:func:`mser_truncation`).  An integer: that many steps are run
+        first and every recorded step is kept.
     seed : int
         Seed (``0 <= seed < 2**64``); the same seed gives identical results.
     batches : int
-        Blocks of the recorded series (>= 2; at most one per step, and fewer
-        when ``vmax`` is so large that their velocity histograms would need
-        more than 64 MiB).
+        Blocks of each replica's recorded series (>= 2; at most one per
+        step, and fewer when ``vmax`` is so large that their velocity
+        histograms would need more than 64 MiB).
     initial : (positions, velocities), optional
         Start configuration; default :func:`initial_configuration` of kind
         ``start``, drawn from the replica's seed.
     replicas : int
-        Independent runs (own start and stream each); the error bar is the
-        larger of the combined within-run error and the between-run standard
-        error, and replicas that disagree beyond their bars (chi-square,
-        0.1 % level) flag the result.
+        Independent runs (own start and stream each), combined by
+        :func:`estimate_flux`.
     max_memory : float, optional
         Bytes allowed (default 75 % of physical memory); a larger ring is
         refused before anything is allocated (:func:`simulation_bytes`).
-    start : {"random", "uniform"}
-        Start configuration (:func:`initial_configuration`); random (the
-        default) relaxes faster, see the module notes.
+    start : {"auto", "stationary", "random", "uniform"}
+        Start configuration (:func:`initial_configuration`); ``"auto"`` (the
+        default) is the exact stationary state where it is known (NaSch,
+        ``vmax = 1``, parallel update), else the random start.
 
     Returns
     -------
@@ -903,53 +1508,65 @@ def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
     Notes
     -----
     Each replica records the flux of every block (``distance moved / (L *
-    block length)``).  :func:`analyse_series` cuts the warm-up (MSER), takes
-    the error from the integrated autocorrelation time of the kept block
-    means (plus, in quadrature, the difference of the two halves' means: a
-    trend too slow for the other checks), and flags runs too short
-    for it (fewer than :data:`MIN_TAU_MULTIPLE` autocorrelation times), with
-    a transient that outlasts half the run, or with a drift between the first
-    and last part.  The flux is the average of the kept
-    blocks of all replicas, weighted by their lengths:
+    block length)``).  :func:`analyse_series` cuts the warm-up (MSER; not
+    for a stationary start), takes the error from the integrated
+    autocorrelation time of the kept block means, extrapolates it for
+    correlations as long as the run when the run is shorter than
+    :data:`RELAXED_RUN` ``L^(3/2)`` steps (:func:`long_range_error`), adds
+    the start's remaining relaxation (:func:`start_bias`) when the start is
+    not stationary there, and flags runs too short for it (fewer than
+    :data:`MIN_TAU_MULTIPLE` autocorrelation times), with a transient that
+    outlasts half the run, or with an unexplained drift.  The flux is the
+    average of the kept blocks of all replicas, weighted by their lengths:
 
     .. math:: f = \\frac{1}{L T} \\sum_{t} \\sum_j v_j(t), \\qquad
               \\sigma_f^2 = \\tau_{int} \\operatorname{var}(f_b) / n_b
 
-    The coverage of this bar (how often the long-run value lies inside it) is
-    measured by ``benchmarks/mc_coverage.py`` (``docs/validation.md``).
+    The coverage of this bar (how often the exact or long-run value lies
+    inside it) is measured by ``benchmarks/mc_coverage.py``
+    (``docs/validation.md``).
 
     A rule with a single outcome everywhere (NaSch at ``p = 0`` or ``p = 1``)
     is deterministic under parallel update and the result depends on the
     initial configuration (there is no unique stationary state); it is
-    flagged, under the sequential updates too.
+    flagged, under the sequential updates too.  So is a replica in which no
+    car's update was random over its last blocks (cruise control frozen
+    into free flow): it is measured from the first such block on.
 
     Examples
     --------
     >>> r = simulate(Ring(1000, 200, 2, 0.5), steps=4000, seed=3)
-    >>> r.reliable and abs(r.flux - 0.238) < 4 * r.flux_error < 0.01
+    >>> r.reliable and abs(r.flux - 0.2388) < 3 * r.flux_error < 0.01
     True
     """
     steps = _ensure_steps("steps", steps, 1)
     batches = _ensure_steps("batches", batches, 2)
-    replicas = _ensure_steps("replicas", replicas, 1)
-    if start not in STARTS:
-        raise InvalidParameterError(f"start must be one of {', '.join(STARTS)}, got {start!r}")
+    replicas = _ensure_steps("replicas", replicas, 1, _MAX_REPLICAS)
+    start = resolve_start(ring, start)
     if initial is not None and replicas > 1:
         raise InvalidParameterError("an initial configuration allows only replicas = 1")
+    if initial is not None:
+        start = "given"
     auto = warmup is None
     warmup = 0 if auto else _ensure_steps("warmup", warmup, 0)
     _rng_state(seed)   # validates the seed before any work
-    ensure_simulation_fits(ring, max_memory)
+    ensure_simulation_fits(ring, max_memory, "random" if start == "given" else start)
+    stationary = start == "stationary"
+    relaxed = relaxed_run(ring, warmup + steps)
+    if stationary and auto:
+        warmup_rule = "none (stationary start)"
+    else:
+        warmup_rule = "automatic (MSER cut)" if auto else "explicit"
     # velocities never exceed the largest gap, L - N: histograms need no more
     width = min(int(ring.vmax), max(0, int(ring.length) - int(ring.cars))) + 1
     blocks = max(1, min(batches, steps, _SNAPSHOT_BYTES // (8 * width) - 1))
-    # Block b covers steps [edges[b], edges[b+1]); sizes differ by at most one.
-    edges = np.linspace(0, steps, blocks + 1).astype(np.int64)
+    edges = block_edges(steps, blocks)
     sizes = np.diff(edges)
+    warm_edges = _warmup_edges(warmup)
     rule = _kernel_rule(ring)
     start_time = time.perf_counter()
-    results, all_blocks = [], []
-    kept_counts = np.zeros(ring.vmax + 1, dtype=np.int64)
+    all_blocks = np.empty((replicas, blocks))
+    transients, frozen, snapshots = [], [], []
     # One tick per warm-up and per block; drawn only on a terminal (stderr).
     bar = progress_bar(replicas * (blocks + 1), "simulate", "block")
     for r in range(replicas):
@@ -960,50 +1577,53 @@ def simulate(ring: Ring, steps: int, warmup: int | None = None, seed: int = 0,
         else:
             pos, vel = _ensure_configuration(ring, *initial)
         counts = np.zeros(ring.vmax + 1, dtype=np.int64)
-        _advance(ring, rule, pos, vel, warmup, rng, counts)
+        draws = np.zeros(1, dtype=np.int64)
+        wf = np.array([_advance(ring, rule, pos, vel, int(b - a), rng, counts, draws)
+                       / (ring.length * int(b - a)) for a, b in zip(warm_edges, warm_edges[1:])])
+        transients.append((wf, np.diff(warm_edges)))
         bar.update(1)
         # cumulative velocity histogram after each block, to count the kept part only
         snaps = np.zeros((blocks + 1, width), dtype=np.int64)
         counts[:] = 0
-        bf = np.empty(blocks)
+        last_random = -1
         for b in range(blocks):
-            bf[b] = _advance(ring, rule, pos, vel, int(sizes[b]), rng, counts) / (
-                ring.length * int(sizes[b]))
+            before = int(draws[0])
+            all_blocks[r, b] = _advance(ring, rule, pos, vel, int(sizes[b]), rng, counts,
+                                        draws) / (ring.length * int(sizes[b]))
+            if draws[0] > before:
+                last_random = b
             snaps[b + 1] = counts[:width]
             bar.update(1)
-        a = analyse_series(bf, sizes, truncate=auto)
-        kept_counts[:width] += snaps[-1] - snaps[a.cut]
-        results.append((a, int(steps - edges[a.cut])))
-        all_blocks.append(bf)
+        frozen.append(last_random + 1 if ring.cars not in (0, ring.length) else blocks)
+        snapshots.append(snaps)
     bar.close()
     seconds = time.perf_counter() - start_time
-    kept = np.array([k for _, k in results], dtype=float)
-    means = np.array([a.mean for a, _ in results])
-    errs = np.array([a.error for a, _ in results])
-    flux = float(np.dot(kept, means) / kept.sum())
-    error = float(math.sqrt(np.dot(kept ** 2, errs ** 2)) / kept.sum())
-    reasons = [f"replica {r}: {why}" if replicas > 1 else why
-               for r, (a, _) in enumerate(results) for why in a.reasons]
-    if replicas > 1:
-        # the spread between runs sees correlations longer than one run
-        error = max(error, float(np.std(means, ddof=1) / math.sqrt(replicas)))
-        reasons += _replica_disagreement(means, errs)
+    est = estimate_run(ring, all_blocks, sizes, start, None if auto else warmup, transients,
+                       frozen)
+    flux, error, reasons = est.flux, est.error, list(est.reasons)
+    static = _deterministic(ring)
     if ring.cars in (0, ring.length):
         reasons = []     # nothing moves (or nobody can): the flux is exactly 0
         flux, error = 0.0, 0.0
-    elif _deterministic(ring):
-        reasons.insert(0, _deterministic(ring))
-    c_v = kept_counts / (kept.sum() * ring.length)
-    tau_steps = max(a.tau * float(np.mean(sizes[a.cut:])) for a, _ in results)
-    warmup_used = warmup + max(int(edges[a.cut]) for a, _ in results)
+    elif static:
+        reasons = [static]   # the other checks have nothing random to judge
+    kept_counts = np.zeros(ring.vmax + 1, dtype=np.int64)
+    for snaps, a in zip(snapshots, est.analyses):
+        kept_counts[:width] += snaps[-1] - snaps[a.cut]
+    c_v = kept_counts / (sum(est.kept) * ring.length)
+    tau_steps = max(a.tau * float(np.mean(sizes[a.cut:])) for a in est.analyses)
+    warmup_used = warmup + max(int(edges[a.cut]) for a in est.analyses)
     return SimulationResult(ring.length, ring.cars, ring.vmax,
                             None if ring.p is None else float(ring.p), ring.update,
                             steps, warmup, blocks, int(seed), flux, error, c_v,
-                            np.concatenate(all_blocks), seconds, replicas,
+                            all_blocks, seconds, replicas,
                             reliable=not reasons, warning="; ".join(reasons[:3]) or None,
-                            warmup_used=warmup_used, measured_steps=int(kept.sum()),
+                            warmup_used=warmup_used, measured_steps=int(sum(est.kept)),
                             tau_int=float(tau_steps), start=start,
-                            model=ring.model.describe())
+                            model=ring.model.describe(), warmup_rule=warmup_rule,
+                            relaxed=relaxed,
+                            start_bias=max(a.bias for a in est.analyses),
+                            deterministic=bool(static) or any(f < blocks for f in frozen))
 
 
 def _deterministic(ring: Ring) -> str:
@@ -1032,7 +1652,9 @@ def _params_text(ring: Ring) -> str:
 def _replica_disagreement(means: np.ndarray, errors: np.ndarray) -> list[str]:
     """A reason when replica means scatter more than their bars allow (chi-square test)."""
     if np.any(errors <= 0):
-        return [] if np.ptp(means) == 0 else ["replicas differ although each has no spread"]
+        # rounding of equal sums is no disagreement
+        same = np.ptp(means) <= 1e-12 * max(1.0, float(np.max(np.abs(means))))
+        return [] if same else ["replicas differ although each has no spread"]
     from scipy.stats import chi2
 
     w = 1 / errors ** 2

@@ -10,6 +10,13 @@ from ..model_options import build_model, model_options
 
 __all__ = ["simulate"]
 
+#: Recorded steps per replica when --steps is not given.
+DEFAULT_STEPS = 20000
+
+_STARTS = {"stationary": "exact stationary state (NaSch, vmax = 1, parallel update)",
+           "random": "random cells, all cars at rest",
+           "uniform": "cars evenly spaced at velocity min(gap, vmax)"}
+
 
 @click.command()
 @click.option("--length", "-L", type=int, required=True, help="Ring length L (cells).")
@@ -21,14 +28,19 @@ __all__ = ["simulate"]
 @click.option("--p", "p", type=float, default=None,
               help="Braking probability in [0, 1], the model's p [its default; nasch: 0.5].")
 @model_options
-@click.option("--steps", type=int, default=10000, show_default=True,
+@click.option("--steps", type=int, default=DEFAULT_STEPS, show_default=True,
               help="Recorded time steps per replica.")
 @click.option("--warmup", type=int, default=None,
-              help="Steps run before recording [automatic: cut from the data by MSER].")
+              help="Steps run before recording [automatic: none from a stationary start,"
+                   " else cut from the data by MSER].")
+@click.option("--start", type=click.Choice(["auto", "stationary", "random", "uniform"]),
+              default="auto", show_default=True,
+              help="Start configuration; auto: the exact stationary state where it is known"
+                   " (NaSch, vmax 1, parallel), else random.")
 @click.option("--replicas", type=int, default=2, show_default=True,
-              help="Independent runs, each from its own random start.")
+              help="Independent runs, each from its own start.")
 @click.option("--batches", type=int, default=1024, show_default=True,
-              help="Blocks of the recorded flux series (at most one per step).")
+              help="Blocks of each replica's recorded flux series (at most one per step).")
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Random seed; the same seed gives identical output.")
 @click.option("--update", type=click.Choice(["parallel", "random-sequential",
@@ -40,21 +52,25 @@ __all__ = ["simulate"]
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @quiet_option
 @handle_errors
-def simulate(length, density, cars, vmax, p, model, params, steps, warmup, replicas, batches,
-             seed, update, max_memory, as_json):
-    """Monte Carlo flux of a large ring, with an autocorrelation error bar.
+def simulate(length, density, cars, vmax, p, model, params, steps, warmup, start, replicas,
+             batches, seed, update, max_memory, as_json):
+    """Monte Carlo flux of a large ring, with an error bar whose coverage is measured.
 
-    The warm-up is cut from the data (MSER), the 1-sigma error comes from the
-    integrated autocorrelation time, and a run too short for an honest bar
-    (or whose replicas disagree) says so: a warning on stderr and
-    "reliable": false with the reason in the JSON.  Any model (--model,
-    --param; docs/models.md) and update; the JSON records both.
+    The 1-sigma error comes from the integrated autocorrelation time; on a
+    run shorter than 10 L^(3/2) steps it is extrapolated for correlations as
+    long as the run, and a start that is not stationary adds the bias its
+    slow relaxation leaves (fitted from the transient).  A run too short for
+    an honest bar (or whose replicas disagree, or that is deterministic)
+    says so: a warning on stderr and "reliable": false with the reason in
+    the JSON.  Any model (--model, --param; docs/models.md) and update; the
+    output records both, the start and the warm-up rule
+    (docs/validation.md: how often the bars cover).
 
     \b
     Example:
-      nasch simulate --length 100000 --density 0.2 --vmax 5 --p 0.25 --steps 2000
-      nasch simulate -L 1000 -c 0.5 --vmax 2 --p 0.5 --seed 7 --json
-      nasch simulate -L 10000 -c 0.2 --model vdr --param p0=0.75 --p 0.1 --steps 4000
+      nasch simulate --length 100000 --density 0.2 --vmax 2 --p 0.5 --steps 10000
+      nasch simulate -L 10000 -c 0.5 --vmax 1 --p 0.5 --json
+      nasch simulate -L 10000 -c 0.2 --model vdr --param p0=0.75 --update ordered-sequential
       nasch simulate -L 10000 -c 0.3 --model kkw --update ordered-sequential
     """
     from markov.model.ring import Ring
@@ -69,8 +85,11 @@ def simulate(length, density, cars, vmax, p, model, params, steps, warmup, repli
     ring = Ring(length, cars, update=update, model=build_model(model, params, vmax=vmax, p=p))
     max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
     r = run(ring, steps=steps, warmup=warmup, seed=seed, batches=batches, replicas=replicas,
-            max_memory=None if max_memory is None else max_memory * 2**30)
-    if not r.reliable:
+            max_memory=None if max_memory is None else max_memory * 2**30, start=start)
+    if r.deterministic:
+        click.echo(f"warning: deterministic run: {r.warning}; the flux is that of the cycle"
+                   " reached, no error bar applies", err=True)
+    elif not r.reliable:
         click.echo(f"warning: no honest error bar: {r.warning}; run longer (--steps)", err=True)
     if as_json:
         emit_json(r.to_dict())
@@ -78,15 +97,35 @@ def simulate(length, density, cars, vmax, p, model, params, steps, warmup, repli
     values = " ".join(f"{k}={v:g}" for k, v in ring.model.params.items())
     click.echo(f"Monte Carlo of {ring.model.name} ({values}) L={length} N={cars}"
                f" (c={ring.density:.6g}) update={update} seed={seed}")
-    warm = (f"{r.warmup} warm-up" if warmup is not None
-            else f"automatic warm-up, at most {r.warmup_used} steps cut")
-    click.echo(f"  {r.replicas} x {r.steps} steps ({warm}) in {r.batches} blocks,"
+    click.echo(f"  start          {_STARTS[r.start]}")
+    if r.warmup_rule == "explicit":
+        warm = f"{r.warmup} steps run first, every recorded step kept"
+    elif r.warmup_rule.startswith("none"):
+        warm = "none needed (the start is stationary), every recorded step kept"
+    else:
+        warm = f"automatic: cut from the data (MSER), at most {r.warmup_used} steps"
+    click.echo(f"  warm-up        {warm}")
+    click.echo(f"  {r.replicas} x {r.steps} steps in {r.batches} blocks each,"
                f" {r.seconds:.2f} s, {r.car_updates_per_s:.3g} car updates/s")
     tau = (f"<= {r.tau_int:.3g} steps (one block: the blocks are uncorrelated)"
            if r.tau_int_is_bound else f"{r.tau_int:.3g} steps")
-    click.echo(f"  tau_int        {tau}; {r.measured_steps} steps kept in all"
-               f" (after the warm-up cut)")
-    bar = "1 sigma" if r.reliable else "NOT an honest bar, see the warning"
+    click.echo(f"  tau_int        {tau}; {r.measured_steps} steps kept in all")
+    terms = "none: the run is deterministic" if r.deterministic else _bar_terms(r)
+    click.echo(f"  error bar      {terms}")
+    if r.deterministic:
+        bar = "deterministic: no error bar"
+    else:
+        bar = "1 sigma" if r.reliable else "NOT an honest bar, see the warning"
     click.echo(f"  flux           {r.flux:.8f} +- {r.flux_error:.2g} ({bar})")
     for v, c in enumerate(r.c_v):
         click.echo(f"  c_{v}            {c:.8f}")
+
+
+def _bar_terms(r) -> str:
+    """What went into the error bar, in words (the conventions of docs/validation.md)."""
+    terms = ["autocorrelation time"]
+    if not r.relaxed:
+        terms.append("extrapolated for correlations as long as the run (run < 10 L^(3/2))")
+    if r.start_bias > 0:
+        terms.append(f"start-bias term {r.start_bias:.2g}")
+    return "; ".join(terms)
