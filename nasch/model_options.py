@@ -17,15 +17,11 @@ parameter names, bad values and a ``--vmax`` / ``--p`` that disagrees with
 """
 from __future__ import annotations
 
-import re
-
 import click
 
 from markov.errors import InvalidParameterError
 
 __all__ = ["model_options", "parse_params", "param_names", "build_model"]
-
-_INT = re.compile(r"^[+-]?\d+$")
 
 
 def model_options(func):
@@ -55,7 +51,7 @@ def model_options(func):
 
 
 def parse_params(params) -> dict:
-    """``("p=0.5", "vmax=3")`` -> ``{"p": 0.5, "vmax": 3}``.
+    """``("p=0.5", "vmax=3")`` -> ``{"p": 0.5, "vmax": 3}`` (:func:`markov.model.load.parse_values`).
 
     Parameters
     ----------
@@ -66,34 +62,14 @@ def parse_params(params) -> dict:
     -------
     dict
 
-    Raises
-    ------
-    InvalidParameterError
-        An item without ``=``, an empty name, a name given twice, a value that
-        is not a number.
-
     Examples
     --------
     >>> parse_params(["vmax=3", "p=0.25", "p0=1"])
     {'vmax': 3, 'p': 0.25, 'p0': 1}
     """
-    out: dict = {}
-    for item in params:
-        name, sep, text = str(item).partition("=")
-        name, text = name.strip(), text.strip()
-        if not sep or not name or not text:
-            raise InvalidParameterError(f"--param expects NAME=VALUE, got {item!r}")
-        if name in out:
-            raise InvalidParameterError(f"--param {name} given twice")
-        if _INT.match(text):
-            out[name] = int(text)
-            continue
-        try:
-            out[name] = float(text)
-        except ValueError:
-            raise InvalidParameterError(
-                f"--param {name}: {text!r} is not a number") from None
-    return out
+    from markov.model.load import parse_values
+
+    return parse_values(params, "--param")
 
 
 def param_names(params) -> set:

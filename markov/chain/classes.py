@@ -30,7 +30,7 @@ from markov.memory import gib, memory_limit
 from markov.model.ring import Ring
 from markov.chain.statespace import contains_nasch_support
 
-__all__ = ["closed_classes", "all_configurations_classes", "support_graph_bytes",
+__all__ = ["closed_classes", "closed_classes_of_graph", "all_configurations_classes", "support_graph_bytes",
            "known_irreducible", "contains_nasch_support", "search_all_fits", "ClassCensus",
            "SEARCH_ALL_MAX_EDGES", "PROVEN", "ALL_CONFIGURATIONS", "FROM_COMPACT_JAM",
            "FROM_START"]
@@ -213,11 +213,7 @@ def closed_classes(ring: Ring, keys: np.ndarray, lump: bool,
     >>> [len(c) for c in closed_classes(Ring(4, 1, 2, 0.0), keys, lump=True)]
     [1]
     """
-    import scipy.sparse as sp
-    from scipy.sparse.csgraph import connected_components
-
     from markov.chain.sequential import successor_keys
-    from markov.chain.transition import state_indices
 
     keys = np.ascontiguousarray(keys, dtype=np.int64)
     n = len(keys)
@@ -230,6 +226,31 @@ def closed_classes(ring: Ring, keys: np.ndarray, lump: bool,
     if n == 1:
         return [keys]
     indptr, succ = successor_keys(ring, keys, lump)
+    return closed_classes_of_graph(keys, indptr, succ)
+
+
+def closed_classes_of_graph(keys: np.ndarray, indptr: np.ndarray,
+                            succ: np.ndarray) -> list[np.ndarray]:
+    """The closed classes of a support graph given as rows of successor keys.
+
+    Parameters
+    ----------
+    keys : (n,) int64 array, sorted
+        A closed set of states.
+    indptr, succ : int64 arrays
+        Row ``i`` (the successors of ``keys[i]``) is ``succ[indptr[i]:indptr[i+1]]``.
+
+    Returns
+    -------
+    list of (m,) int64 arrays
+        As :func:`closed_classes`.
+    """
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+
+    from markov.chain.transition import state_indices
+
+    n = len(keys)
     col = state_indices(keys, succ)
     graph = sp.csr_array((np.ones(len(col), np.int8), col.astype(np.int32), indptr),
                          shape=(n, n))

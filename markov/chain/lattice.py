@@ -38,7 +38,8 @@ from markov._jit import njit, prange
 from markov.chain.encoding import check_encodable, powers
 from markov.model.ring import UPDATE_CODES
 
-__all__ = ["Lattice", "lattice_of", "successors", "increments", "count_layout",
+__all__ = ["Lattice", "lattice_of", "successors", "increments", "count_layout", "start_key",
+           "count_configurations", "all_lattice_keys", "successor_set", "reachable_keys",
            "ENTRY_CODES", "EXIT_CODES"]
 
 ENTRY_CODES = {"site1": 0, "reservoir": 1, "insert": 2}
@@ -132,7 +133,12 @@ class Lattice:
         return count_layout(self.n_ramps, self.length)
 
     def kernel_args(self) -> tuple:
-        """The arguments every kernel of this module takes, in order."""
+        """The arguments every kernel of this module takes, in order.
+
+        Returns
+        -------
+        tuple
+        """
         return (self.ints, self.floats, self.zone_of, self.zone_vmax, self.count,
                 self.new_velocity, self.weight, self.ramp_cell, self.ramp_velocity,
                 self.ramp_alpha, self.ramp_down, self.ramp_up, self.pw)
@@ -309,16 +315,18 @@ def _virtual(cells, ip, fp, zone_of, zone_vmax, count, newv, wt, exit_open, od, 
 @njit(cache=True)
 def _post(mode, at, cells, w, cnt, cell1_empty, ordered, exit_open, ip, fp, zone_of,
           zone_vmax, count, newv, wt, ramp_cell, ramp_v, ramp_a, ramp_down, ramp_up, pw,
-          out_keys, out_w, incr, row, scale, od, ou, ow):
+          out_keys, out_w, incr, row, scale, od, ou, ow, work, wcnt, order):
     """After the cars moved: the entry (site1, insert; ordered: last, reservoir too) and
-    the ramps, each a coin where it applies; emit every branch."""
+    the ramps, each a coin where it applies; emit every branch (``work``, ``wcnt``,
+    ``order``: the caller's scratch)."""
     L = ip[_L]
     R = ip[_R]
     entry = ip[_ENTRY]
     base = _RAMPS + R
     # the binary choices in their order: -1 the entry (site1/insert), i >= 0 ramp i
     C = R + (1 if entry == 0 or entry == 2 else 0)
-    order = np.empty(C, np.int64)
+    if C == 0 and not (ordered and entry == 1):
+        return _emit(mode, at, cells, w, cnt, ip, pw, out_keys, out_w, incr, row, scale)
     j = 0
     if not ordered and (entry == 0 or entry == 2):
         order[j] = -1
@@ -328,8 +336,6 @@ def _post(mode, at, cells, w, cnt, cell1_empty, ordered, exit_open, ip, fp, zone
         j += 1
     if ordered and (entry == 0 or entry == 2):
         order[j] = -1
-    work = np.empty(L, np.int64)
-    wcnt = np.empty(cnt.shape[0], np.float64)
     for mask in range(1 << C):
         for y in range(L):
             work[y] = cells[y]
@@ -401,12 +407,41 @@ def _post(mode, at, cells, w, cnt, cell1_empty, ordered, exit_open, ip, fp, zone
 # ------------------------------------------------------------------- the updates
 
 @njit(cache=True)
+def _add_outcomes(od, ou, ow, row, m, td, tu, tw, n, factor):
+    """Append ``factor`` times the ``n`` moves ``td, tu, tw[0, :]`` to row ``row`` (which has
+    ``m``), adding to a move already there; returns the new count."""
+    if factor == 0.0:
+        return m
+    for k in range(n):
+        w = factor * tw[0, k]
+        if w == 0.0:
+            continue
+        found = False
+        for j in range(m):
+            if od[row, j] == td[0, k] and ou[row, j] == tu[0, k]:
+                ow[row, j] += w
+                found = True
+                break
+        if not found:
+            od[row, m] = td[0, k]
+            ou[row, m] = tu[0, k]
+            ow[row, m] = w
+            m += 1
+    return m
+
+
+@njit(cache=True)
 def _parallel(mode, key, at, ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_cell, ramp_v,
               ramp_a, ramp_down, ramp_up, pw, out_keys, out_w, incr, row, scale):
+    """Every car (and the virtual car) at once.  The exit coin of ``wall`` only shows to
+    the first car from the exit (to the virtual car on an empty road): its moves are the
+    mixture ``beta`` open + ``1 - beta`` shut; the virtual car's absence is one more of
+    its moves (``od = -1``)."""
     L = ip[_L]
     B = ip[_B]
     R = ip[_R]
-    K = newv.shape[-1]
+    K = max(newv.shape[-1], 2)
+    W = 2 * K + 1
     periodic = ip[_PERIODIC] == 1
     base = _RAMPS + R
     cells = np.empty(L, np.int64)
@@ -421,85 +456,118 @@ def _parallel(mode, key, at, ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_c
             xs[n] = y + 1
             vs[n] = cells[y] - 1
             n += 1
-    od = np.empty((n + 1, max(K, 2)), np.int64)
-    ou = np.empty((n + 1, max(K, 2)), np.int64)
-    ow = np.empty((n + 1, max(K, 2)), np.float64)
+    od = np.empty((n + 1, W), np.int64)
+    ou = np.empty((n + 1, W), np.int64)
+    ow = np.empty((n + 1, W), np.float64)
+    td = np.empty((1, W), np.int64)
+    tu = np.empty((1, W), np.int64)
+    tw = np.empty((1, W), np.float64)
     oc = np.empty(n + 1, np.int64)
     idx = np.empty(n + 1, np.int64)
     new = np.empty(L, np.int64)
     cnt = np.zeros(base + L + 1, np.float64)
+    work = np.empty(L, np.int64)
+    wcnt = np.empty(base + L + 1, np.float64)
+    order_post = np.empty(R + 1, np.int64)
     wall = not periodic and ip[_EXIT] == 1
-    for coin in range(2 if wall else 1):
-        exit_open = coin == 0 and wall
-        w_exit = 1.0 if not wall else (fp[1] if exit_open else 1.0 - fp[1])
-        if w_exit == 0.0:
-            continue
-        for i in range(n):
+    beta = fp[1]
+    for i in range(n):
+        if wall and i == n - 1:
+            m = 0
+            if beta > 0.0:
+                c = _outcomes(cells, xs[i], vs[i], ip, fp, zone_of, zone_vmax, count, newv, wt,
+                              True, td, tu, tw, 0)
+                m = _add_outcomes(od, ou, ow, i, m, td, tu, tw, c, beta)
+            if beta < 1.0:
+                c = _outcomes(cells, xs[i], vs[i], ip, fp, zone_of, zone_vmax, count, newv, wt,
+                              False, td, tu, tw, 0)
+                m = _add_outcomes(od, ou, ow, i, m, td, tu, tw, c, 1.0 - beta)
+            oc[i] = m
+        else:
             oc[i] = _outcomes(cells, xs[i], vs[i], ip, fp, zone_of, zone_vmax, count, newv, wt,
-                              exit_open, od, ou, ow, i)
-        reservoir = not periodic and ip[_ENTRY] == 1
-        for with_virtual in range(2 if reservoir else 1):
-            movers = n
-            w_entry = 1.0
-            if reservoir:
-                w_entry = fp[0] if with_virtual == 1 else 1.0 - fp[0]
-                if w_entry == 0.0:
-                    continue
-                if with_virtual == 1:
-                    oc[n] = _virtual(cells, ip, fp, zone_of, zone_vmax, count, newv, wt,
-                                     exit_open, od, ou, ow, n)
-                    movers = n + 1
+                              False, od, ou, ow, i)
+    movers = n
+    if not periodic and ip[_ENTRY] == 1:             # the reservoir's virtual car
+        alpha = fp[0]
+        m = 0
+        if alpha < 1.0:
+            od[n, 0] = -1
+            ou[n, 0] = 0
+            ow[n, 0] = 1.0 - alpha
+            m = 1
+        if alpha > 0.0:
+            if wall and n == 0:
+                if beta > 0.0:
+                    c = _virtual(cells, ip, fp, zone_of, zone_vmax, count, newv, wt, True,
+                                 td, tu, tw, 0)
+                    m = _add_outcomes(od, ou, ow, n, m, td, tu, tw, c, alpha * beta)
+                if beta < 1.0:
+                    c = _virtual(cells, ip, fp, zone_of, zone_vmax, count, newv, wt, False,
+                                 td, tu, tw, 0)
+                    m = _add_outcomes(od, ou, ow, n, m, td, tu, tw, c, alpha * (1.0 - beta))
+            else:
+                c = _virtual(cells, ip, fp, zone_of, zone_vmax, count, newv, wt, False,
+                             td, tu, tw, 0)
+                m = _add_outcomes(od, ou, ow, n, m, td, tu, tw, c, alpha)
+        oc[n] = m
+        movers = n + 1
+    for i in range(movers):
+        idx[i] = 0
+        if oc[i] == 0:
+            return at
+    counting = mode == 2
+    while True:
+        w = 1.0
+        for i in range(movers):
+            w *= ow[i, idx[i]]
+        if w > 0.0:
+            for y in range(L):
+                new[y] = 0
+            if counting:
+                for y in range(cnt.shape[0]):
+                    cnt[y] = 0.0
             for i in range(movers):
-                idx[i] = 0
-            while True:
-                w = w_exit * w_entry
-                for i in range(movers):
-                    w *= ow[i, idx[i]]
-                if w > 0.0:
-                    for y in range(L):
-                        new[y] = 0
-                    for y in range(cnt.shape[0]):
-                        cnt[y] = 0.0
-                    for i in range(movers):
-                        d = od[i, idx[i]]
-                        u = ou[i, idx[i]]
-                        if i == n:                  # the virtual car
-                            if d < 0:
-                                continue
-                            cnt[_ENTERED] += 1
-                            _cross(cnt, base, 0, d, L, False, 1.0)
-                            new[d - 1] = u + 1
-                            continue
-                        x = xs[i]
-                        if periodic:
-                            cnt[_ADVANCE] += d
-                            _cross(cnt, base, x, d, L, True, 1.0)
-                            new[(x - 1 + d) % L] = u + 1
-                        else:
-                            cnt[_ADVANCE] += d - x
-                            _cross(cnt, base, x, d, L, False, 1.0)
-                            if d > L:
-                                cnt[_LEFT] += 1
-                            else:
-                                new[d - 1] = u + 1
-                    if periodic:
-                        at = _emit(mode, at, new, w, cnt, ip, pw, out_keys, out_w, incr, row,
-                                   scale)
-                    else:
-                        at = _post(mode, at, new, w, cnt, cells[0] == 0, False, exit_open, ip,
-                                   fp, zone_of, zone_vmax, count, newv, wt, ramp_cell, ramp_v,
-                                   ramp_a, ramp_down, ramp_up, pw, out_keys, out_w, incr, row,
-                                   scale, od, ou, ow)
-                # the odometer over the movers' outcomes
-                i = 0
-                while i < movers:
-                    idx[i] += 1
-                    if idx[i] < oc[i]:
-                        break
-                    idx[i] = 0
-                    i += 1
-                if i == movers:
-                    break
+                d = od[i, idx[i]]
+                u = ou[i, idx[i]]
+                if i == n:                  # the virtual car
+                    if d < 0:
+                        continue
+                    new[d - 1] = u + 1
+                    if counting:
+                        cnt[_ENTERED] += 1
+                        _cross(cnt, base, 0, d, L, False, 1.0)
+                    continue
+                x = xs[i]
+                if periodic:
+                    new[(x - 1 + d) % L] = u + 1
+                    if counting:
+                        cnt[_ADVANCE] += d
+                        _cross(cnt, base, x, d, L, True, 1.0)
+                else:
+                    if d <= L:
+                        new[d - 1] = u + 1
+                    if counting:
+                        cnt[_ADVANCE] += d - x
+                        _cross(cnt, base, x, d, L, False, 1.0)
+                        if d > L:
+                            cnt[_LEFT] += 1
+            if periodic:
+                at = _emit(mode, at, new, w, cnt, ip, pw, out_keys, out_w, incr, row, scale)
+            else:
+                at = _post(mode, at, new, w, cnt, cells[0] == 0, False, False, ip, fp, zone_of,
+                           zone_vmax, count, newv, wt, ramp_cell, ramp_v, ramp_a, ramp_down,
+                           ramp_up, pw, out_keys, out_w, incr, row, scale, od, ou, ow, work,
+                           wcnt, order_post)
+        # the odometer over the movers' outcomes
+        i = 0
+        while i < movers:
+            idx[i] += 1
+            if idx[i] < oc[i]:
+                break
+            idx[i] = 0
+            i += 1
+        if i == movers:
+            break
     return at
 
 
@@ -532,6 +600,9 @@ def _ordered(mode, key, at, ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_ce
     vold = np.empty(n + 1, np.int64)
     order = np.empty(max(n, 1), np.int64)       # the cars' cells in the order they update
     cnt = np.zeros(base + L + 1, np.float64)
+    work = np.empty(L, np.int64)
+    wcnt = np.empty(base + L + 1, np.float64)
+    order_post = np.empty(R + 1, np.int64)
     wall = not periodic and ip[_EXIT] == 1
     starts = n if periodic else 1
     if periodic and n == 0:
@@ -563,7 +634,8 @@ def _ordered(mode, key, at, ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_ce
                         at = _post(mode, at, cells, wpre[n], cnt, cells[0] == 0, True, exit_open,
                                    ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_cell,
                                    ramp_v, ramp_a, ramp_down, ramp_up, pw, out_keys, out_w,
-                                   incr, row, scale, od[n:], ou[n:], ow[n:])
+                                   incr, row, scale, od[n:], ou[n:], ow[n:], work, wcnt,
+                                   order_post)
                     d -= 1
                     if d >= 0:
                         _undo(cells, cnt, order[d], vold[d], od[d, kk[d]], ou[d, kk[d]], L,
@@ -853,3 +925,141 @@ def increments(lattice: Lattice, keys: np.ndarray, weights: np.ndarray | None = 
     incr = np.zeros((len(keys), lattice.layout["size"]), np.float64)
     _increments(keys, w, *lattice.kernel_args(), incr)
     return incr
+
+
+# ---------------------------------------------------------------- the states
+
+def start_key(lattice: Lattice) -> int:
+    """The search's start: the empty road, or the compact jam of a ring with stretches.
+
+    Parameters
+    ----------
+    lattice : Lattice
+
+    Returns
+    -------
+    int
+    """
+    if not lattice.periodic:
+        return 0
+    return int(sum(int(lattice.pw[x]) for x in range(int(lattice.ints[_NZ]))))
+
+
+def count_configurations(lattice: Lattice) -> int:
+    """Every configuration: ``B**L`` on a road, ``C(L, N) (Vmax + 1)**N`` on a ring.
+
+    Parameters
+    ----------
+    lattice : Lattice
+
+    Returns
+    -------
+    int
+    """
+    import math
+
+    L, top = lattice.length, lattice.top_vmax
+    if lattice.periodic:
+        n = int(lattice.ints[_NZ])
+        return math.comb(L, n) * (top + 1) ** n
+    return (top + 2) ** L
+
+
+def all_lattice_keys(lattice: Lattice) -> np.ndarray:
+    """Sorted keys of every configuration (:func:`count_configurations` of them).
+
+    Parameters
+    ----------
+    lattice : Lattice
+
+    Returns
+    -------
+    (n,) int64 array
+    """
+    import itertools
+
+    from markov.chain.encoding import unique_keys
+
+    L, top = lattice.length, lattice.top_vmax
+    if not lattice.periodic:
+        return np.arange((top + 2) ** L, dtype=np.int64)
+    n = int(lattice.ints[_NZ])
+    if n == 0:
+        return np.zeros(1, np.int64)
+    places = np.array(list(itertools.combinations(range(L), n)), dtype=np.int64)
+    digits = np.array(list(itertools.product(range(1, top + 2), repeat=n)), dtype=np.int64)
+    keys = (lattice.pw[places][:, None, :] * digits[None, :, :]).sum(axis=2).ravel()
+    return unique_keys(keys)
+
+
+def successor_set(lattice: Lattice, keys: np.ndarray) -> np.ndarray:
+    """Sorted distinct successors of ``keys`` (the support of ``x P``).
+
+    Parameters
+    ----------
+    lattice : Lattice
+    keys : (n,) int64 array
+
+    Returns
+    -------
+    (m,) int64 array
+    """
+    from markov.chain.encoding import unique_keys
+
+    return unique_keys(successors(lattice, keys)[1])
+
+
+#: States per call of the row generator in the search (bounds its transient arrays).
+_CHUNK = 1 << 18
+
+
+def reachable_keys(lattice: Lattice, start: int | None = None, max_memory: float | None = None,
+                   per_state: float | None = None) -> np.ndarray:
+    """Sorted keys of everything reachable from ``start`` (default :func:`start_key`).
+
+    Parameters
+    ----------
+    lattice : Lattice
+    start : int, optional
+    max_memory : float, optional
+        Bytes allowed (default 75 % of physical memory).
+    per_state : float, optional
+        Bytes per state the caller will need; at least the search's own.
+
+    Returns
+    -------
+    (n,) int64 array, sorted
+
+    Raises
+    ------
+    StateSpaceTooLargeError
+        As soon as the states found, times ``per_state``, exceed the limit.
+    """
+    from markov.chain.encoding import unique_keys
+    from markov.errors import StateSpaceTooLargeError
+    from markov.memory import gib, memory_limit, search_bytes_per_state
+    from markov.progress import progress_bar
+
+    limit = memory_limit(max_memory)
+    per_state = max(search_bytes_per_state(), per_state or 0.0)
+    visited = np.array([start_key(lattice) if start is None else start], dtype=np.int64)
+    frontier = visited
+    with progress_bar(None, "states", "state") as bar:
+        while frontier.size:
+            found = unique_keys(np.concatenate(
+                [successor_set(lattice, frontier[lo:lo + _CHUNK])
+                 for lo in range(0, frontier.size, _CHUNK)]))
+            idx = np.searchsorted(visited, found)
+            idx[idx == len(visited)] = 0
+            new = found[visited[idx] != found]
+            visited = np.concatenate([visited, new])
+            visited.sort(kind="stable")
+            frontier = new
+            bar.update(new.size)
+            if visited.size * per_state > limit:
+                raise StateSpaceTooLargeError(
+                    f"the chain of {lattice.system.__class__.__name__.lower()} L ="
+                    f" {lattice.length} has more than {visited.size:,} states; at about"
+                    f" {per_state:.0f} bytes per state that exceeds the memory limit of"
+                    f" {gib(limit)}")
+    return visited

@@ -21,6 +21,7 @@ import importlib
 import importlib.util
 import math
 import numbers
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from fractions import Fraction
@@ -32,7 +33,7 @@ from markov.errors import InvalidParameterError
 from markov.model.spec import ModelSpec
 from markov.validate import ensure_int
 
-__all__ = ["Model", "load_model", "MODELS", "SHIPPED", "available_models"]
+__all__ = ["Model", "load_model", "MODELS", "SHIPPED", "available_models", "parse_values"]
 
 #: Names of the shipped models, each a module ``markov.model.shipped.<name>``.
 SHIPPED = ("nasch", "vdr", "tt", "bjh", "fi", "cc", "kkw")
@@ -99,16 +100,29 @@ class Model:
         """Maximal velocity."""
         return self.params["vmax"]
 
-    def horizon(self) -> int:
+    def horizon(self, max_velocity: int | None = None) -> int:
         """Largest gap the rule distinguishes (rows above it repeat this one).
+
+        Parameters
+        ----------
+        max_velocity : int, optional
+            The largest ``v`` and ``v_ahead`` it is asked about, when above its
+            ``vmax`` (a car from a faster stretch): the larger of the rule's
+            horizon and the horizon it declares for that ``vmax``.
 
         Returns
         -------
         int
         """
+        own = self.vmax if self.spec.horizon is None else ensure_int(
+            f"horizon of rule {self.name}", self.spec.horizon(self.params), 0)
+        if max_velocity is None or max_velocity <= self.vmax:
+            return own
         if self.spec.horizon is None:
-            return self.vmax
-        return ensure_int(f"horizon of rule {self.name}", self.spec.horizon(self.params), 0)
+            return max(own, max_velocity)
+        wider = ensure_int(f"horizon of rule {self.name}",
+                           self.spec.horizon({**self.params, "vmax": max_velocity}), 0)
+        return max(own, wider)
 
     def with_params(self, **changes) -> "Model":
         """The same rule with some parameters changed (validated again).
@@ -310,3 +324,50 @@ def available_models() -> list[dict]:
     return [{"name": s.name, "parameters": dict(s.parameters),
              "descriptions": dict(s.descriptions), "reference": s.reference,
              "convention": s.convention} for s in MODELS.values()]
+
+
+_INT = re.compile(r"^[+-]?\d+$")
+
+
+def parse_values(items, option: str = "--param") -> dict:
+    """``("p=0.5", "vmax=3")`` -> ``{"p": 0.5, "vmax": 3}``: an integer reads as ``int``.
+
+    Parameters
+    ----------
+    items : iterable of str
+        ``NAME=VALUE`` items.
+    option : str
+        The option they came from, for the messages.
+
+    Returns
+    -------
+    dict
+
+    Raises
+    ------
+    InvalidParameterError
+        An item without ``=``, an empty name, a name given twice, a value that
+        is not a number.
+
+    Examples
+    --------
+    >>> parse_values(["vmax=3", "p=0.25", "p0=1"])
+    {'vmax': 3, 'p': 0.25, 'p0': 1}
+    """
+    out: dict = {}
+    for item in items:
+        name, sep, text = str(item).partition("=")
+        name, text = name.strip(), text.strip()
+        if not sep or not name or not text:
+            raise InvalidParameterError(f"{option} expects NAME=VALUE, got {item!r}")
+        if name in out:
+            raise InvalidParameterError(f"{option} {name} given twice")
+        if _INT.match(text):
+            out[name] = int(text)
+            continue
+        try:
+            out[name] = float(text)
+        except ValueError:
+            raise InvalidParameterError(
+                f"{option} {name}: {text!r} is not a number") from None
+    return out

@@ -16,6 +16,7 @@ from fractions import Fraction
 
 from markov.errors import InvalidParameterError
 from markov.model.load import Model, load_model
+from markov.model.stretch import zone_models
 from markov.model.table import RuleTable, cached_table
 from markov.validate import ensure_int as _ensure_int
 
@@ -67,6 +68,11 @@ class Ring:
         the NaSch model with ``vmax`` and ``p``.  With a model, ``vmax`` and
         ``p`` may be left out: they are read from it (``p`` is ``None`` for a
         model without a parameter ``p``); given, they must agree with it.
+    stretches : sequence of Stretch, optional
+        Cells whose cars use other parameter values (a slow site, a speed
+        limit; :mod:`markov.model.stretch`).  A ring with a stretch has no
+        rotation symmetry: it is solved without lumping, on the chain of the
+        roads (:mod:`markov.chain.lattice`).
 
     Examples
     --------
@@ -85,6 +91,7 @@ class Ring:
     p: float | Fraction | None = None
     update: str = PARALLEL
     model: Model | None = None
+    stretches: tuple = ()
 
     def __post_init__(self) -> None:
         length = _ensure_int("length L", self.length, 1)
@@ -119,12 +126,38 @@ class Ring:
         object.__setattr__(self, "vmax", vmax)
         object.__setattr__(self, "p", p)
         object.__setattr__(self, "model", model)
+        stretches = tuple(self.stretches)
+        object.__setattr__(self, "stretches", stretches)
+        object.__setattr__(self, "_zones", zone_models(model, length, stretches))
 
     def __repr__(self) -> str:
         head = f"Ring(length={self.length}, cars={self.cars}, "
+        tail = f", stretches={self.stretches!r})" if self.stretches else ")"
         if self.is_nasch:
-            return head + f"vmax={self.vmax}, p={self.p!r}, update={self.update!r})"
-        return head + f"update={self.update!r}, model={self.model!r})"
+            return head + f"vmax={self.vmax}, p={self.p!r}, update={self.update!r}" + tail
+        return head + f"update={self.update!r}, model={self.model!r}" + tail
+
+    periodic = True
+
+    @property
+    def zones(self) -> tuple[Model, ...]:
+        """The distinct models along the ring, the bulk first (one without stretches)."""
+        return self._zones[0]
+
+    @property
+    def zone_of_cell(self) -> tuple[int, ...]:
+        """Index into :attr:`zones` of each cell ``1..L`` (position ``x - 1``)."""
+        return self._zones[1]
+
+    @property
+    def homogeneous(self) -> bool:
+        """Whether every cell has the bulk model: no stretch with other values."""
+        return len(self.zones) == 1
+
+    @property
+    def top_vmax(self) -> int:
+        """The largest ``vmax`` along the ring."""
+        return max(m.vmax for m in self.zones)
 
     @property
     def is_nasch(self) -> bool:
@@ -196,4 +229,4 @@ class Ring:
         Ring
         """
         return Ring(self.length, self.cars, update=self.update,
-                    model=self.model.with_params(**changes))
+                    model=self.model.with_params(**changes), stretches=self.stretches)

@@ -179,7 +179,8 @@ def _symbol_params(model: Model) -> dict:
     return params
 
 
-def tabulate(model: Model, max_gap: int | None = None, symbolic: bool = False) -> RuleTable:
+def tabulate(model: Model, max_gap: int | None = None, symbolic: bool = False,
+             max_velocity: int | None = None) -> RuleTable:
     """Evaluate and validate a rule on every ``(v, gap, v_ahead)``.
 
     Parameters
@@ -194,6 +195,11 @@ def tabulate(model: Model, max_gap: int | None = None, symbolic: bool = False) -
         :attr:`RuleTable.weights` are then expressions (distinct after
         simplification) and zero weights are those that vanish identically;
         :attr:`RuleTable.weight` holds their values at the model's parameters.
+    max_velocity : int, optional
+        Tabulate ``v`` and ``v_ahead`` up to this (default and at least
+        ``vmax``): a car on a stretch with a lower ``vmax`` may still carry the
+        velocity of a faster one (:mod:`markov.model.stretch`); the new
+        velocity stays in ``0..min(gap, vmax)``.
 
     Returns
     -------
@@ -219,21 +225,22 @@ def tabulate(model: Model, max_gap: int | None = None, symbolic: bool = False) -
     """
     import numpy as np
 
-    horizon = model.horizon()
+    horizon = model.horizon(max_velocity)
     max_gap = horizon if max_gap is None else ensure_int("max_gap", max_gap, 0)
     vmax = model.vmax
-    calls = (vmax + 1) ** 2 * (min(max_gap, horizon) + 1 + HORIZON_PROBE)
+    v_top = vmax if max_velocity is None else max(vmax, ensure_int("max_velocity", max_velocity, 0))
+    calls = (v_top + 1) ** 2 * (min(max_gap, horizon) + 1 + HORIZON_PROBE)
     if calls > MAX_RULE_CALLS:
         raise InvalidParameterError(
-            f"the table of rule {model.name} needs {calls:.3g} calls of the rule (vmax = {vmax},"
+            f"the table of rule {model.name} needs {calls:.3g} calls of the rule (vmax = {v_top},"
             f" horizon {horizon}: (vmax + 1)^2 (horizon + {1 + HORIZON_PROBE})), more than"
             f" {MAX_RULE_CALLS:,}; use a smaller vmax or horizon")
     params = _symbol_params(model) if symbolic else model.params
     values = dict(model.values)
     rows: dict[tuple[int, int, int], list] = {}
     with RuleCaller(model.spec.function, model.name, params) as call:
-        for v in range(vmax + 1):
-            for a in range(vmax + 1):
+        for v in range(v_top + 1):
+            for a in range(v_top + 1):
                 for g in range(min(max_gap, horizon) + 1):
                     rows[v, g, a] = _merge(model, call(v, g, a), v, g, a, symbolic)
                 top = rows[v, horizon, a] if horizon <= max_gap else _merge(
@@ -248,7 +255,7 @@ def tabulate(model: Model, max_gap: int | None = None, symbolic: bool = False) -
                 for g in range(horizon + 1, max_gap + 1):
                     rows[v, g, a] = top
     width = max(len(r) for r in rows.values())
-    shape = (vmax + 1, max_gap + 1, vmax + 1)
+    shape = (v_top + 1, max_gap + 1, v_top + 1)
     count = np.zeros(shape, np.int64)
     new_velocity = np.full(shape + (width,), -1, np.int64)
     weight = np.zeros(shape + (width,), np.float64)
