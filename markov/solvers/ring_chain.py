@@ -8,7 +8,7 @@ one-call entry point used by the CLI.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -17,6 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from markov import memory
+from markov.solvers.class_solutions import ClassSolution, ClassSolutions
 from markov.chain.classes import (
     ALL_CONFIGURATIONS,
     FROM_COMPACT_JAM,
@@ -960,166 +961,6 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     _ensure_representable(ring)
     return RingChain(ring, lump=lump, max_memory=max_memory, operator=operator,
                      state_bound=state_bound).solution(method=method, tol=tol)
-
-
-@dataclass(frozen=True)
-class ClassSolution:
-    """One closed class of a reducible chain and its stationary state.
-
-    Attributes
-    ----------
-    representative : str
-        The class's smallest configuration in text notation.
-    from_start : bool
-        Whether the class is reachable from the start configuration (the
-        compact jam by default).
-    solution : Solution
-        The stationary state restricted to the class.
-    """
-
-    representative: str
-    from_start: bool
-    solution: Solution
-
-    def to_dict(self) -> dict:
-        """JSON-ready: the solution's fields with the class's.
-
-        Returns
-        -------
-        dict
-        """
-        d = self.solution.to_dict()
-        d.update(representative=self.representative, from_start=self.from_start)
-        return d
-
-
-#: Two classes' values of an observable that differ by less than this are the same.
-COMMON_TOL = 1e-12
-
-#: The observables :meth:`ClassSolutions.common` compares, with their names in to_dict.
-_OBSERVABLES = ("flux", "mean_velocity", "c_v", "gap_distribution")
-
-
-@dataclass(frozen=True)
-class ClassSolutions(Sequence):
-    """Every closed class of a ring solved: a reducible chain answered in full.
-
-    A sequence of :class:`ClassSolution` (ordered by the classes' smallest
-    keys), with how the classes were found and what they share.
-
-    Attributes
-    ----------
-    ring : Ring
-    classes : tuple of ClassSolution
-    census : ClassCensus
-        How many classes there are, and whether that is every class of the ring.
-    origin : str
-        What ``from_start`` refers to: ``"compact jam"`` or ``"start"``.
-    """
-
-    ring: Ring
-    classes: tuple
-    census: ClassCensus
-    origin: str = "compact jam"
-
-    def __getitem__(self, i):
-        return self.classes[i]
-
-    def __len__(self) -> int:
-        return len(self.classes)
-
-    def common(self, tol: float = COMMON_TOL) -> dict:
-        """The observables that are the same in every class, name -> value.
-
-        ``flux``, ``mean_velocity``, ``c_v`` and ``gap_distribution``, each
-        kept when all classes agree within ``tol`` (the value is the first
-        class's).  An observable that differs is left out: no class speaks
-        for the others.
-
-        Parameters
-        ----------
-        tol : float
-
-        Returns
-        -------
-        dict
-
-        Examples
-        --------
-        NaSch at ``p = 0``: every class carries ``min(vmax c, 1 - c)``, but
-        not the same velocities.
-
-        >>> sorted(solve_classes(Ring(10, 5, 2, 0.0)).common())
-        ['flux', 'mean_velocity']
-        """
-        dicts = [c.solution.to_dict() for c in self.classes]
-        out = {}
-        for name in _OBSERVABLES:
-            values = [np.asarray(d[name], dtype=float) for d in dicts]
-            if all(v.shape == values[0].shape and np.allclose(v, values[0], rtol=0, atol=tol)
-                   for v in values):
-                out[name] = dicts[0][name]
-        return out
-
-    def flux_groups(self, most: int = 6) -> str:
-        """The classes grouped by flux: ``"0 in 19 classes (e.g. 000.....); 0.25 in 4 (...)"``.
-
-        Parameters
-        ----------
-        most : int
-            Groups shown; the rest are counted.
-
-        Returns
-        -------
-        str
-        """
-        groups: dict[float, list[ClassSolution]] = {}
-        for c in self.classes:
-            groups.setdefault(round(c.solution.flux, 12), []).append(c)
-        shown = "; ".join(
-            f"{flux:.12g} in {len(members)} class{'es' if len(members) > 1 else ''}"
-            f" (e.g. {members[0].representative})"
-            for flux, members in sorted(groups.items())[:most])
-        if len(groups) > most:
-            shown += f"; and {len(groups) - most} more fluxes"
-        return shown
-
-    def summary(self) -> str:
-        """One line: the classes grouped by their flux, and what they share.
-
-        Returns
-        -------
-        str
-        """
-        shown = self.flux_groups()
-        common = [n for n in self.common() if n != "mean_velocity"]
-        same = (f"; the same in every class: {', '.join(common)}" if common
-                else "; no observable is the same in every class")
-        return f"{self.census.note()}: flux {shown}{same}"
-
-    def refusal(self) -> str:
-        """The one-line refusal of a single answer for this ring.
-
-        Returns
-        -------
-        str
-        """
-        r = self.ring
-        params = " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
-                          for k, v in r.model.params.items())
-        return (f"the chain of {r.model.name} {params} (L={r.length}, N={r.cars}, {r.update})"
-                f" has no unique stationary state: {self.summary()}; solve each with"
-                " solve_classes (nasch solve --classes)")
-
-    def to_dict(self) -> dict:
-        """JSON-ready: ``closed_classes`` (the census), ``common``, ``classes``.
-
-        Returns
-        -------
-        dict
-        """
-        return {"closed_classes": self.census.to_dict(), "common": self.common(),
-                "classes": [c.to_dict() for c in self.classes], "origin": self.origin}
 
 
 def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
