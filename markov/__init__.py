@@ -42,6 +42,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 __all__ = [
     "Ring", "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL", "ORDERED_SEQUENTIAL",
+    "Road", "Stretch", "OnRamp", "RoadChain", "RoadSolution", "solve_road",
     "rule", "ModelSpec", "Model", "load_model", "MODELS", "available_models", "tabulate",
     "RingChain", "Solution", "ClassSolution", "ClassSolutions", "solve", "solve_classes",
     "to_frame", "load_solution", "stationary", "StationaryResult",
@@ -57,6 +58,10 @@ __all__ = [
 _WHERE = {
     **{name: "markov.model.ring" for name in ("Ring", "UPDATES", "PARALLEL",
                                              "RANDOM_SEQUENTIAL", "ORDERED_SEQUENTIAL")},
+    "Road": "markov.model.road", "OnRamp": "markov.model.road",
+    "Stretch": "markov.model.stretch",
+    **{name: "markov.solvers.road_chain" for name in ("RoadChain", "RoadSolution",
+                                                     "solve_road")},
     "rule": "markov.model.spec", "ModelSpec": "markov.model.spec",
     **{name: "markov.model.load" for name in ("Model", "load_model", "MODELS",
                                              "available_models")},

@@ -6,6 +6,8 @@ equations (``tests/test_symbolic_paradisical.py``), never against this copy.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -82,3 +84,16 @@ def backward_sequential_vmax1_flux(p, c):
     """
     q = 1 - p
     return q * c * (1 - c) / (1 - q * c)
+
+
+def dehp_Z(L, a, b):
+    """Derrida-Evans-Hakim-Pasquier normalisation for hop rate 1 (``Z_0 = 1``).
+
+    ``Z_L = sum_{p=1..L} p (2L-1-p)! / (L! (L-p)!) * (b^{-p-1} - a^{-p-1}) / (b^{-1} - a^{-1})``;
+    the last factor is written as ``sum_{k=0..p} a^{-k} b^{-(p-k)}`` (the same
+    polynomial, no 0/0 at ``a = b``).
+    """
+    if L == 0:
+        return 1.0
+    return sum(p * math.factorial(2 * L - 1 - p) / (math.factorial(L) * math.factorial(L - p))
+               * sum(a ** -k * b ** -(p - k) for k in range(p + 1)) for p in range(1, L + 1))

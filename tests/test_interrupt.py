@@ -66,7 +66,7 @@ def test_ctrl_c_during_a_simulation(tmp_path):
 @pytest.mark.parametrize("delay", [1.0, 4.5])   # while the cluster starts / while it works
 def test_ctrl_c_during_a_dask_table(tmp_path, delay):
     proc, _, err, scratch = _interrupt(
-        ["table", "--lengths", "8,10,12,14,16", "--density", "0.5,0.25", "--p", "0.25,0.5",
+        ["table", "--lengths", "16,18,20,22", "--density", "0.5,0.25", "--p", "0.25,0.5",
          "--mc-steps", "0", "--workers", "2", "-o", "t.csv"], tmp_path, None, delay)
     _check(proc, err, tmp_path, scratch)
 
@@ -75,13 +75,13 @@ def test_ctrl_c_during_a_dask_table(tmp_path, delay):
 # search or the factored operator runs inside a compiled kernel (where the
 # interrupt used to surface as "SystemError: CPUDispatcher(...) returned a
 # result with an exception set" and a 90-line traceback), while the solver
-# iterates.  L = 20 takes about 15 s here, so every delay lands in the work.
+# iterates.  L = 22 takes about 15 s here, so every delay lands in the work.
 # Around 0.4 s the interrupt lands in imports that run exec() on a string,
 # after which CPython used to end the process by SIGINT (status -2) although
 # the interrupt had been caught and reported (about half of such runs).
 @pytest.mark.parametrize("delay", [0.3, 0.4, 0.6, 0.9, 1.3, 1.7, 2.1, 2.5])
 def test_ctrl_c_at_varied_moments_of_a_solve(tmp_path, delay):
-    proc, _, err, scratch = _interrupt(["solve", "-L", "20", "-N", "10", "--vmax", "2",
+    proc, _, err, scratch = _interrupt(["solve", "-L", "22", "-N", "11", "--vmax", "2",
                                         "--p", "0.5"], tmp_path, None, delay)
     _check(proc, err, tmp_path, scratch)
 

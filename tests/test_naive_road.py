@@ -13,6 +13,7 @@ import itertools
 import math
 
 import naive_road as nr
+from reference import dehp_Z
 import numpy as np
 import pytest
 
@@ -55,19 +56,6 @@ def assert_transitions(road, cells, expected):
 
 
 # ------------------------------------------------ random-sequential TASEP: DEHP
-
-
-def dehp_Z(L, a, b):
-    """Derrida-Evans-Hakim-Pasquier normalisation for hop rate 1 (``Z_0 = 1``).
-
-    ``Z_L = sum_{p=1..L} p (2L-1-p)! / (L! (L-p)!) * (b^{-p-1} - a^{-p-1}) / (b^{-1} - a^{-1})``;
-    the last factor is written as ``sum_{k=0..p} a^{-k} b^{-(p-k)}`` (the same
-    polynomial, no 0/0 at ``a = b``).
-    """
-    if L == 0:
-        return 1.0
-    return sum(p * math.factorial(2 * L - 1 - p) / (math.factorial(L) * math.factorial(L - p))
-               * sum(a ** -k * b ** -(p - k) for k in range(p + 1)) for p in range(1, L + 1))
 
 
 def test_dehp_sum_is_the_quoted_ratio():

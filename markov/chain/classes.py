@@ -33,7 +33,7 @@ from markov.chain.statespace import contains_nasch_support
 __all__ = ["closed_classes", "closed_classes_of_graph", "all_configurations_classes", "support_graph_bytes",
            "known_irreducible", "contains_nasch_support", "search_all_fits", "ClassCensus",
            "SEARCH_ALL_MAX_EDGES", "PROVEN", "ALL_CONFIGURATIONS", "FROM_COMPACT_JAM",
-           "FROM_START"]
+           "FROM_EMPTY_ROAD", "FROM_START", "lattice_irreducible"]
 
 #: Every configuration of a ring whose single class is not proven is searched for
 #: closed classes up to this many edges of the support graph (lumped
@@ -44,6 +44,7 @@ SEARCH_ALL_MAX_EDGES = 10_000_000
 PROVEN = "proven"                          # one class, by an argument (known_irreducible)
 ALL_CONFIGURATIONS = "all configurations"  # every configuration searched
 FROM_COMPACT_JAM = "from the compact jam"  # only what the compact jam reaches
+FROM_EMPTY_ROAD = "from the empty road"    # only what the empty road reaches
 FROM_START = "from the start"              # only what a given start reaches
 
 
@@ -63,11 +64,15 @@ class ClassCensus:
         :data:`FROM_START` (the classes a given start configuration reaches).
     configurations : int
         Configurations of the ring (rotation classes when lumped are fewer).
+    origin : str
+        Where the search starts: ``"the compact jam"`` (a ring) or ``"the
+        empty road"``.
     """
 
     count: int
     scope: str
     configurations: int
+    origin: str = "the compact jam"
 
     @property
     def complete(self) -> bool:
@@ -84,16 +89,16 @@ class ClassCensus:
         Examples
         --------
         >>> ClassCensus(1, FROM_COMPACT_JAM, 10**11).note()
-        "one closed class reached from the compact jam; the rest of the ring's 1e+11 configurations was not searched for other classes"
+        'one closed class reached from the compact jam; the rest of the 1e+11 configurations was not searched for other classes'
         """
         what = "one closed class" if self.count == 1 else f"{self.count} closed classes"
         if self.scope == PROVEN:
-            return f"{what} (proven: every configuration reaches the compact jam)"
+            return f"{what} (proven: every configuration reaches {self.origin})"
         if self.scope == ALL_CONFIGURATIONS:
             return f"{what} (all {self.configurations:,} configurations searched)"
         if self.scope == FROM_START:
             return f"{what} reached from the start configuration (the class it falls into)"
-        return (f"{what} reached from the compact jam; the rest of the ring's"
+        return (f"{what} reached from {self.origin}; the rest of the"
                 f" {self.configurations:.3g} configurations was not searched for other classes")
 
     def to_dict(self) -> dict:
@@ -104,7 +109,7 @@ class ClassCensus:
         dict
         """
         return {"count": self.count, "scope": self.scope, "complete": self.complete,
-                "configurations": self.configurations}
+                "configurations": self.configurations, "origin": self.origin}
 
 
 def known_irreducible(ring: Ring) -> bool:
@@ -305,3 +310,53 @@ def all_configurations_classes(ring: Ring, lump: bool = True,
             f" vmax={ring.vmax}) and their support graph need about {gib(need)}, over the"
             f" limit of {gib(limit)}")
     return closed_classes(ring, all_keys(ring, lump, max_memory), lump, max_memory)
+
+
+def lattice_irreducible(lattice) -> bool:
+    """Whether a road, or a ring with stretches, has one closed class, proven.
+
+    A road drains: if nothing need enter in a step (``alpha < 1`` and every
+    ramp's ``alpha_r < 1``; under random-sequential update a sub-step away
+    from the entry and the ramps enters nothing anyway), cars can leave
+    (``beta > 0``) and every car with an empty cell ahead can move (a new
+    velocity ``>= 1`` in every row with ``gap >= 1``, in every zone), then
+    every configuration reaches the empty road, which therefore lies in every
+    closed class: there is one.  A ring with stretches whose zones share one
+    ``vmax`` and each contain NaSch's outcomes has NaSch's paths
+    (:func:`known_irreducible`'s argument, cell by cell).
+
+    Parameters
+    ----------
+    lattice : markov.chain.lattice.Lattice
+
+    Returns
+    -------
+    bool
+    """
+    count, new = lattice.count, lattice.new_velocity
+    zones, top, H = count.shape[0], count.shape[1] - 1, count.shape[2] - 1
+    if lattice.periodic:
+        vmaxes = set(int(v) for v in lattice.zone_vmax)
+        if len(vmaxes) != 1:
+            return False
+        vmax = vmaxes.pop()
+        for z in range(zones):
+            for v in range(top + 1):
+                for g in range(H + 1):
+                    u = min(v + 1, vmax, g)
+                    need = {u - 1, u} if u else {0}
+                    for a in range(top + 1):
+                        if not need <= set(new[z, v, g, a, :count[z, v, g, a]].tolist()):
+                            return False
+        return True
+    alpha, beta = float(lattice.floats[0]), float(lattice.floats[1])
+    sequential = int(lattice.ints[5]) == 1
+    if beta <= 0 or not sequential and (alpha >= 1 or (lattice.ramp_alpha >= 1).any()):
+        return False
+    for z in range(zones):
+        for v in range(top + 1):
+            for g in range(1, H + 1):
+                for a in range(top + 1):
+                    if new[z, v, g, a, :count[z, v, g, a]].max() < 1:
+                        return False
+    return True

@@ -16,7 +16,7 @@ from fractions import Fraction
 
 from markov.errors import InvalidParameterError
 from markov.model.load import Model, load_model
-from markov.model.stretch import zone_models
+from markov.model.stretch import cell_zones, zone_models
 from markov.model.table import RuleTable, cached_table
 from markov.validate import ensure_int as _ensure_int
 
@@ -147,7 +147,7 @@ class Ring:
     @property
     def zone_of_cell(self) -> tuple[int, ...]:
         """Index into :attr:`zones` of each cell ``1..L`` (position ``x - 1``)."""
-        return self._zones[1]
+        return cell_zones(self.length, self._zones[1])
 
     @property
     def homogeneous(self) -> bool:

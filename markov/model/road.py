@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from markov.errors import InvalidParameterError
 from markov.model.load import Model, load_model
 from markov.model.ring import NASCH, PARALLEL, UPDATES
-from markov.model.stretch import Stretch, zone_models
+from markov.model.stretch import Stretch, cell_zones, zone_models
 from markov.validate import ensure_int
 
 __all__ = ["Road", "Stretch", "OnRamp", "ENTRIES", "EXITS", "SITE1", "RESERVOIR", "INSERT",
@@ -256,7 +256,7 @@ class Road:
     @property
     def zone_of_cell(self) -> tuple[int, ...]:
         """Index into :attr:`zones` of each cell ``1..L`` (position ``x - 1``)."""
-        return self._zones[1]
+        return cell_zones(self.length, self._zones[1])
 
     @property
     def top_vmax(self) -> int:

@@ -90,11 +90,13 @@ class Stretch:
         return {"first": self.first, "last": self.last, "values": dict(self.values)}
 
 
-def zone_models(model: Model, length: int, stretches) -> tuple[tuple[Model, ...], tuple[int, ...]]:
-    """The distinct models along ``length`` cells and each cell's index into them.
+def zone_models(model: Model, length: int, stretches) -> tuple[tuple[Model, ...], tuple]:
+    """The distinct models along ``length`` cells and the stretches that use them.
 
     Zone 0 is the bulk model; each stretch with values that differ from the
-    bulk adds its model (equal ones share a zone).
+    bulk adds its model (equal ones share a zone).  The cells are not listed
+    one by one (a ring of 2**61 cells has a bulk and nothing else):
+    :func:`cell_zones` expands the answer for a lattice small enough to build.
 
     Parameters
     ----------
@@ -104,8 +106,9 @@ def zone_models(model: Model, length: int, stretches) -> tuple[tuple[Model, ...]
 
     Returns
     -------
-    (models, zone_of_cell)
-        ``zone_of_cell[x - 1]`` is the zone of cell ``x``.
+    (models, spans)
+        ``spans`` holds ``(first, last, zone)`` for each stretch whose model is
+        not the bulk's.
 
     Raises
     ------
@@ -113,8 +116,8 @@ def zone_models(model: Model, length: int, stretches) -> tuple[tuple[Model, ...]
         A stretch outside ``1..L``, two that overlap, or a value the model refuses.
     """
     zones = [model]
-    of_cell = [0] * length
-    taken: dict[int, Stretch] = {}
+    spans = []
+    seen: list[Stretch] = []
     for s in stretches:
         if not isinstance(s, Stretch):
             raise InvalidParameterError(
@@ -122,12 +125,12 @@ def zone_models(model: Model, length: int, stretches) -> tuple[tuple[Model, ...]
         if s.last > length:
             raise InvalidParameterError(
                 f"stretch {s.first}-{s.last} lies outside the cells 1..{length}")
-        for x in s.cells:
-            if x in taken:
-                o = taken[x]
+        for o in seen:
+            if s.first <= o.last and o.first <= s.last:
                 raise InvalidParameterError(
-                    f"stretches {o.first}-{o.last} and {s.first}-{s.last} overlap at cell {x}")
-            taken[x] = s
+                    f"stretches {o.first}-{o.last} and {s.first}-{s.last} overlap at cell "
+                    f"{max(s.first, o.first)}")
+        seen.append(s)
         if not s.values or not len(s.cells):
             continue
         try:
@@ -136,6 +139,14 @@ def zone_models(model: Model, length: int, stretches) -> tuple[tuple[Model, ...]
             raise InvalidParameterError(f"stretch {s.first}-{s.last}: {exc}") from None
         if m not in zones:
             zones.append(m)
-        for x in s.cells:
-            of_cell[x - 1] = zones.index(m)
-    return tuple(zones), tuple(of_cell)
+        if zones.index(m):
+            spans.append((s.first, s.last, zones.index(m)))
+    return tuple(zones), tuple(spans)
+
+
+def cell_zones(length: int, spans) -> tuple[int, ...]:
+    """Each cell's zone, ``[x - 1]`` for cell ``x``, from :func:`zone_models`' spans."""
+    of_cell = [0] * length
+    for first, last, zone in spans:
+        of_cell[first - 1:last] = [zone] * (last - first + 1)
+    return tuple(of_cell)

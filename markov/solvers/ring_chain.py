@@ -250,6 +250,10 @@ class RingChain:
                  state_bound: Callable[[Ring, bool], int | None] | None = None,
                  start: str | None = None):
         ensure_chain_arguments(_ensure_ring(ring), max_memory=max_memory)
+        if not ring.homogeneous:
+            raise InvalidParameterError(
+                "a ring with a stretch has no rotation symmetry: its chain is"
+                " markov.solvers.road_chain.RoadChain (markov.solve takes it)")
         self.ring = ring
         self.start = _start_key(ring, start, lump)
         self.lump = lump
@@ -912,8 +916,10 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
 
     Parameters
     ----------
-    ring : Ring
-        The system (validated on construction).
+    ring : Ring or Road
+        The system (validated on construction).  A road, or a ring with a
+        stretch, is solved by :func:`markov.solvers.road_chain.solve_road`
+        (no lumping) and gives a :class:`~markov.solvers.road_chain.RoadSolution`.
     method : {"auto", "direct", "eigs", "iterative", "gmres", "bicgstab", "power", "aggregation"}
         Stationary solver (:func:`markov.solvers.stationary.stationary`).
     lump : bool
@@ -957,6 +963,10 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     >>> round(solve(Ring(3, 1, 1, 0.25)).flux, 12)
     0.25
     """
+    from markov.solvers.road_chain import is_lattice_system, solve_road
+
+    if is_lattice_system(ring):   # a road, or a ring with a stretch: no rotation symmetry
+        return solve_road(ring, method=method, tol=tol, max_memory=max_memory)
     ensure_chain_arguments(_ensure_ring(ring), method=method, tol=tol, max_memory=max_memory)
     _ensure_representable(ring)
     return RingChain(ring, lump=lump, max_memory=max_memory, operator=operator,
@@ -999,6 +1009,13 @@ def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
     >>> [round(c.solution.flux, 12) for c in solve_classes(Ring(7, 3, 2, 0.0), every=True)]
     [0.571428571429]
     """
+    from markov.solvers.road_chain import RoadChain, is_lattice_system
+
+    if is_lattice_system(ring):
+        chain = RoadChain(ring, max_memory=max_memory, start=start)
+        if every:
+            chain.search_all_configurations()
+        return chain.class_solutions(tol)
     ensure_chain_arguments(_ensure_ring(ring), tol=tol, max_memory=max_memory)
     _ensure_representable(ring)
     chain = RingChain(ring, lump=lump, max_memory=max_memory, operator="matrix", start=start)

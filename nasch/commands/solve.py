@@ -1,4 +1,4 @@
-"""``nasch solve``: the exact stationary state of one ring."""
+"""``nasch solve``: the exact stationary state of one ring or road."""
 from __future__ import annotations
 
 import click
@@ -7,14 +7,17 @@ from markov.choices import DEFAULT_TOL, METHODS, OPERATORS
 
 from ..cli_common import emit_json, handle_errors, quiet_option
 from ..model_options import build_model, model_options
+from ..road_options import build_system, road_options
 
 __all__ = ["solve"]
 
 
 @click.command()
-@click.option("--length", "-L", type=int, required=True, help="Ring length L (cells).")
-@click.option("--cars", "-N", type=int, required=True, help="Number of cars N, 0 <= N <= L.")
+@click.option("--length", "-L", type=int, required=True, help="Ring or road length L (cells).")
+@click.option("--cars", "-N", type=int, default=None,
+              help="Number of cars N, 0 <= N <= L (a ring; a road's cars come and go).")
 @model_options
+@road_options
 @click.option("--vmax", type=int, default=None,
               help="Maximal velocity >= 1 (default: the model's, 2 for nasch).")
 @click.option("--p", "p", type=float, default=None,
@@ -59,9 +62,9 @@ __all__ = ["solve"]
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @quiet_option
 @handle_errors
-def solve(length, cars, model, params, vmax, p, update, start, every_class, method, operator,
-          tol, no_lump, max_memory, top, save, sensitivity, fluctuations, lags,
-          as_json):
+def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, stretches, ramps,
+          vmax, p, update, start, every_class, method, operator, tol, no_lump, max_memory, top,
+          save, sensitivity, fluctuations, lags, as_json):
     """Exact stationary state of one ring: flux, c_v; --json adds the gap distribution.
 
     By default a state is a rotation class of the ring and its probability is
@@ -97,11 +100,17 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
     from markov.errors import NoUniqueStationaryStateError
     from markov.files import check_output_path
     from markov.goe.census import recurrent_class_bound
-    from markov.model.ring import Ring
     from markov.validate import ensure_int, ensure_max_memory
 
-    ring = Ring(length, cars, update=update, model=build_model(model, params, vmax=vmax, p=p))
+    from markov.solvers.road_chain import is_lattice_system
+
+    ring = build_system(length, cars, build_model(model, params, vmax=vmax, p=p), update,
+                        road=road, alpha=alpha, beta=beta, entry=entry, exit_=exit_, v_in=v_in,
+                        stretches=stretches, ramps=ramps)
     max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
+    if is_lattice_system(ring):
+        return _solve_lattice(ring, start, every_class, method, operator, tol, no_lump,
+                              max_memory, top, save, sensitivity, fluctuations, lags, as_json)
     if every_class and (top is not None or save is not None):
         raise click.UsageError("--classes reports every class; --top and --save need one")
     if top is not None:
@@ -185,6 +194,105 @@ def solve(length, cars, model, params, vmax, p, update, start, every_class, meth
         click.echo(f"wrote {save} ({data['states']:,} states)", err=True)
 
 
+def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, max_memory, top,
+                   save, sensitivity, fluctuations, lags, as_json) -> None:
+    """A road, or a ring with a stretch: checked, solved, printed (docs/roads.md)."""
+    from markov.errors import NoUniqueStationaryStateError
+    from markov.files import check_output_path
+    from markov.solvers.road_chain import RoadChain
+    from markov.validate import ensure_int
+
+    what = "a road" if not system.periodic else "a ring with a stretch"
+    if no_lump:
+        raise click.UsageError(f"--no-lump is for rings: {what} is never lumped")
+    if operator == "matrix-free":
+        raise click.UsageError(f"{what} is solved with its matrix (--operator matrix-free is"
+                               " for rings)")
+    if method == "aggregation":
+        raise click.UsageError(f"--method aggregation is for rings; {what} takes the others")
+    for flag, given in (("--sensitivity", sensitivity), ("--fluctuations", fluctuations),
+                        ("--autocorrelation", lags is not None)):
+        if given:
+            raise click.UsageError(f"{flag} is not yet computed for {what}")
+    if every_class and (top is not None or save is not None):
+        raise click.UsageError("--classes reports every class; --top and --save need one")
+    if top is not None:
+        top = ensure_int("--top", top, 1)
+    if save is not None:
+        save = check_output_path(save, suffixes=(".npz",))
+    limit = None if max_memory is None else max_memory * 2**30
+    chain = RoadChain(system, max_memory=limit, start=start)
+    one_state = top is not None or save is not None
+    try:
+        if every_class:
+            chain.search_all_configurations()
+            classes = chain.class_solutions(tol)
+            _echo_classes(system, classes, as_json, start)
+            return
+        sol = chain.solution(method=method, tol=tol)
+    except NoUniqueStationaryStateError as exc:
+        if exc.classes is None or one_state:
+            raise
+        _echo_classes(system, exc.classes, as_json, start)
+        return
+    data = sol.to_dict()
+    rows = sol.top_configurations(top) if top else None
+    if save is not None:
+        sol.save(save)
+    if as_json:
+        if rows is not None:
+            data["top"] = rows
+        if save is not None:
+            data["saved"] = str(save)
+        emit_json(data)
+        return
+    _echo_lattice(system, sol, data)
+    if rows is not None:
+        click.echo(f"  most probable configurations ({len(rows)} of {sol.n_states:,};"
+                   " '.' empty, digit = velocity, cars move right):")
+        for r in rows:
+            click.echo(f"    {r['configuration']}  {r['probability']:.12g}")
+    if save is not None:
+        click.echo(f"wrote {save} ({data['states']:,} states)", err=True)
+
+
+def _numbers(values, digits: int = 6) -> str:
+    return " ".join("nan" if v is None else f"{v:.{digits}g}" for v in values)
+
+
+def _echo_lattice(system, sol, data: dict) -> None:
+    """The text output of a road or a ring with stretches: conventions first."""
+    if system.periodic:
+        click.echo(f"{_title(system)} L={system.length} N={system.cars}"
+                   f" (c={system.cars / system.length:.4g}) {_params(system)}"
+                   f" update={system.update} stretches " + " ".join(
+                       f"{s.first}-{s.last}:" + ",".join(f"{k}={v:g}" for k, v in s.values)
+                       for s in system.stretches))
+    else:
+        click.echo(system.summary())
+        click.echo(f"  entry {system.entry}: {data['entry_convention']}")
+        click.echo(f"  exit {system.exit}: {data['exit_convention']}")
+    click.echo(f"  states {data['states']:,} (no lumping), nonzeros {data['nonzeros']:,},"
+               f" method {data['method']}, residual {data['residual']:.2e},"
+               f" {data['seconds']:.3f} s; per time step ({data['time_step']})")
+    if system.periodic:
+        click.echo(f"  flux           {data['flux']:.15g}  (per cell; every bond current"
+                   f" equals it to {data['conservation']:.1e})")
+    else:
+        click.echo(f"  flux           {data['flux']:.15g}  (cars leaving per time step)")
+        click.echo(f"  inflow         {data['inflow']:.15g}  (cars entering at cell 1)")
+        for r, x in zip(system.ramps, data["ramp_inflows"]):
+            click.echo(f"  on-ramp {r.cell:<6} {x:.15g}")
+        click.echo(f"  conservation   |flux - inflow - ramps| = {data['conservation']:.1e};"
+                   f" bond currents against it: {data['bond_check']:.1e}")
+    click.echo(f"  mean cars      {data['mean_cars']:.15g}")
+    click.echo(f"  bond currents  {_numbers(data['bond_currents'])}")
+    click.echo(f"  density        {_numbers(data['density_profile'])}")
+    click.echo(f"  velocity       {_numbers(data['velocity_profile'])}")
+    if sol.census is not None and sol.census.scope != "proven":
+        click.echo(f"  classes        {sol.census.note()}")
+
+
 def _sensitivity_names(ring, given, every_class: bool) -> list[str]:
     """The parameter names of --sensitivity, each checked before any solve."""
     if not given:
@@ -266,6 +374,8 @@ def _echo_dynamics(data: dict) -> None:
 
 
 def _title(ring) -> str:
+    if not ring.periodic:
+        return ring.summary()
     return "NaSch ring" if ring.is_nasch else f"{ring.model.name} ring"
 
 
@@ -276,26 +386,31 @@ def _params(ring) -> str:
 
 def _echo_classes(ring, classes, as_json: bool, start) -> None:
     """Every closed class with its observables, and what is the same in all of them."""
-    origin = "the start" if start is not None else "the compact jam"
+    origin = "the start" if start is not None else classes.census.origin
     common = classes.common()
     if as_json:
         emit_json({**classes.to_dict(), **common, "start": start})
         return
-    click.echo(f"{_title(ring)} L={ring.length} N={ring.cars} (c={ring.density:.4g})"
-               f" {_params(ring)} update={ring.update}: {classes.census.note()}")
+    if ring.periodic:
+        click.echo(f"{_title(ring)} L={ring.length} N={ring.cars} (c={ring.cars / ring.length:.4g})"
+                   f" {_params(ring)} update={ring.update}: {classes.census.note()}")
+    else:
+        click.echo(f"{ring.summary()}: {classes.census.note()}")
     if len(classes) > 1:
         shared = [f"{name.replace('_', ' ')} {common[name]:.15g}"
-                  for name in ("flux", "mean_velocity") if name in common]
-        shared += [name for name in ("c_v", "gap_distribution") if name in common]
+                  for name in ("flux", "mean_velocity", "inflow", "mean_cars") if name in common]
+        shared += [name for name in ("c_v", "gap_distribution", "density_profile",
+                                     "velocity_profile") if name in common]
         click.echo("  the same in every class: " + ", ".join(shared) if shared
                    else "  no observable is the same in every class: each class below")
     if "flux" not in common:
         click.echo(f"  fluxes: {classes.flux_groups()}")
     for i, c in enumerate(classes[:MAX_LISTED], 1):
         sol = c.solution
-        cv = " ".join(f"{x:.6g}" for x in sol.c_v)
+        shown = (f"c_v {' '.join(f'{x:.6g}' for x in sol.c_v)}" if hasattr(sol, "c_v")
+                 else f"mean cars {sol.mean_cars:.6g}")
         click.echo(f"  {i}. {c.representative}  states {sol.n_states:,}  flux {sol.flux:.15g}"
-                   f"  c_v {cv}{'  (reached from ' + origin + ')' if c.from_start else ''}")
+                   f"  {shown}{'  (reached from ' + origin + ')' if c.from_start else ''}")
     if len(classes) > MAX_LISTED:
         click.echo(f"  ... and {len(classes) - MAX_LISTED:,} more classes (--json lists all)")
 

@@ -1,0 +1,556 @@
+"""The chain of a road, or of a ring with stretches, and its stationary state.
+
+:class:`RoadChain` builds lazily, as :class:`markov.solvers.ring_chain.RingChain`
+does: the states reachable from the empty road (a ring: the compact jam), the
+closed classes and how far they were searched, the transition matrix from the
+row generator of :mod:`markov.chain.lattice`, and the stationary state.
+:class:`RoadSolution` holds it with the observables of ``docs/roads.md``:
+``flux`` (cars leaving per time step), ``inflow``, ``ramp_inflows``,
+``bond_currents``, ``density_profile``, ``velocity_profile``, ``mean_cars`` and
+``car_distribution``.  :func:`solve_road` is the one-call entry point;
+:func:`markov.solve` sends a road (or a ring with a stretch) here.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from markov import memory
+from markov._jit import njit
+from markov.chain.classes import (ALL_CONFIGURATIONS, FROM_COMPACT_JAM, FROM_EMPTY_ROAD,
+                                  FROM_START, PROVEN, SEARCH_ALL_MAX_EDGES, ClassCensus,
+                                  closed_classes_of_graph, lattice_irreducible)
+from markov.chain.encoding import decode, from_text, encode, to_text
+from markov.chain.lattice import (Lattice, all_lattice_keys, count_configurations, increments,
+                                  lattice_of, reachable_keys, successors)
+from markov.choices import DEFAULT_TOL, OPERATORS
+from markov.errors import InvalidParameterError, NoUniqueStationaryStateError
+from markov.model.ring import RANDOM_SEQUENTIAL, Ring
+from markov.model.road import Road
+from markov.solvers.class_solutions import ClassSolution, ClassSolutions
+from markov.solvers.stationary import StationaryResult, stationary
+from markov.validate import ensure_max_memory, ensure_tol
+
+__all__ = ["RoadChain", "RoadSolution", "solve_road", "is_lattice_system", "SPLIT_MAX_STATES"]
+
+#: Largest reachable set split into closed classes (its support graph, every
+#: successor stored); a larger one is solved as one class and verified.
+SPLIT_MAX_STATES = 200_000
+
+
+def is_lattice_system(system) -> bool:
+    """Whether ``system`` is solved on the chain of this module: a road, or a ring
+    with a stretch of other values (no rotation symmetry).
+
+    Parameters
+    ----------
+    system : Ring or Road
+
+    Returns
+    -------
+    bool
+    """
+    return isinstance(system, Road) or isinstance(system, Ring) and not system.homogeneous
+
+
+def _ensure_system(system):
+    if not isinstance(system, (Road, Ring)):
+        raise InvalidParameterError(
+            f"expected a markov Road or Ring, got {type(system).__name__} {system!r:.60}")
+    return system
+
+
+def _start_key(system, start: str | None) -> int | None:
+    if start is None:
+        return None
+    if not isinstance(start, str):
+        raise InvalidParameterError(
+            f"a start configuration is text ('.' empty, digit = velocity), got {start!r}")
+    cells = from_text(start, system.top_vmax)
+    if len(cells) != system.length:
+        raise InvalidParameterError(
+            f"the start configuration {start!r} has {len(cells)} cells; the"
+            f" {'ring' if system.periodic else 'road'} has L = {system.length}")
+    if system.periodic and sum(c >= 0 for c in cells) != system.cars:
+        raise InvalidParameterError(
+            f"the start configuration {start!r} has {sum(c >= 0 for c in cells)} cars; the"
+            f" ring has N = {system.cars}")
+    return encode(cells, system.top_vmax)
+
+
+class RoadChain:
+    """The finite Markov chain of a road, or of a ring with stretches, built lazily.
+
+    Parameters
+    ----------
+    system : Road or Ring
+    max_memory : float, optional
+        Bytes allowed (default 75 % of physical memory).
+    operator : {"auto", "matrix"}
+        How ``x -> x P`` is applied: the assembled CSR matrix.
+    start : str, optional
+        A start configuration (text): the classes it reaches.
+
+    Examples
+    --------
+    One cell, site1/sink, parallel: the cell empties with ``beta`` and fills with
+    ``alpha``, so it is occupied ``alpha / (alpha + beta)`` of the time, and the
+    flux is ``beta`` times that.
+
+    >>> from markov import load_model
+    >>> road = Road(1, load_model("nasch", {"vmax": 1}), alpha=0.3, beta=0.6)
+    >>> round(RoadChain(road).solution().flux, 12), round(0.6 * 0.3 / 0.9, 12)
+    (0.2, 0.2)
+    """
+
+    def __init__(self, system, max_memory: float | None = None, operator: str = "auto",
+                 start: str | None = None):
+        self.system = _ensure_system(system)
+        self.max_memory = ensure_max_memory(max_memory)
+        self.limit = memory.memory_limit(max_memory)
+        if operator not in OPERATORS:
+            raise InvalidParameterError(
+                f"operator must be one of {', '.join(OPERATORS)}, got {operator!r}")
+        if operator == "matrix-free":
+            raise InvalidParameterError(
+                "a road is solved with its matrix here; matrix-free roads are not built yet")
+        self.operator = operator
+        self.start = _start_key(system, start)
+        self.build_seconds = 0.0
+        self.unverified = False
+        self.census: ClassCensus | None = None
+
+    @property
+    def origin(self) -> str:
+        return "the compact jam" if self.system.periodic else "the empty road"
+
+    @cached_property
+    def lattice(self) -> Lattice:
+        """The arrays the row generator reads (:func:`markov.chain.lattice.lattice_of`)."""
+        return lattice_of(self.system)
+
+    @cached_property
+    def reachable(self) -> np.ndarray:
+        """Sorted keys of everything reachable from the start (the empty road by default)."""
+        t = time.perf_counter()
+        keys = reachable_keys(self.lattice, self.start, self.max_memory,
+                              per_state=memory.matrix_bytes(1, 32, "direct"))
+        self.build_seconds += time.perf_counter() - t
+        return keys
+
+    def _rows(self, keys: np.ndarray):
+        return successors(self.lattice, keys)
+
+    @cached_property
+    def classes(self) -> list[np.ndarray]:
+        """The closed classes: one where proven (:func:`markov.chain.classes.lattice_irreducible`),
+        else every configuration searched where that fits, else those the start reaches."""
+        configurations = count_configurations(self.lattice)
+        if self.start is None and lattice_irreducible(self.lattice):
+            self.census = ClassCensus(1, PROVEN, configurations, self.origin)
+            return [self.reachable]
+        t = time.perf_counter()
+        if self.start is None and configurations * 16 <= SEARCH_ALL_MAX_EDGES:
+            keys = all_lattice_keys(self.lattice)
+            indptr, succ, _ = self._rows(keys)
+            classes = closed_classes_of_graph(keys, indptr, succ)
+            self.census = ClassCensus(len(classes), ALL_CONFIGURATIONS, configurations,
+                                      self.origin)
+            self.build_seconds += time.perf_counter() - t
+            return classes
+        scope = FROM_START if self.start is not None else \
+            (FROM_COMPACT_JAM if self.system.periodic else FROM_EMPTY_ROAD)
+        reach = self.reachable
+        if len(reach) > SPLIT_MAX_STATES:
+            self.unverified = True
+            self.census = ClassCensus(1, scope, configurations, self.origin)
+            return [reach]
+        indptr, succ, _ = self._rows(reach)
+        classes = closed_classes_of_graph(reach, indptr, succ)
+        self.census = ClassCensus(len(classes), scope, configurations, self.origin)
+        self.build_seconds += time.perf_counter() - t
+        return classes
+
+    @cached_property
+    def keys(self) -> np.ndarray:
+        """Sorted keys of the one closed class.
+
+        Raises
+        ------
+        NoUniqueStationaryStateError
+            With every class solved (:meth:`class_solutions`) where there are several.
+        """
+        if len(self.classes) > 1:
+            solved = self.class_solutions()
+            raise NoUniqueStationaryStateError(solved.refusal(), classes=solved)
+        return self.classes[0]
+
+    @property
+    def n_states(self) -> int:
+        return len(self.keys)
+
+    @cached_property
+    def matrix(self) -> sp.csr_array:
+        """Row-stochastic transition matrix on :attr:`keys`."""
+        return self._matrix(self.keys)
+
+    def _matrix(self, keys: np.ndarray) -> sp.csr_array:
+        t = time.perf_counter()
+        indptr, succ, weight = self._rows(keys)
+        need = memory.matrix_bytes(len(keys), len(succ), "direct")
+        memory.check_fits(f"the transition matrix ({len(succ):,} transitions on"
+                          f" {len(keys):,} states)", need, self.limit)
+        col = np.searchsorted(keys, succ)
+        col[col == len(keys)] = 0
+        if not np.array_equal(keys[col], succ):
+            raise NoUniqueStationaryStateError(
+                "the set of states is not closed: a successor lies outside it")
+        P = sp.csr_array((weight, col.astype(np.int32), indptr), shape=(len(keys), len(keys)))
+        P.sum_duplicates()
+        self.build_seconds += time.perf_counter() - t
+        return P
+
+    def solution(self, method: str = "auto", tol: float = DEFAULT_TOL) -> "RoadSolution":
+        """Solve for the stationary state (:func:`markov.solvers.stationary.stationary`).
+
+        Parameters
+        ----------
+        method : str
+        tol : float
+
+        Returns
+        -------
+        RoadSolution
+        """
+        ensure_tol(tol)
+        keys = self.keys
+        P = self.matrix
+        result = stationary(P, method=method, tol=tol)
+        if self.unverified:
+            self._verify_one_class(result.pi)
+        return RoadSolution(self.system, keys, result, P.nnz, self.build_seconds, "matrix",
+                            self.census, self.lattice)
+
+    def _verify_one_class(self, pi: np.ndarray) -> None:
+        top = int(self.keys[int(np.argmax(pi))])
+        found = reachable_keys(self.lattice, top, self.max_memory)
+        if len(found) != len(self.keys):
+            raise NoUniqueStationaryStateError(
+                f"the chain of {self.system.summary() if hasattr(self.system, 'summary') else self.system}"
+                f" is not one closed class: of the {len(self.keys):,} states the start"
+                f" reaches, the class of the most probable one holds {len(found):,}; the"
+                " support graph is too large to split here, so no unique answer is given")
+        self.unverified = False
+
+    def search_all_configurations(self) -> None:
+        """Take the closed classes over every configuration, searched even where one is
+        proven (small systems)."""
+        from markov.errors import StateSpaceTooLargeError
+
+        configurations = count_configurations(self.lattice)
+        if configurations * 16 > SEARCH_ALL_MAX_EDGES * 10:
+            raise StateSpaceTooLargeError(
+                f"{configurations:.3g} configurations are too many to search every one for"
+                " closed classes here")
+        keys = all_lattice_keys(self.lattice)
+        indptr, succ, _ = self._rows(keys)
+        classes = closed_classes_of_graph(keys, indptr, succ)
+        self.__dict__["classes"] = classes
+        self.__dict__.pop("keys", None)
+        self.census = ClassCensus(len(classes), ALL_CONFIGURATIONS, configurations, self.origin)
+
+    def class_solutions(self, tol: float = DEFAULT_TOL) -> ClassSolutions:
+        """Each closed class solved on its own.
+
+        Parameters
+        ----------
+        tol : float
+
+        Returns
+        -------
+        ClassSolutions
+        """
+        classes = self.classes
+        reached = classes
+        if self.census.scope == ALL_CONFIGURATIONS:
+            reached = [c for c in classes if np.isin(c[:1], self.reachable).any()]
+        firsts = {int(c[0]) for c in reached}
+        out = []
+        for keys in classes:
+            P = self._matrix(keys)
+            result = stationary(P, tol=tol)
+            sol = RoadSolution(self.system, keys, result, P.nnz, self.build_seconds, "matrix",
+                               self.census, self.lattice)
+            out.append(ClassSolution(to_text(decode(int(keys[0]), self.system.length,
+                                                    self.system.top_vmax)),
+                                     int(keys[0]) in firsts, sol))
+        return ClassSolutions(self.system, tuple(out), self.census,
+                              "start" if self.start is not None else
+                              ("compact jam" if self.system.periodic else "empty road"))
+
+
+@njit(cache=True)
+def _profiles(keys, pi, length, b, density, velocity, cars):
+    """``density[x] = sum pi [cell x holds a car]``, ``velocity[x]`` the same times its
+    velocity, ``cars[n]`` the probability of ``n`` cars."""
+    for i in range(keys.shape[0]):
+        k = keys[i]
+        n = 0
+        for x in range(length):
+            d = k % b
+            k //= b
+            if d > 0:
+                density[x] += pi[i]
+                velocity[x] += pi[i] * (d - 1)
+                n += 1
+        cars[n] += pi[i]
+
+
+@dataclass(frozen=True)
+class RoadSolution:
+    """The exact stationary state of a road (or of a ring with stretches) and its observables.
+
+    Every observable is per time step: a random-sequential step is ``L + 1``
+    sub-steps on a road (``L`` on a ring).
+
+    Attributes
+    ----------
+    system : Road or Ring
+    keys : (n,) int64 array
+        States (all cells, never lumped).
+    result : StationaryResult
+    nonzeros : int
+    build_seconds : float
+    operator : str
+    census : ClassCensus
+    lattice : Lattice
+    """
+
+    system: object
+    keys: np.ndarray = field(repr=False)
+    result: StationaryResult = field(repr=False)
+    nonzeros: int | None
+    build_seconds: float
+    operator: str
+    census: ClassCensus | None
+    lattice: Lattice = field(repr=False, compare=False)
+
+    #: What :meth:`markov.solvers.class_solutions.ClassSolutions.common` compares.
+    COMMON = ("flux", "inflow", "density_profile", "velocity_profile", "mean_cars")
+
+    @property
+    def pi(self) -> np.ndarray:
+        return self.result.pi
+
+    @property
+    def n_states(self) -> int:
+        return len(self.keys)
+
+    @property
+    def residual(self) -> float:
+        return self.result.residual
+
+    @property
+    def lumped(self) -> bool:
+        return False
+
+    @property
+    def steps_per_time_step(self) -> int:
+        """Chain steps per time step: ``L + 1`` (road) or ``L`` (ring) sub-steps under
+        random-sequential update, else 1."""
+        if self.system.update != RANDOM_SEQUENTIAL:
+            return 1
+        return self.system.length + (0 if self.system.periodic else 1)
+
+    @cached_property
+    def _counts(self) -> np.ndarray:
+        per_step = increments(self.lattice, self.keys, self.pi).sum(axis=0)
+        return per_step * self.steps_per_time_step
+
+    @cached_property
+    def _profiles(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        L = self.system.length
+        density, velocity, cars = np.zeros(L), np.zeros(L), np.zeros(L + 1)
+        _profiles(self.keys, self.pi, L, self.system.top_vmax + 2, density, velocity, cars)
+        return density, velocity, cars
+
+    @property
+    def flux(self) -> float:
+        """Cars leaving at the exit per time step (a ring: the cells advanced by all
+        cars per time step divided by ``L``, the flux per cell)."""
+        lay = self.lattice.layout
+        if self.system.periodic:
+            return float(self._counts[lay["advance"]] / self.system.length)
+        return float(self._counts[lay["left"]])
+
+    @property
+    def inflow(self) -> float:
+        """Cars entering at the entry per time step (0 on a ring)."""
+        return float(self._counts[self.lattice.layout["entered"]])
+
+    @property
+    def ramp_inflows(self) -> np.ndarray:
+        """Cars put on the road by each on-ramp per time step, in the ramps' order."""
+        return self._counts[self.lattice.layout["ramps"]].copy()
+
+    @property
+    def bond_currents(self) -> np.ndarray:
+        """Cars crossing from cell ``k`` to ``k + 1`` per time step: ``k = 1..L-1`` on a
+        road, ``k = 1..L`` on a ring (bond ``L``: from cell ``L`` to cell 1)."""
+        bonds = self._counts[self.lattice.layout["bonds"]]
+        L = self.system.length
+        return bonds[1:L + 1].copy() if self.system.periodic else bonds[1:L].copy()
+
+    @property
+    def density_profile(self) -> np.ndarray:
+        """``P(cell x holds a car)``, ``x = 1..L``."""
+        return self._profiles[0].copy()
+
+    @property
+    def velocity_profile(self) -> np.ndarray:
+        """Mean velocity of a car on cell ``x`` (NaN where no car ever stands)."""
+        d, v, _ = self._profiles
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(d > 0, v / np.where(d > 0, d, 1), np.nan)
+
+    @property
+    def car_distribution(self) -> np.ndarray:
+        """``P(n cars on the road)``, ``n = 0..L``."""
+        return self._profiles[2].copy()
+
+    @property
+    def mean_cars(self) -> float:
+        """Expected number of cars."""
+        return float(self._profiles[0].sum())
+
+    @property
+    def conservation(self) -> float:
+        """``|flux - inflow - sum(ramp inflows)|`` (a road), or the spread of the bond
+        currents around the flux (a ring): zero to rounding, a printed check."""
+        if self.system.periodic:
+            return float(np.abs(self.bond_currents - self.flux).max())
+        return float(abs(self.flux - self.inflow - self.ramp_inflows.sum()))
+
+    @property
+    def bond_check(self) -> float:
+        """Largest ``|J_k - (inflow + ramp inflows at cells <= k)|`` over the bonds (a road)."""
+        if self.system.periodic:
+            return self.conservation
+        ramps = self.system.ramps
+        inflows = self.ramp_inflows
+        expected = np.array([self.inflow + sum(inflows[i] for i, r in enumerate(ramps)
+                                               if r.cell <= k)
+                             for k in range(1, self.system.length)])
+        return float(np.abs(self.bond_currents - expected).max()) if len(expected) else 0.0
+
+    def to_dict(self) -> dict:
+        """JSON-ready: the system with its conventions, the observables, the solver's figures.
+
+        Returns
+        -------
+        dict
+        """
+        s = self.system
+        d = s.describe() if hasattr(s, "describe") else {
+            "geometry": "ring", "length": s.length, "cars": s.cars, "update": s.update,
+            "model": s.model.describe(), "stretches": [x.describe() for x in s.stretches]}
+        d.update({
+            "flux": self.flux, "inflow": self.inflow, "ramp_inflows": self.ramp_inflows.tolist(),
+            "bond_currents": self.bond_currents.tolist(),
+            "density_profile": self.density_profile.tolist(),
+            "velocity_profile": [None if np.isnan(x) else float(x)
+                                 for x in self.velocity_profile],
+            "mean_cars": self.mean_cars, "car_distribution": self.car_distribution.tolist(),
+            "conservation": self.conservation, "bond_check": self.bond_check,
+            "states": self.n_states, "nonzeros": self.nonzeros, "operator": self.operator,
+            "method": self.result.method, "residual": self.residual,
+            "iterations": self.result.iterations, "build_seconds": self.build_seconds,
+            "solve_seconds": self.result.seconds,
+            "seconds": self.build_seconds + self.result.seconds,
+            "closed_classes": self.census.to_dict() if self.census else None,
+            "time_step": (f"{self.steps_per_time_step} sub-steps" if self.steps_per_time_step > 1
+                          else "one step"),
+        })
+        return d
+
+    def to_record(self) -> dict:
+        """One flat row (:func:`markov.to_frame`): the system's values and the scalars.
+
+        Returns
+        -------
+        dict
+        """
+        s = self.system
+        rec = {"model": s.model.name, **{k: (v if isinstance(v, (int, float)) else float(v))
+                                         for k, v in s.model.params.items()},
+               "update": s.update, "length": s.length}
+        if s.periodic:
+            rec.update(cars=s.cars, density=s.cars / s.length)
+        else:
+            rec.update(entry=s.entry, exit=s.exit, alpha=s.alpha, beta=s.beta)
+        rec.update(flux=self.flux, inflow=self.inflow, mean_cars=self.mean_cars,
+                   states=self.n_states, residual=self.residual, method=self.result.method,
+                   closed_classes=None if self.census is None else self.census.count)
+        return rec
+
+    def top_configurations(self, k: int) -> list[dict]:
+        """The ``k`` most probable configurations in text notation.
+
+        Parameters
+        ----------
+        k : int
+
+        Returns
+        -------
+        list of dict
+        """
+        order = np.argsort(-self.pi, kind="stable")[:k]
+        return [{"configuration": to_text(decode(int(self.keys[i]), self.system.length,
+                                                 self.system.top_vmax)),
+                 "probability": float(self.pi[i])} for i in order]
+
+    def save(self, path) -> Path:
+        """Write the states, probabilities and metadata (the road and its conventions).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+
+        Returns
+        -------
+        pathlib.Path
+        """
+        from markov.solvers.storage import save_road_solution
+
+        return save_road_solution(self, path)
+
+
+def solve_road(system, method: str = "auto", tol: float = DEFAULT_TOL,
+               max_memory: float | None = None, start: str | None = None) -> RoadSolution:
+    """Exact stationary state of a road, or of a ring with stretches.
+
+    Parameters
+    ----------
+    system : Road or Ring
+    method : str
+    tol : float
+    max_memory : float, optional
+        Bytes allowed.
+    start : str, optional
+        A start configuration: the class it falls into.
+
+    Returns
+    -------
+    RoadSolution
+
+    Raises
+    ------
+    NoUniqueStationaryStateError
+        Several closed classes (``classes`` holds each solved).
+    """
+    return RoadChain(system, max_memory=max_memory, start=start).solution(method, tol)
