@@ -1066,8 +1066,12 @@ def to_frame(solutions):
     return pd.DataFrame.from_records(records, columns=list(columns) or None)
 
 
-def load_solution(path) -> Solution:
-    """Read a file written by :meth:`Solution.save` (``nasch solve --save``).
+def load_solution(path):
+    """Read a file written by :meth:`Solution.save` or ``RoadSolution.save`` (``--save``).
+
+    A ring's file gives a :class:`Solution`, a road's (or a ring with a
+    stretch) a :class:`~markov.solvers.road_chain.RoadSolution`
+    (:mod:`markov.solvers.road_storage`).
 
     The file is checked before anything is built from it: its SHA-256 sums,
     the metadata against the ring, every key (``N`` cars, a canonical rotation
@@ -1083,7 +1087,7 @@ def load_solution(path) -> Solution:
 
     Returns
     -------
-    Solution
+    Solution or RoadSolution
 
     Raises
     ------
@@ -1093,7 +1097,15 @@ def load_solution(path) -> Solution:
         When it is not a stationary-state file, is damaged or edited, or fails
         a check: one line naming the file and what is wrong.
     """
-    from markov.solvers.storage import read_solution
+    from markov.solvers.storage import read_stored
 
-    ring, keys, result, lumped, operator = read_solution(path)
+    kind, parts = read_stored(path)
+    if kind == "road":
+        from markov.chain.lattice import lattice_of
+        from markov.solvers.road_chain import RoadSolution
+
+        system, keys, result, census, operator = parts
+        return RoadSolution(system, keys, result, None, 0.0, operator, census,
+                            lattice_of(system))
+    ring, keys, result, lumped, operator = parts
     return Solution(ring, keys, result, None, 0.0, lumped, operator)

@@ -70,12 +70,14 @@ from markov.choices import SOLVERS
 from markov.errors import CorruptFileError, InvalidParameterError, StateSpaceTooLargeError
 from markov.files import write_bytes_atomic
 from markov.model.ring import PARALLEL, Ring
+from markov.solvers.road_storage import (ROAD_DTYPES, ROAD_FORMAT, ROAD_FORMAT_VERSION,
+                                         read_road_parts, save_road_solution)
 from markov.solvers.stationary import StationaryResult
 from markov.validate import ensure_int
 
 __all__ = ["FORMAT", "FORMAT_VERSION", "READ_VERSIONS", "SUM_TOLERANCE", "ENCODING",
            "save_solution", "read_solution", "decode_keys", "rotation_counts", "unlumped",
-           "top_configurations", "UNLUMP_LIMIT"]
+           "top_configurations", "UNLUMP_LIMIT", "read_stored", "save_road_solution"]
 
 FORMAT = "nasch-stationary"
 #: Version written.  Version 1 (before the SHA-256 sums) is still read, with
@@ -366,7 +368,7 @@ def _read_npy(zf: zipfile.ZipFile, info: zipfile.ZipInfo, size: int):
             shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
         else:
             raise _Bad(f"array {name!r} has .npy version {version}, expected 1.0 or 2.0")
-        want = _DTYPES.get(name)
+        want = _DTYPES.get(name) or ROAD_DTYPES.get(name)
         if name == "metadata":
             if dtype.kind != "U" or shape != () or dtype.itemsize == 0:
                 raise _Bad(f"metadata is {dtype.str} of shape {shape}, expected a 0-d string")
@@ -401,7 +403,9 @@ def _read_archive(fh, size: int):
             raise _Bad("its arrays are compressed; the format stores them uncompressed"
                        " (numpy.savez, not savez_compressed)")
         expected = {f"{name}.npy" for name in (*_DTYPES, "metadata")}
-        if set(infos) != expected or len(zf.infolist()) != len(expected):
+        # a road's file has no rotations (markov.solvers.road_storage)
+        road = {f"{name}.npy" for name in (*ROAD_DTYPES, "metadata")}
+        if set(infos) not in (expected, road) or len(zf.infolist()) != len(infos):
             raise _Bad(f"holds {', '.join(sorted(infos)) or 'nothing'},"
                        f" expected {', '.join(sorted(expected))}")
         arrays, sums = {}, {}
@@ -417,6 +421,9 @@ def _parse_metadata(text: str) -> dict:
         raise _Bad("its metadata is not valid JSON") from None
     if not isinstance(meta, dict):
         raise _Bad("its metadata is not a JSON object")
+    if meta.get("format") == ROAD_FORMAT and meta.get("format_version") == ROAD_FORMAT_VERSION \
+            and type(meta.get("format_version")) is int:
+        return meta
     if meta.get("format") != FORMAT or meta.get("format_version") not in READ_VERSIONS \
             or type(meta.get("format_version")) is not int:
         raise _Bad(f"format {meta.get('format')!r} version {meta.get('format_version')!r},"
@@ -629,7 +636,9 @@ def _check_probabilities(pi: np.ndarray) -> None:
 
 
 def read_solution(path) -> tuple[Ring, np.ndarray, StationaryResult, bool, str]:
-    """The parts of a solution stored by :func:`save_solution`, checked.
+    """The parts of a ring's solution stored by :func:`save_solution`, checked.
+
+    A road's file is refused here (:func:`read_stored` reads both).
 
     :func:`markov.solvers.ring_chain.load_solution` builds the ``Solution`` from them.
     Every check of ``docs/storage.md`` ("Checked on loading") runs first:
@@ -668,6 +677,34 @@ def read_solution(path) -> tuple[Ring, np.ndarray, StationaryResult, bool, str]:
     ...
     markov.errors.CorruptFileError: cannot load .../pi.npz: not a zip archive, ...
     """
+    kind, parts = read_stored(path)
+    if kind != "ring":
+        raise CorruptFileError(f"cannot load {os.fspath(path)}: it holds a road's solution"
+                               f" (markov.load_solution reads it)")
+    return parts
+
+
+def read_stored(path) -> tuple[str, tuple]:
+    """A stored ring's or road's solution, checked: ``("ring", parts)`` or ``("road", parts)``.
+
+    Ring parts are those of :func:`read_solution`; road parts are ``(system, keys,
+    result, census, operator)`` (:func:`markov.solvers.road_storage.read_road_parts`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    (str, tuple)
+
+    Raises
+    ------
+    InvalidParameterError
+        When the file is missing or cannot be opened.
+    CorruptFileError
+        When it fails a check: one line naming the file and what is wrong.
+    """
     name = os.fspath(path)
     try:
         fh = open(name, "rb")
@@ -687,6 +724,14 @@ def read_solution(path) -> tuple[Ring, np.ndarray, StationaryResult, bool, str]:
                 detail = " ".join(str(exc).split())[:200]
                 raise _Bad(f"damaged archive ({type(exc).__name__}: {detail})") from None
         meta = _parse_metadata(text)
+        if meta["format"] == ROAD_FORMAT:
+            if "rotations" in arrays:
+                raise _Bad("a road's file holds no rotations array")
+            parts = read_road_parts(meta, arrays, sums)
+            return "road", parts
+        if "rotations" not in arrays:
+            raise _Bad(f"holds {', '.join(sorted(f'{k}.npy' for k in arrays))},"
+                       f" expected keys.npy, metadata.npy, probabilities.npy, rotations.npy")
         if meta["format_version"] >= 2:
             _check_sums(meta, sums)
         ring = _ring_of(meta)
@@ -706,4 +751,4 @@ def read_solution(path) -> tuple[Ring, np.ndarray, StationaryResult, bool, str]:
         raise CorruptFileError(f"cannot load {name}: {text}") from None
     result = StationaryResult(pi, meta["method"], float(meta["residual"]), meta["iterations"],
                               0.0)
-    return ring, keys, result, meta["lumped"], meta["operator"]
+    return "ring", (ring, keys, result, meta["lumped"], meta["operator"])
