@@ -21,7 +21,7 @@ import click
 
 from markov.errors import InvalidParameterError
 
-__all__ = ["road_options", "build_system", "ROAD_ONLY"]
+__all__ = ["road_options", "build_system", "ring_only", "ROAD_ONLY"]
 
 #: Options that mean something on a road only, as (parameter, flag).
 ROAD_ONLY = (("alpha", "--alpha"), ("beta", "--beta"), ("entry", "--entry"),
@@ -112,3 +112,35 @@ def build_system(length, cars, model, update, *, road: bool, alpha=None, beta=No
     return Road(length, model, update, 0.5 if alpha is None else alpha,
                 0.5 if beta is None else beta, entry, exit_, 0 if v_in is None else v_in,
                 parsed, tuple(OnRamp.parse(r) for r in ramps))
+
+
+def ring_only(reason: str):
+    """Click decorator: ``--road`` accepted by a ring-only command and refused with ``reason``.
+
+    A user who adds ``--road`` to a command that has no road meaning gets one
+    line saying why and where the road's counterpart is, exit status 2,
+    instead of click's "no such option".
+
+    Parameters
+    ----------
+    reason : str
+
+    Returns
+    -------
+    callable
+    """
+    import functools
+    import sys
+
+    def decorate(func):
+        @functools.wraps(func)
+        def wrapper(*args, road=False, **kwargs):
+            if road:
+                click.echo(f"error: --road: {reason}", err=True)
+                sys.exit(2)
+            return func(*args, **kwargs)
+
+        return click.option("--road", is_flag=True,
+                            help=f"Refused here: {reason}")(wrapper)
+
+    return decorate

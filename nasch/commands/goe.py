@@ -4,6 +4,7 @@ from __future__ import annotations
 import click
 
 from ..cli_common import emit_json, handle_errors, quiet_option
+from ..road_options import ring_only
 from ..model_options import build_model, model_options
 from markov.errors import InvalidParameterError
 
@@ -26,6 +27,7 @@ __all__ = ["goe"]
               help="Update of the census (the patterns are those of parallel update).")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @quiet_option
+@ring_only('the Garden-of-Eden census counts ring configurations; a road\'s unreachable configurations are the difference between "configurations" and "states" in nasch solve --road')
 @handle_errors
 def goe(vmax, model, params, max_cells, do_census, length, cars, update, as_json):
     """Elementary Garden of Eden patterns (exhaustive) or a ring's GoE census.

@@ -9,6 +9,7 @@ from markov.errors import InvalidParameterError
 
 from ..cli_common import (ensure_dask_options, ensure_probabilities, handle_errors, number_list,
                           quiet_option)
+from ..road_options import ring_only
 from ..model_options import model_options
 
 __all__ = ["plot"]
@@ -56,6 +57,7 @@ def plot():
 @click.option("--scheduler", default=None,
               help="Address of a running Dask scheduler, tcp://HOST:PORT.")
 @quiet_option
+@ring_only("a fundamental diagram is a ring's (its density is N/L); for a road use nasch plot phase-diagram or nasch plot profile")
 @handle_errors
 def fundamental(vmax, p_text, lengths_text, ext_text, budget_text, mc_length, mc_steps, seed,
                 methods_text, output, serial, scheduler):
@@ -128,6 +130,7 @@ _UPDATES = ("parallel", "random-sequential", "ordered-sequential")
 @click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
               help="Figure file, .png or .pdf.")
 @quiet_option
+@ring_only("the space-time figure draws rings only; nasch simulate --road runs a road's Monte Carlo")
 @handle_errors
 def spacetime(length, density, vmax, p, model, params, update, steps, warmup, seed, bw,
               output):
@@ -183,6 +186,7 @@ def spacetime(length, density, vmax, p, model, params, update, steps, warmup, se
 @click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
               help="Figure file, .png or .pdf.")
 @quiet_option
+@ring_only("fundamental diagrams are rings'; for a road use nasch plot phase-diagram or nasch plot profile")
 @handle_errors
 def models(models_text, vmax, params, update, length, densities, steps, replicas, seed,
            output):
@@ -260,6 +264,7 @@ MAX_RELAXATION_CURVES = 10
 @click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
               help="Figure file, .png or .pdf.")
 @quiet_option
+@ring_only("relaxation time against density is a ring's; a road's relaxation time is in nasch spectrum --road")
 @handle_errors
 def relaxation(length, model, params, vmax, vary, values_text, p_text, update, spectrum_cars,
                count, output):

@@ -9,6 +9,7 @@ from markov.errors import InvalidParameterError
 
 from ..cli_common import ensure_probabilities, handle_errors, number_list, quiet_option
 from ..formatting import format_for_path
+from ..road_options import ring_only
 from ..model_options import build_model, model_options, param_names
 
 __all__ = ["study"]
@@ -53,6 +54,7 @@ __all__ = ["study"]
 @click.option("--scheduler", default=None, help="Address of a running Dask scheduler.")
 @model_options
 @quiet_option
+@ring_only('the study sweeps rings; for roads use nasch table --road and nasch plot phase-diagram')
 @handle_errors
 def study(model, params, vmax_text, p_text, density_text, methods_text, mc_length, mc_steps, mc_replicas,
           lengths_text, budget_text, no_extrapolation, max_states, seed, fmt, output, figure,
