@@ -237,7 +237,8 @@ def road_spectrum(system, count: int = 4, tol: float = 1e-10, maxiter: int = 20_
     if n == 1:
         return RoadSpectrum(sv.road, (), (), 1, sv.S, "dense", time.perf_counter() - start)
     want = min(count + 1, n)
-    A = spla.aslinearoperator(sv.P.T.tocsr())
+    # complex, as the ring's sector matrices: _leading starts ARPACK from a complex vector
+    A = spla.aslinearoperator(sv.P.T.tocsr().astype(np.complex128))
     pairs = _leading(A, want, tol, maxiter)
     drop = int(np.argmin([abs(v - 1) for v, _ in pairs]))
     pairs = (pairs[:drop] + pairs[drop + 1:])[:count]
@@ -365,6 +366,15 @@ def polynomial_degree_bound(road: Road, name: str, at, value: float, radius: flo
     ramp: at most ``L + 3 + ramps`` factors in a time step of parallel or
     ordered-sequential update, 2 in a sub-step of random-sequential update (a
     car or the entry, and the exit coin).
+
+    Parameters
+    ----------
+    road : Road
+    name : str
+    at : callable
+        The road at another value (:func:`road_parameter`).
+    value, radius : float
+        The interval ``[value - radius, value + radius]`` sampled.
 
     Returns
     -------
