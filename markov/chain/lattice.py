@@ -38,7 +38,7 @@ from markov._jit import njit, prange
 from markov.chain.encoding import check_encodable, powers
 from markov.model.ring import UPDATE_CODES
 
-__all__ = ["Lattice", "lattice_of", "successors", "increments", "count_layout", "start_key",
+__all__ = ["Lattice", "lattice_of", "successors", "successor_branches", "increments", "count_layout", "start_key",
            "count_configurations", "all_lattice_keys", "successor_set", "reachable_keys",
            "ENTRY_CODES", "EXIT_CODES"]
 
@@ -284,6 +284,11 @@ def _emit(mode, at, cells, w, cnt, ip, pw, out_keys, out_w, incr, row, scale):
         f = scale * w
         for j in range(cnt.shape[0]):
             incr[row, j] += f * cnt[j]
+    elif mode == 3:     # the rows with each branch's own counts (successor_branches)
+        out_keys[at] = _key(cells, ip[_L], pw)
+        out_w[at] = w
+        for j in range(cnt.shape[0]):
+            incr[at, j] = cnt[j]
     return at + 1
 
 
@@ -515,7 +520,7 @@ def _parallel(mode, key, at, ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_c
         idx[i] = 0
         if oc[i] == 0:
             return at
-    counting = mode == 2
+    counting = mode >= 2
     while True:
         w = 1.0
         for i in range(movers):
@@ -866,6 +871,14 @@ def _fill_rows(keys, indptr, ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_c
 
 
 @njit(cache=True, parallel=True)
+def _fill_branches(keys, indptr, ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_cell,
+                   ramp_v, ramp_a, ramp_down, ramp_up, pw, out_keys, out_w, out_counts):
+    for i in prange(keys.shape[0]):
+        _state(3, keys[i], indptr[i], ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_cell,
+               ramp_v, ramp_a, ramp_down, ramp_up, pw, out_keys, out_w, out_counts, 0, 0.0)
+
+
+@njit(cache=True, parallel=True)
 def _increments(keys, weights, ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_cell, ramp_v,
                 ramp_a, ramp_down, ramp_up, pw, incr):
     """``incr[i] = weights[i] * E[counts of a step | state i]`` (one row per state)."""
@@ -902,6 +915,38 @@ def successors(lattice: Lattice, keys: np.ndarray) -> tuple[np.ndarray, np.ndarr
     weight = np.empty(int(indptr[-1]), np.float64)
     _fill_rows(keys, indptr, *args, succ, weight)
     return indptr, succ, weight
+
+
+def successor_branches(lattice: Lattice, keys: np.ndarray):
+    """:func:`successors` with the counts of every branch (:func:`count_layout`).
+
+    What a transition's own counts need (the cars leaving in it, for the
+    exit current's fluctuations), where :func:`increments` gives only their
+    expectation per state.
+
+    Parameters
+    ----------
+    lattice : Lattice
+    keys : (n,) int64 array
+
+    Returns
+    -------
+    indptr, succ, weight
+        As :func:`successors` (one entry per branch, not summed).
+    counts : (nnz, size) float64 array
+        The counts of each branch.
+    """
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    args = lattice.kernel_args()
+    lengths = np.empty(len(keys), np.int64)
+    _row_lengths(keys, *args, lengths)
+    indptr = np.zeros(len(keys) + 1, np.int64)
+    np.cumsum(lengths, out=indptr[1:])
+    nnz = int(indptr[-1])
+    succ, weight = np.empty(nnz, np.int64), np.empty(nnz, np.float64)
+    counts = np.zeros((nnz, lattice.layout["size"]), np.float64)
+    _fill_branches(keys, indptr, *args, succ, weight, counts)
+    return indptr, succ, weight, counts
 
 
 def increments(lattice: Lattice, keys: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:

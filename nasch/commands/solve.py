@@ -210,10 +210,18 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
                                " for rings)")
     if method == "aggregation":
         raise click.UsageError(f"--method aggregation is for rings; {what} takes the others")
-    for flag, given in (("--sensitivity", sensitivity), ("--fluctuations", fluctuations),
-                        ("--autocorrelation", lags is not None)):
-        if given:
-            raise click.UsageError(f"{flag} is not yet computed for {what}")
+    if system.periodic:
+        for flag, given in (("--sensitivity", sensitivity), ("--fluctuations", fluctuations),
+                            ("--autocorrelation", lags is not None)):
+            if given:
+                raise click.UsageError(f"{flag} is not yet computed for {what}")
+    names = _road_sensitivity_names(system, sensitivity)
+    if lags is not None:
+        lags = ensure_int("--autocorrelation", lags, 0, MAX_CLI_LAGS)
+    dynamics = bool(names) or fluctuations or lags is not None
+    if every_class and dynamics:
+        raise click.UsageError("--classes reports every class; --sensitivity, --fluctuations"
+                               " and --autocorrelation need one")
     if every_class and (top is not None or save is not None):
         raise click.UsageError("--classes reports every class; --top and --save need one")
     if top is not None:
@@ -222,7 +230,7 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
         save = check_output_path(save, suffixes=(".npz",))
     limit = None if max_memory is None else max_memory * 2**30
     chain = RoadChain(system, max_memory=limit, start=start)
-    one_state = top is not None or save is not None
+    one_state = top is not None or save is not None or dynamics
     try:
         if every_class:
             chain.search_all_configurations()
@@ -236,6 +244,8 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
         _echo_classes(system, exc.classes, as_json, start)
         return
     data = sol.to_dict()
+    if dynamics:
+        data.update(_road_dynamics(chain, sol, names, fluctuations, lags, tol))
     rows = sol.top_configurations(top) if top else None
     if save is not None:
         sol.save(save)
@@ -247,6 +257,8 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
         emit_json(data)
         return
     _echo_lattice(system, sol, data)
+    if dynamics:
+        _echo_road_dynamics(data)
     if rows is not None:
         click.echo(f"  most probable configurations ({len(rows)} of {sol.n_states:,};"
                    " '.' empty, digit = velocity, cars move right):")
@@ -254,6 +266,74 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
             click.echo(f"    {r['configuration']}  {r['probability']:.12g}")
     if save is not None:
         click.echo(f"wrote {save} ({data['states']:,} states)", err=True)
+
+
+def _road_sensitivity_names(system, given) -> list[str]:
+    """The parameters of --sensitivity on a road, each checked before any solve."""
+    if not given:
+        return []
+    from markov.analysis.road_dynamics import road_parameter
+
+    names: list[str] = []
+    for item in given:
+        for name in (x.strip() for x in item.split(",")):
+            if name and name not in names:
+                names.append(name)
+    if not names:
+        raise click.UsageError("--sensitivity needs a parameter name, e.g. --sensitivity alpha")
+    for name in names:
+        road_parameter(system, name)   # refuses unknown names, vmax, values 0 or 1
+    return names
+
+
+#: Observables of a road's --autocorrelation.
+ROAD_CORRELATED = ("exit", "cars", "stopped")
+
+
+def _road_dynamics(chain, sol, names, fluctuations: bool, lags, tol) -> dict:
+    """The JSON fields of a road's --sensitivity, --fluctuations and --autocorrelation."""
+    from markov.analysis import road_dynamics as rd
+
+    S = sol.steps_per_time_step
+    out: dict = {"dynamics_time_unit": "time step",
+                 "chain_step": "one time step" if S == 1 else
+                 f"one sub-step ({S} sub-steps = one time step)"}
+    if names:
+        found = {name: rd.road_sensitivity(chain, name, solution=sol, tol=min(tol, 1e-12))
+                 for name in names}
+        for name, d in found.items():
+            out[f"dflux_d{name}"] = d.dflux
+        out["sensitivity"] = {name: d.to_dict() for name, d in found.items()}
+    if fluctuations:
+        out.update(rd.exit_fluctuations(chain, sol).to_dict())
+        for name in ("cars", "stopped"):
+            out[f"tau_int_{name}"] = rd.road_autocorrelation_time(chain, name, sol) / S
+        out.pop("time_unit", None)
+    if lags is not None:
+        out["autocorrelation_lags"] = "chain steps"
+        out["autocorrelation"] = {name: rd.road_autocorrelation(chain, name, lags, sol).tolist()
+                                  for name in ROAD_CORRELATED}
+    return out
+
+
+def _echo_road_dynamics(data: dict) -> None:
+    click.echo(f"  dynamics per time step (a chain step is {data['chain_step']})")
+    for name, d in data.get("sensitivity", {}).items():
+        click.echo(f"  dflux/d{name} = {d['dflux']:.15g}  dinflow {d['dinflow']:.15g}"
+                   f"  dmean_cars {d['dmean_cars']:.15g}  (residual {d['residual']:.1e},"
+                   f" {d['points']} Chebyshev points, degree check {d['degree_check']:.1e})")
+    if "exit_diffusion" in data:
+        click.echo(f"  exit current   {data['exit_current']:.15g}  (cars leaving per time step)")
+        click.echo(f"  exit diffusion {data['exit_diffusion']:.15g}  (lim var(cars left by t) / t,"
+                   f" Fano {data['exit_fano']:.6g})")
+        click.echo(f"  tau_int exit   {data['tau_int_exit']:.10g}  tau_int cars"
+                   f" {data['tau_int_cars']:.10g}  tau_int stopped {data['tau_int_stopped']:.10g}"
+                   "  time steps")
+    if "autocorrelation" in data:
+        c = data["autocorrelation"]
+        click.echo("  autocorrelation C(t), t in chain steps:  t  exit  cars  stopped")
+        for t, row in enumerate(zip(*(c[n] for n in ROAD_CORRELATED))):
+            click.echo(f"    {t:>6}  " + "  ".join(f"{x: .12e}" for x in row))
 
 
 def _numbers(values, digits: int = 6) -> str:

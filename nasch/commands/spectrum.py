@@ -10,6 +10,7 @@ from markov.errors import InvalidParameterError
 
 from ..cli_common import emit_json, handle_errors, number_list, quiet_option
 from ..model_options import build_model, model_options
+from ..road_options import build_system, road_options
 
 __all__ = ["spectrum"]
 
@@ -39,6 +40,7 @@ def _sectors(text: str):
 @click.option("--density", "-c", type=float, default=None,
               help="Density: N = round(c L) on each ring (several lengths).")
 @model_options
+@road_options
 @click.option("--vmax", type=int, default=None,
               help="Maximal velocity >= 1 (default: the model's, 2 for nasch).")
 @click.option("--p", "p", type=float, default=None,
@@ -62,8 +64,9 @@ def _sectors(text: str):
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
 @quiet_option
 @handle_errors
-def spectrum(length_text, cars, density, model, params, vmax, p, update, count, sector_text,
-             operator, tol, max_memory, show, as_json):
+def spectrum(length_text, cars, density, model, params, road, alpha, beta, entry, exit_, v_in,
+             stretches, ramps, vmax, p, update, count, sector_text, operator, tol, max_memory,
+             show, as_json):
     """Relaxation spectrum: leading eigenvalues of P in every momentum sector.
 
     The chain of a ring commutes with rotations, so P splits into momentum
@@ -79,6 +82,11 @@ def spectrum(length_text, cars, density, model, params, vmax, p, update, count, 
       nasch spectrum -L 16 -N 8 --p 0.5
       nasch spectrum -L 12 -N 4 --model vdr --param p0=0.75 --p 0.1 --sector 0,1
       nasch spectrum -L 10,12,14,16,18 -c 0.5 --vmax 1 --p 0.5 --count 1 --json
+      nasch spectrum -L 8 --road --alpha 0.3 --beta 0.6 --vmax 2 --p 0.25
+
+    With --road (docs/roads.md, "Dynamics of a road"): the road has no
+    rotation, so one sector: the leading eigenvalues of its P, and tau in
+    time steps (a random-sequential chain step is one of L + 1 sub-steps).
     """
     from markov.model.ring import Ring
     from markov.analysis.spectrum import relaxation_spectrum
@@ -86,6 +94,13 @@ def spectrum(length_text, cars, density, model, params, vmax, p, update, count, 
 
     from ..relaxation import fit_power_law
 
+    if road or stretches:
+        return _road_spectrum(length_text, cars, density, model, params, road, alpha, beta,
+                              entry, exit_, v_in, stretches, ramps, vmax, p, update, count,
+                              sector_text, operator, tol, max_memory, show, as_json)
+    if any(x is not None for x in (alpha, beta, entry, exit_, v_in)) or ramps:
+        build_system(2, 1, build_model(model, params, vmax=vmax, p=p), update, road=False,
+                     alpha=alpha, beta=beta, entry=entry, exit_=exit_, v_in=v_in, ramps=ramps)
     lengths = _lengths(length_text)
     if cars is not None and density is not None:
         raise click.UsageError("give --cars or --density, not both")
@@ -157,3 +172,62 @@ def _echo_ring(ring, s, show: int) -> None:
         for e in s.eigenvalues[:show]:
             click.echo(f"    {e.value.real:+.12f} {e.value.imag:+.12f}i  |{abs(e.value):.12f}|"
                        f"  k={e.sector:<3d} res {e.residual:.1e}")
+
+
+def _road_spectrum(length_text, cars, density, model, params, road, alpha, beta, entry, exit_,
+                   v_in, stretches, ramps, vmax, p, update, count, sector_text, operator, tol,
+                   max_memory, show, as_json) -> None:
+    """``--road``: the leading eigenvalues of one road's P (one sector)."""
+    from markov.analysis.road_dynamics import road_spectrum
+    from markov.solvers.road_chain import RoadChain
+    from markov.validate import ensure_int, ensure_max_memory, ensure_tol
+
+    if not road:
+        raise InvalidParameterError("the spectrum of a ring with a stretch is not computed"
+                                    " (no rotation sectors); --stretch here needs --road")
+    if density is not None:
+        raise InvalidParameterError("--density is a ring's: a road's cars come and go")
+    if sector_text.strip() != "all":
+        raise InvalidParameterError("--sector is a ring's: a road has one sector")
+    if operator == "matrix-free":
+        raise InvalidParameterError("a road is solved with its matrix (--operator matrix-free"
+                                    " is for rings)")
+    try:
+        length = int(length_text)
+    except ValueError:
+        raise InvalidParameterError(f"--road takes one length, got {length_text!r}") from None
+    length = ensure_int("--length", length, 1)
+    count = ensure_int("--count", count, 1, 1000)
+    show = ensure_int("--show", show, 0)
+    tol = ensure_tol(tol, "--tol")
+    max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
+    system = build_system(length, cars, build_model(model, params, vmax=vmax, p=p), update,
+                          road=True, alpha=alpha, beta=beta, entry=entry, exit_=exit_,
+                          v_in=v_in, stretches=stretches, ramps=ramps)
+    chain = RoadChain(system, max_memory=None if max_memory is None else max_memory * 2**30)
+    s = road_spectrum(chain, count=count, tol=tol)
+    if as_json:
+        emit_json(s.to_dict())
+        return
+    click.echo(system.summary())
+    d = s.to_dict()
+    click.echo(f"  entry {system.entry}: {d['entry_convention']}")
+    click.echo(f"  exit {system.exit}: {d['exit_convention']}")
+    click.echo(f"  {s.states:,} states (one sector: a road has no rotation), {s.operator},"
+               f" {s.seconds:.2f} s; a chain step is {d['chain_step']}")
+    lam = s.second
+    if lam is None:
+        click.echo("  no eigenvalue besides the stationary 1 (a single configuration)")
+        return
+    tau = s.relaxation_time
+    tau_text = "infinite (|lambda_2| = 1: the chain does not relax)" if math.isinf(tau) \
+        else f"{tau:.10g} time steps"
+    click.echo(f"  lambda_2 = {lam.real:.12f} {lam.imag:+.12f}i  |lambda_2| = {abs(lam):.12f}"
+               " (per chain step)")
+    click.echo(f"  relaxation time tau = -1/(S ln|lambda_2|) = {tau_text}"
+               f" (S = {s.steps_per_time_step} chain steps per time step);"
+               f" oscillation arg = {s.oscillation:.6f} rad/chain step")
+    if show:
+        click.echo("  eigenvalues (by modulus; residual):")
+        for v, r in list(zip(s.eigenvalues, s.residuals))[:show]:
+            click.echo(f"    {v.real:+.12f} {v.imag:+.12f}i  |{abs(v):.12f}|  res {r:.1e}")

@@ -1,0 +1,872 @@
+"""The dynamics of a solved open road: spectrum, sensitivities, exit-current fluctuations, C(t).
+
+Every analysis of a ring (:mod:`markov.analysis.spectrum`, ``sensitivity``,
+``correlations``, ``fluctuations``) has its road version here, on the
+road's own transition matrix ``P`` (:class:`markov.solvers.road_chain.RoadChain`,
+row-stochastic, never lumped: a road has no rotation, so one sector).
+
+Units.  ``P`` is one *chain step*: a time step under parallel and
+ordered-sequential update, one *sub-step* under random-sequential update, where
+a time step is ``S = L + 1`` sub-steps
+(:attr:`markov.solvers.road_chain.RoadSolution.steps_per_time_step`).  Every
+result is given per time step (times divided, rates multiplied by ``S``), and
+the per-chain-step value is kept beside it.
+
+* :func:`road_spectrum`: the leading eigenvalues of ``P`` (dense LAPACK up to
+  :data:`markov.analysis.spectrum.DENSE_SECTOR_STATES` states, else ARPACK,
+  largest modulus), with residuals; ``tau = -1 / (S ln |lambda_2|)`` time steps.
+* :func:`road_sensitivity`: ``d pi / d theta`` and the derivatives of the flux,
+  the inflow, the mean number of cars and the density profile, for ``theta`` =
+  ``alpha``, ``beta``, ``ramp@CELL`` (an on-ramp's rate), a probability
+  parameter of the bulk model (``p``, ``p0``, ...; the stretches that do not
+  set it follow it) or of one stretch (``p@FIRST-LAST``).  ``dpi (I - P) =
+  pi dP``, ``sum dpi = 0`` (:func:`markov.solvers.fundamental.solve_fundamental`).
+  ``dP`` is exact to rounding: each transition probability is a polynomial in
+  ``theta`` (a product of the rule's weights, the coins ``alpha``, ``beta``,
+  the ramps' rates) of degree at most ``d`` (:func:`polynomial_degree_bound`), so
+  its Chebyshev interpolant on ``d + 3`` points of ``[theta - r, theta + r]``
+  is the polynomial itself and its derivative at the centre is exact; the two
+  top Chebyshev coefficients, zero for such a polynomial, are reported
+  (``degree_check``).  The state set and the support of ``P`` must not change
+  on that interval: a value 0 or 1 is refused.
+* :func:`exit_fluctuations`: ``J`` and the diffusion coefficient
+  ``Delta = lim var(Y_t) / t`` of ``Y_t``, the number of cars that left up to
+  time ``t``, by the Green-Kubo (Poisson-equation) formula of
+  :mod:`markov.analysis.fluctuations` with the cars leaving in each transition
+  (:func:`markov.chain.lattice.successor_branches`); :func:`exit_count_variance`
+  gives ``var(Y_t)`` at finite ``t``, :func:`exit_scgf` the scaled cumulant
+  generating function from the tilted matrix ``P_s(x, y) = sum P e^{s m}``.
+* :func:`road_autocorrelation` and :func:`road_autocorrelation_time`: ``C(t)``
+  and ``tau_int`` of the exit current (cars leaving in one chain step) or of a
+  state observable (:data:`ROAD_OBSERVABLES`: cars on the road, stopped cars,
+  the occupation of one cell ``occupation:X``).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from markov.chain.lattice import increments, lattice_of, successor_branches, successors
+from markov.errors import InvalidParameterError, NoUniqueStationaryStateError
+from markov.model.road import OnRamp, Road
+from markov.model.stretch import Stretch
+from markov.solvers.fundamental import solve_fundamental
+from markov.solvers.road_chain import RoadChain, RoadSolution
+from markov.validate import ensure_int, ensure_real
+
+__all__ = ["RoadSpectrum", "road_spectrum", "RoadSensitivity", "road_sensitivity",
+           "road_parameter", "polynomial_degree_bound", "ExitFluctuations",
+           "exit_fluctuations", "exit_count_variance", "exit_scgf", "ROAD_OBSERVABLES",
+           "road_observable", "road_autocorrelation", "road_autocorrelation_time",
+           "exit_branches"]
+
+#: State observables of :func:`road_autocorrelation` besides ``"exit"`` (an increment)
+#: and ``"occupation:X"``.
+ROAD_OBSERVABLES = ("exit", "cars", "stopped")
+#: Most lags of :func:`road_autocorrelation` and steps of :func:`exit_count_variance`.
+MAX_LAGS = 1_000_000
+_CHUNK = 1 << 14
+
+
+# ------------------------------------------------------------------ the chain
+
+
+class _Solved(NamedTuple):
+    chain: RoadChain
+    solution: RoadSolution
+    P: sp.csr_array
+    pi: np.ndarray
+    S: int               # chain steps per time step
+
+    @property
+    def road(self) -> Road:
+        return self.chain.system
+
+    @property
+    def keys(self) -> np.ndarray:
+        return self.solution.keys
+
+    def step(self, x: np.ndarray) -> np.ndarray:
+        """The row vector ``x P``."""
+        return self.P.T @ x
+
+
+def _prepare(system, solution: RoadSolution | None = None) -> _Solved:
+    """The road's chain, its solution and matrix; one closed class, or the refusal."""
+    if isinstance(system, RoadChain):
+        chain = system
+    elif isinstance(system, Road):
+        chain = RoadChain(system)
+    else:
+        raise InvalidParameterError(
+            f"expected a markov Road or RoadChain, got {type(system).__name__}")
+    if chain.system.periodic:
+        raise InvalidParameterError(
+            "these are the analyses of an open road; a ring (with stretches or not) has"
+            " markov.analysis.spectrum, sensitivity, correlations and fluctuations")
+    if solution is not None:
+        if not isinstance(solution, RoadSolution) or solution.system != chain.system:
+            raise InvalidParameterError("the solution is not of this road")
+        # its states: no search for the classes again
+        chain.__dict__.setdefault("keys", solution.keys)
+        if not np.array_equal(chain.keys, solution.keys):
+            raise InvalidParameterError("the solution is not on this chain's states")
+    else:
+        solution = chain.solution()   # several closed classes: refused there, with them
+    return _Solved(chain, solution, chain.matrix, solution.pi, solution.steps_per_time_step)
+
+
+def _chain_step_name(S: int) -> str:
+    return "one time step" if S == 1 else f"one sub-step ({S} sub-steps = one time step)"
+
+
+# ------------------------------------------------------------------ spectrum
+
+
+@dataclass(frozen=True)
+class RoadSpectrum:
+    """Leading eigenvalues of a road's ``P``, the stationary 1 excluded.
+
+    Attributes
+    ----------
+    road : Road
+    eigenvalues : tuple of complex
+        By decreasing modulus (per chain step).
+    residuals : tuple of float
+        ``||x P - lambda x|| / ||x||`` of each.
+    states : int
+    steps_per_time_step : int
+    operator : {"dense", "arpack"}
+    seconds : float
+    """
+
+    road: Road
+    eigenvalues: tuple
+    residuals: tuple
+    states: int
+    steps_per_time_step: int
+    operator: str
+    seconds: float
+
+    @property
+    def second(self) -> complex | None:
+        return self.eigenvalues[0] if self.eigenvalues else None
+
+    @property
+    def relaxation_time_chain_steps(self) -> float:
+        """``-1 / ln |lambda_2|`` in chain steps (sub-steps: random-sequential)."""
+        lam = self.second
+        if lam is None or abs(lam) == 0:
+            return 0.0
+        return math.inf if abs(lam) >= 1 - 1e-12 else -1.0 / math.log(abs(lam))
+
+    @property
+    def relaxation_time(self) -> float:
+        """``-1 / (S ln |lambda_2|)`` in time steps."""
+        return self.relaxation_time_chain_steps / self.steps_per_time_step
+
+    @property
+    def oscillation(self) -> float:
+        """``arg lambda_2`` per chain step (radians)."""
+        return 0.0 if self.second is None else float(np.angle(self.second))
+
+    def to_dict(self) -> dict:
+        """JSON-ready, with the road and its conventions.
+
+        Returns
+        -------
+        dict
+        """
+        tau, tau_c = self.relaxation_time, self.relaxation_time_chain_steps
+        return {**self.road.describe(),
+                "eigenvalues": [{"re": float(v.real), "im": float(v.imag),
+                                 "modulus": float(abs(v)), "residual": float(r)}
+                                for v, r in zip(self.eigenvalues, self.residuals)],
+                "relaxation_time": tau if math.isfinite(tau) else None,
+                "relaxation_time_chain_steps": tau_c if math.isfinite(tau_c) else None,
+                "time_unit": "time step", "chain_step": _chain_step_name(
+                    self.steps_per_time_step),
+                "steps_per_time_step": self.steps_per_time_step,
+                "oscillation": self.oscillation, "sectors": "one (a road has no rotation)",
+                "states": self.states, "operator": self.operator, "seconds": self.seconds}
+
+
+def road_spectrum(system, count: int = 4, tol: float = 1e-10, maxiter: int = 20_000,
+                  solution: RoadSolution | None = None) -> RoadSpectrum:
+    """The ``count`` eigenvalues of largest modulus of a road's ``P`` after the stationary 1.
+
+    Parameters
+    ----------
+    system : Road or RoadChain
+        One closed class (several: :class:`markov.errors.NoUniqueStationaryStateError`
+        with every class solved).
+    count : int
+    tol : float
+        ARPACK's relative accuracy.
+    maxiter : int
+    solution : RoadSolution, optional
+
+    Returns
+    -------
+    RoadSpectrum
+
+    Examples
+    --------
+    One cell, parallel site1/sink: the cell empties with ``beta``, fills with
+    ``alpha``, so ``lambda_2 = 1 - alpha - beta``.
+
+    >>> from markov import load_model
+    >>> s = road_spectrum(Road(1, load_model("nasch", {"vmax": 1}), alpha=0.3, beta=0.6))
+    >>> round(s.second.real, 12)
+    0.1
+    """
+    from markov.analysis.spectrum import DENSE_SECTOR_STATES, _leading
+    from markov.validate import ensure_tol
+
+    count = ensure_int("count", count, 1, 1000)
+    tol = ensure_tol(tol)
+    start = time.perf_counter()
+    sv = _prepare(system, solution)
+    n = len(sv.pi)
+    if n == 1:
+        return RoadSpectrum(sv.road, (), (), 1, sv.S, "dense", time.perf_counter() - start)
+    want = min(count + 1, n)
+    # complex, as the ring's sector matrices: _leading starts ARPACK from a complex vector
+    A = spla.aslinearoperator(sv.P.T.tocsr().astype(np.complex128))
+    pairs = _leading(A, want, tol, maxiter)
+    drop = int(np.argmin([abs(v - 1) for v, _ in pairs]))
+    pairs = (pairs[:drop] + pairs[drop + 1:])[:count]
+    route = "dense" if n <= DENSE_SECTOR_STATES or want >= n - 1 else "arpack"
+    return RoadSpectrum(sv.road, tuple(v for v, _ in pairs), tuple(r for _, r in pairs), n,
+                        sv.S, route, time.perf_counter() - start)
+
+
+# ---------------------------------------------------------------- sensitivity
+
+
+def road_parameter(road: Road, name: str):
+    """The value of a road's parameter ``name`` and the road at another value.
+
+    Parameters
+    ----------
+    road : Road
+    name : str
+        ``alpha``, ``beta``, ``ramp@CELL``, a probability parameter ``NAME`` of the
+        bulk model, or ``NAME@FIRST-LAST`` (its value in that stretch, which must set it).
+
+    Returns
+    -------
+    value : float
+    at : callable
+        ``at(x)`` is the road with the parameter at ``x``.
+
+    Raises
+    ------
+    InvalidParameterError
+        An unknown name, an integer parameter, a value 0 or 1 (no two-sided
+        derivative: the support of ``P`` changes there).
+    """
+    if not isinstance(name, str) or not name:
+        raise InvalidParameterError(f"a parameter name is text, got {name!r}")
+    model = road.model
+    probabilities = model.spec.probability_parameters()
+    known = ["alpha", "beta"] + [f"ramp@{r.cell}" for r in road.ramps] + list(probabilities) \
+        + [f"{k}@{s.first}-{s.last}" for s in road.stretches for k, _ in s.values
+           if k in probabilities]
+    hint = f"; the road's parameters: {', '.join(known)}"
+    if name in ("alpha", "beta"):
+        value = float(getattr(road, name))
+
+        def at(x):
+            return road.with_params(**{name: x})
+    elif name.startswith("ramp@"):
+        try:
+            cell = int(name[5:])
+        except ValueError:
+            raise InvalidParameterError(f"ramp@CELL needs an integer cell, got {name!r}"
+                                        + hint) from None
+        which = [i for i, r in enumerate(road.ramps) if r.cell == cell]
+        if len(which) != 1:
+            raise InvalidParameterError(
+                f"{name}: {'no on-ramp' if not which else 'several on-ramps'} on cell {cell}"
+                + hint)
+        i = which[0]
+        value = float(road.ramps[i].alpha)
+
+        def at(x):
+            ramps = list(road.ramps)
+            ramps[i] = OnRamp(ramps[i].cell, x, ramps[i].velocity)
+            return Road(road.length, road.model, road.update, road.alpha, road.beta,
+                        road.entry, road.exit, road.v_in, road.stretches, tuple(ramps))
+    elif "@" in name:
+        param, _, span = name.partition("@")
+        first, dash, last = span.partition("-")
+        which = [i for i, s in enumerate(road.stretches)
+                 if dash and f"{s.first}" == first and f"{s.last}" == last]
+        if not which or param not in dict(road.stretches[which[0]].values):
+            raise InvalidParameterError(f"{name}: no stretch {span} setting {param}" + hint)
+        i = which[0]
+        if param not in probabilities:
+            raise InvalidParameterError(
+                f"{param} is not a probability parameter of {model.name}: no derivative" + hint)
+        value = float(dict(road.stretches[i].values)[param])
+
+        def at(x):
+            stretches = list(road.stretches)
+            s = stretches[i]
+            stretches[i] = Stretch(s.first, s.last, {**dict(s.values), param: x})
+            return Road(road.length, road.model, road.update, road.alpha, road.beta,
+                        road.entry, road.exit, road.v_in, tuple(stretches), road.ramps)
+    elif name in model.spec.parameters:
+        if name not in probabilities:
+            raise InvalidParameterError(
+                f"{name} is an integer parameter of {model.name}: no derivative" + hint)
+        value = float(model.params[name])
+
+        def at(x):
+            return road.with_params(**{name: x})
+    else:
+        raise InvalidParameterError(f"the road has no parameter {name!r}" + hint)
+    if not 0 < value < 1:
+        raise InvalidParameterError(
+            f"{name} = {value:g} is on the boundary of [0, 1]: probabilities 0 or 1 change the"
+            f" states and the support of P there, so there is no two-sided derivative;"
+            f" give 0 < {name} < 1")
+    return value, at
+
+
+def _lattice_numbers(lattice) -> np.ndarray:
+    """Every number of a lattice a transition probability is a product of."""
+    return np.concatenate([lattice.weight.ravel(), lattice.floats, lattice.ramp_alpha])
+
+
+def _chebyshev(K: int):
+    """Nodes ``t_k`` in ``[-1, 1]``, the weights ``D`` of the derivative at 0 of the
+    interpolant, and the rows giving its two top coefficients."""
+    from numpy.polynomial import chebyshev as C
+
+    t = np.cos(np.pi * (np.arange(K) + 0.5) / K)
+    coef = C.chebfit(t, np.eye(K), K - 1)          # (K coefficients, K unit samples)
+    D = C.chebval(0.0, C.chebder(coef))
+    return t, D, coef[-2:]
+
+
+def polynomial_degree_bound(road: Road, name: str, at, value: float, radius: float) -> int:
+    """An upper bound of the degree in ``theta`` of every transition probability.
+
+    A probability is a product of one factor per car the step updates (the
+    rule's weight: a polynomial of degree ``g`` in ``theta``, found here from
+    the tables on 9 Chebyshev points), per coin (``alpha``, ``beta``) and per
+    ramp: at most ``L + 3 + ramps`` factors in a time step of parallel or
+    ordered-sequential update, 2 in a sub-step of random-sequential update (a
+    car or the entry, and the exit coin).
+
+    Parameters
+    ----------
+    road : Road
+    name : str
+    at : callable
+        The road at another value (:func:`road_parameter`).
+    value, radius : float
+        The interval ``[value - radius, value + radius]`` sampled.
+
+    Returns
+    -------
+    int
+    """
+    t, _, _ = _chebyshev(9)
+    from numpy.polynomial import chebyshev as C
+
+    samples = np.array([_lattice_numbers(lattice_of(at(value + radius * x))) for x in t])
+    coef = C.chebfit(t, samples, 8)
+    scale = max(1.0, float(np.abs(samples).max()))
+    big = np.flatnonzero(np.abs(coef).max(axis=1) > 1e-9 * scale)
+    g = int(big.max()) if len(big) else 0
+    if g >= 7:
+        raise InvalidParameterError(
+            f"the weights of {road.model.name} are not polynomials of low degree in {name}"
+            " (their Chebyshev coefficients do not vanish above degree 6): no exact dP here")
+    factors = 2 if road.update == "random-sequential" else road.length + 3 + len(road.ramps)
+    return max(1, g * factors)
+
+
+@dataclass(frozen=True, eq=False)
+class RoadSensitivity:
+    """Derivatives of a road's stationary state in one parameter.
+
+    Attributes
+    ----------
+    parameter : str
+    value : float
+    dpi : (n,) float64 array
+        Sums to zero.
+    dflux, dinflow, dmean_cars : float
+        Per time step.
+    ddensity : (L,) float64 array
+    residual : float
+        ``||dpi (I - P) - pi dP||_1``.
+    degree : int
+        The degree bound; ``degree + 3`` Chebyshev points.
+    degree_check : float
+        The two top Chebyshev coefficients of the entries of ``P`` (relative to
+        the largest entry): zero to rounding for polynomials of degree ``<= degree``.
+    radius : float
+    seconds : float
+    """
+
+    parameter: str
+    value: float
+    dpi: np.ndarray = field(repr=False)
+    dflux: float
+    dinflow: float
+    dmean_cars: float
+    ddensity: np.ndarray
+    residual: float
+    degree: int
+    degree_check: float
+    radius: float
+    seconds: float
+
+    def to_dict(self) -> dict:
+        """JSON-ready (without ``dpi``).
+
+        Returns
+        -------
+        dict
+        """
+        return {"parameter": self.parameter, "value": self.value, "dflux": self.dflux,
+                "dinflow": self.dinflow, "dmean_cars": self.dmean_cars,
+                "ddensity_profile": self.ddensity.tolist(), "residual": self.residual,
+                "derivative": "Chebyshev interpolation of the polynomial entries of P",
+                "degree": self.degree, "points": self.degree + 3,
+                "degree_check": self.degree_check, "radius": self.radius,
+                "seconds": self.seconds}
+
+
+def _matrix_on(lattice, keys: np.ndarray) -> sp.csr_array:
+    indptr, succ, weight = successors(lattice, keys)
+    col = np.searchsorted(keys, succ)
+    col[col == len(keys)] = 0
+    if not np.array_equal(keys[col], succ):
+        raise InvalidParameterError("the state set changes with the parameter: no derivative")
+    P = sp.csr_array((weight, col, indptr), shape=(len(keys), len(keys)))
+    P.sum_duplicates()
+    P.sort_indices()
+    return P
+
+
+def road_sensitivity(system, parameter: str, solution: RoadSolution | None = None,
+                     tol: float = 1e-12) -> RoadSensitivity:
+    """``d pi / d theta`` and the derivatives of the flux, inflow, cars and density, exactly.
+
+    Parameters
+    ----------
+    system : Road or RoadChain
+    parameter : str
+        See :func:`road_parameter`.
+    solution : RoadSolution, optional
+    tol : float
+        Relative residual target of the solve for ``dpi``.
+
+    Returns
+    -------
+    RoadSensitivity
+
+    Examples
+    --------
+    One cell, parallel site1/sink: ``J = alpha beta / (alpha + beta)``, so
+    ``dJ / dalpha = (beta / (alpha + beta))^2``.
+
+    >>> from markov import load_model
+    >>> s = road_sensitivity(Road(1, load_model("nasch", {"vmax": 1}), alpha=0.3, beta=0.6),
+    ...                      "alpha")
+    >>> round(s.dflux, 12), round((0.6 / 0.9) ** 2, 12)
+    (0.444444444444, 0.444444444444)
+    """
+    road = system.system if isinstance(system, RoadChain) else system
+    if not isinstance(road, Road):
+        raise InvalidParameterError(
+            f"expected a markov Road or RoadChain, got {type(system).__name__}")
+    value, at = road_parameter(road, parameter)     # before any work
+    sv = _prepare(system, solution)
+    start = time.perf_counter()
+    radius = 0.5 * min(value, 1 - value)
+    degree = polynomial_degree_bound(road, parameter, at, value, radius)
+    K = degree + 3
+    t, D, top = _chebyshev(K)
+    keys, P0 = sv.keys, sv.P.copy()
+    P0.sort_indices()
+    lay = sv.chain.lattice.layout
+    cols = [lay["left"], lay["entered"]]
+    data, incr = [], []
+    from markov.progress import progress_bar
+
+    bar = progress_bar(K, "sensitivity", "point")
+    for x in t:
+        bar.update(1)
+        lat = lattice_of(at(value + radius * x))
+        Pk = _matrix_on(lat, keys)
+        if not (np.array_equal(Pk.indptr, P0.indptr) and np.array_equal(Pk.indices, P0.indices)):
+            raise InvalidParameterError(
+                f"the support of P changes between {parameter} = {value - radius:g} and"
+                f" {value + radius:g}: no derivative")
+        data.append(Pk.data)
+        incr.append(increments(lat, keys)[:, cols])
+    bar.close()
+    F = np.array(data)
+    dP = sp.csr_array((D @ F / radius, P0.indices, P0.indptr), shape=P0.shape)
+    check = float(np.abs(top @ F).max() / max(1e-300, np.abs(F).max()))
+    da = np.tensordot(D, np.array(incr), axes=1) / radius          # (n, 2)
+    pi = sv.pi
+    h = dP.T @ pi
+    h -= pi * h.sum()                 # exact sum zero (rows of dP sum to zero)
+    dpi = solve_fundamental(sv.P, pi, h, tol=tol)
+    residual = float(np.abs(dpi - sv.step(dpi) - h).sum())
+    a = increments(sv.chain.lattice, keys)[:, cols]
+    dflux = sv.S * float(dpi @ a[:, 0] + pi @ da[:, 0])
+    dinflow = sv.S * float(dpi @ a[:, 1] + pi @ da[:, 1])
+    occ = _digits(road, keys) > 0
+    ddensity = dpi @ occ
+    return RoadSensitivity(parameter, value, dpi, dflux, dinflow, float(ddensity.sum()),
+                           ddensity, residual, degree, check, radius,
+                           time.perf_counter() - start)
+
+
+# -------------------------------------------------------------- observables
+
+
+def _digits(road: Road, keys: np.ndarray) -> np.ndarray:
+    """``(n, L)``: 0 for an empty cell, ``v + 1`` for a car of velocity ``v``."""
+    B = road.top_vmax + 2
+    pw = B ** np.arange(road.length, dtype=np.int64)
+    return (np.asarray(keys, np.int64)[:, None] // pw[None, :]) % B
+
+
+def road_observable(road: Road, keys: np.ndarray, name: str) -> np.ndarray:
+    """A state observable in every state: ``cars``, ``stopped`` or ``occupation:X``.
+
+    Parameters
+    ----------
+    road : Road
+    keys : (n,) int64 array
+    name : str
+
+    Returns
+    -------
+    (n,) float64 array
+    """
+    d = _digits(road, keys)
+    if name == "cars":
+        return (d > 0).sum(axis=1).astype(np.float64)
+    if name == "stopped":
+        return (d == 1).sum(axis=1).astype(np.float64)
+    if isinstance(name, str) and name.startswith("occupation:"):
+        try:
+            x = int(name.partition(":")[2])
+        except ValueError:
+            x = 0
+        if not 1 <= x <= road.length:
+            raise InvalidParameterError(
+                f"occupation:X needs a cell X in 1..{road.length}, got {name!r}")
+        return (d[:, x - 1] > 0).astype(np.float64)
+    raise InvalidParameterError(
+        f"observable must be one of {', '.join(ROAD_OBSERVABLES)} or occupation:X, got {name!r}")
+
+
+# -------------------------------------------------------------- fluctuations
+
+
+class _Exit(NamedTuple):
+    a: np.ndarray       # E[m | x]
+    a2: np.ndarray      # E[m^2 | x]
+    b: np.ndarray       # b(y) = sum_x pi(x) P(x, y) m(x, y)
+    entries: tuple | None
+
+
+def exit_branches(lattice, keys: np.ndarray):
+    """Every branch of every row: ``(source index, target index, weight, cars leaving)``.
+
+    Parameters
+    ----------
+    lattice : Lattice
+    keys : (n,) int64 array, sorted (a closed set)
+
+    Returns
+    -------
+    tuple of four arrays
+    """
+    parts = []
+    left = lattice.layout["left"]
+    for start in range(0, len(keys), _CHUNK):
+        chunk = keys[start:start + _CHUNK]
+        indptr, succ, weight, counts = successor_branches(lattice, chunk)
+        src = start + np.repeat(np.arange(len(chunk)), np.diff(indptr))
+        col = np.searchsorted(keys, succ)
+        col[col == len(keys)] = 0
+        if not np.array_equal(keys[col], succ):
+            raise NoUniqueStationaryStateError(
+                "the set of states is not closed: a successor lies outside it")
+        parts.append((src, col, weight, counts[:, left].copy()))
+    return tuple(np.concatenate(x) for x in zip(*parts))
+
+
+def _exit(sv: _Solved, keep: bool = False) -> _Exit:
+    src, col, w, m = exit_branches(sv.chain.lattice, sv.keys)
+    n = len(sv.keys)
+    wm = w * m
+    a = np.bincount(src, wm, n)
+    a2 = np.bincount(src, wm * m, n)
+    b = np.bincount(col, sv.pi[src] * wm, n)
+    return _Exit(a, a2, b, (src, col, w, m) if keep else None)
+
+
+@dataclass(frozen=True)
+class ExitFluctuations:
+    """Mean and diffusion of ``Y_t``, the cars that left a road up to time ``t``.
+
+    Attributes
+    ----------
+    road : Road
+    current, diffusion, variance : float
+        Per chain step: ``J``, ``Delta = lim var(Y_t) / t`` and ``var(m)`` of the
+        cars leaving in one chain step.
+    steps_per_time_step : int
+    states : int
+    seconds : float
+    """
+
+    road: Road
+    current: float
+    diffusion: float
+    variance: float
+    steps_per_time_step: int
+    states: int
+    seconds: float
+
+    @property
+    def flux(self) -> float:
+        """``J`` per time step (the solution's flux)."""
+        return self.current * self.steps_per_time_step
+
+    @property
+    def diffusion_per_time_step(self) -> float:
+        """``Delta`` per time step (``S`` chain steps)."""
+        return self.diffusion * self.steps_per_time_step
+
+    @property
+    def fano(self) -> float:
+        """``Delta / J``: 1 for a Poisson stream of cars."""
+        return self.diffusion / self.current if self.current > 0 else math.nan
+
+    @property
+    def tau_int(self) -> float:
+        """``Delta / var(m)``: the integrated autocorrelation time of the exit
+        increments, in chain steps."""
+        return self.diffusion / self.variance if self.variance > 0 else 1.0
+
+    def to_dict(self) -> dict:
+        """JSON-ready.
+
+        Returns
+        -------
+        dict
+        """
+        S = self.steps_per_time_step
+        return {"exit_current": self.flux, "exit_diffusion": self.diffusion_per_time_step,
+                "exit_fano": self.fano, "exit_variance_per_chain_step": self.variance,
+                "exit_current_per_chain_step": self.current,
+                "exit_diffusion_per_chain_step": self.diffusion,
+                "tau_int_exit": self.tau_int / S, "tau_int_exit_chain_steps": self.tau_int,
+                "time_unit": "time step", "chain_step": _chain_step_name(S),
+                "steps_per_time_step": S, "states": self.states, "seconds": self.seconds}
+
+
+def exit_fluctuations(system, solution: RoadSolution | None = None) -> ExitFluctuations:
+    """``J`` and the diffusion coefficient of the exit count, exactly (Green-Kubo, one solve).
+
+    ``Delta = var(m) + 2 w . a`` with ``w (I - P) = b - J pi``, ``sum w = 0``
+    (:mod:`markov.analysis.fluctuations`), ``m`` the cars leaving in a transition.
+
+    Parameters
+    ----------
+    system : Road or RoadChain
+    solution : RoadSolution, optional
+
+    Returns
+    -------
+    ExitFluctuations
+
+    Examples
+    --------
+    One cell, parallel site1/sink at ``alpha = beta = 1/2``: the exits form a
+    two-state chain; ``J = 1/4``.
+
+    >>> from markov import load_model
+    >>> fl = exit_fluctuations(Road(1, load_model("nasch", {"vmax": 1}), alpha=0.5, beta=0.5))
+    >>> round(fl.flux, 12)
+    0.25
+    """
+    start = time.perf_counter()
+    sv = _prepare(system, solution)
+    ex = _exit(sv)
+    pi = sv.pi
+    J = float(pi @ ex.a)
+    var = float(pi @ ex.a2) - J * J
+    delta = 0.0
+    if var > 0:
+        h0 = ex.b - J * pi
+        h0 -= pi * h0.sum()
+        w = solve_fundamental(sv.P, pi, h0)
+        delta = var + 2.0 * float(w @ ex.a)
+    return ExitFluctuations(sv.road, J, delta, var, sv.S, len(pi), time.perf_counter() - start)
+
+
+def exit_count_variance(system, steps: int, solution: RoadSolution | None = None) -> np.ndarray:
+    """``var(Y_t)``, ``t = 0..steps`` chain steps, of the stationary road, exactly.
+
+    ``var(Y_t) = t var(m) + 2 sum_{j=1}^{t-1} (t - j) cov_j``,
+    ``cov_j = (b - J pi) P^{j-1} . a``.
+
+    Parameters
+    ----------
+    system : Road or RoadChain
+    steps : int
+        In chain steps (sub-steps for random-sequential update).
+    solution : RoadSolution, optional
+
+    Returns
+    -------
+    (steps + 1,) float64 array
+    """
+    steps = ensure_int("steps", steps, 0, MAX_LAGS)
+    sv = _prepare(system, solution)
+    ex = _exit(sv)
+    J = float(sv.pi @ ex.a)
+    var = float(sv.pi @ ex.a2) - J * J
+    g = ex.b - J * sv.pi
+    out = np.zeros(steps + 1)
+    partial = 0.0
+    for t in range(1, steps + 1):
+        out[t] = out[t - 1] + var + 2.0 * partial
+        if t < steps:
+            partial += float(g @ ex.a)
+            g = sv.step(g)
+    return out
+
+
+def exit_scgf(system, s_values, solution: RoadSolution | None = None) -> np.ndarray:
+    """``Lambda(s) = lim (1/t) log E e^{s Y_t}`` per chain step: the log Perron root of
+    the tilted matrix ``P_s(x, y) = sum over branches P e^{s m}``.
+
+    Dense eigenvalues up to 300 states, else ARPACK (largest real part).
+
+    Parameters
+    ----------
+    system : Road or RoadChain
+    s_values : sequence of float, ``|s| <= 50``
+    solution : RoadSolution, optional
+
+    Returns
+    -------
+    (k,) float64 array
+    """
+    s_arr = [ensure_real("s", s, -50.0, 50.0) for s in np.atleast_1d(s_values)]
+    sv = _prepare(system, solution)
+    src, col, w, m = _exit(sv, keep=True).entries
+    n = len(sv.pi)
+    out = []
+    for s in s_arr:
+        Ps = sp.csr_array((w * np.exp(s * m), (src, col)), shape=(n, n))
+        if n <= 300:
+            lam = float(np.max(np.linalg.eigvals(Ps.toarray()).real))
+        else:
+            lam = float(spla.eigs(Ps.T.tocsr(), k=1, which="LR", v0=sv.pi + 1e-300,
+                                  tol=1e-14)[0][0].real)
+        out.append(math.log(lam))
+    return np.array(out)
+
+
+# ------------------------------------------------------------ correlations
+
+
+def road_autocorrelation(system, observable: str = "exit", lags: int = 100,
+                         solution: RoadSolution | None = None) -> np.ndarray:
+    """Stationary ``C(t)``, ``t = 0..lags`` chain steps, of an observable, exactly.
+
+    ``"exit"``: the cars leaving in one chain step (an increment of ``Y``):
+    ``C(0) = var(m)``, ``C(j) = (b - J pi) P^{j-1} . a``; a state observable
+    (``cars``, ``stopped``, ``occupation:X``): ``C(t) = (pi o d) P^t . d``.
+
+    Parameters
+    ----------
+    system : Road or RoadChain
+    observable : str
+    lags : int
+    solution : RoadSolution, optional
+
+    Returns
+    -------
+    (lags + 1,) float64 array
+    """
+    lags = ensure_int("lags", lags, 0, MAX_LAGS)
+    road = system.system if isinstance(system, RoadChain) else system
+    if observable != "exit" and isinstance(road, Road):
+        road_observable(road, np.zeros(1, np.int64), observable)    # the name, before work
+    sv = _prepare(system, solution)
+    out = np.zeros(lags + 1)
+    if observable == "exit":
+        ex = _exit(sv)
+        J = float(sv.pi @ ex.a)
+        out[0] = float(sv.pi @ ex.a2) - J * J
+        g, r = ex.b - J * sv.pi, ex.a
+        for t in range(1, lags + 1):
+            out[t] = float(g @ r)
+            g = sv.step(g)
+        return out
+    f = road_observable(sv.road, sv.keys, observable)
+    d = f - float(sv.pi @ f)
+    h = sv.pi * d
+    out[0] = float(h @ d)
+    for t in range(1, lags + 1):
+        h = sv.step(h)
+        out[t] = float(h @ d)
+    return out
+
+
+def road_autocorrelation_time(system, observable: str = "exit",
+                              solution: RoadSolution | None = None) -> float:
+    """``tau_int = 1 + 2 sum_{t >= 1} C(t) / C(0)`` in chain steps, exactly (one solve).
+
+    Parameters
+    ----------
+    system : Road or RoadChain
+    observable : str
+    solution : RoadSolution, optional
+
+    Returns
+    -------
+    float
+        In chain steps (divide by ``steps_per_time_step`` for time steps); 1 for
+        a constant observable.
+    """
+    if observable == "exit":
+        return exit_fluctuations(system, solution).tau_int
+    road = system.system if isinstance(system, RoadChain) else system
+    if isinstance(road, Road):
+        road_observable(road, np.zeros(1, np.int64), observable)
+    sv = _prepare(system, solution)
+    f = road_observable(sv.road, sv.keys, observable)
+    d = f - float(sv.pi @ f)
+    h = sv.pi * d
+    c0 = float(h @ d)
+    if c0 <= 0:
+        return 1.0
+    h = h - sv.pi * h.sum()
+    w = solve_fundamental(sv.P, sv.pi, h)
+    return 1.0 + 2.0 * float((w - h) @ d) / c0
