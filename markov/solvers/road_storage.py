@@ -34,6 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from markov.errors import InvalidParameterError
+from markov.solvers.archive import (_Bad, _canonical_json, _check_probabilities, _digest,
+                                    _package_version)
 from markov.files import write_bytes_atomic
 from markov.model.ring import Ring
 from markov.solvers.stationary import StationaryResult
@@ -134,8 +136,6 @@ def save_road_solution(sol, path) -> Path:
     >>> back.flux == sol.flux and back.system == sol.system
     True
     """
-    from markov.solvers.storage import _canonical_json, _digest, _package_version
-
     arrays = {"keys": np.ascontiguousarray(sol.keys, dtype=ROAD_DTYPES["keys"]),
               "probabilities": np.ascontiguousarray(sol.pi, dtype=ROAD_DTYPES["probabilities"])}
     res = sol.result
@@ -168,12 +168,11 @@ def read_road_parts(meta: dict, arrays: dict, sums: dict):
 
     Raises
     ------
-    markov.solvers.storage._Bad
+    markov.solvers.archive._Bad
         What is wrong (the caller turns it into one CorruptFileError line).
     """
     from markov.chain.classes import ClassCensus
     from markov.chain.encoding import check_encodable
-    from markov.solvers.storage import _Bad, _canonical_json, _check_probabilities, _digest
 
     missing = [k for k in _FIELDS if k not in meta]
     if missing:

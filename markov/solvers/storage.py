@@ -52,7 +52,6 @@ configuration; it equals the unlumped solve (``lump=False``) to round-off.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import io
 import json
 import math
@@ -70,6 +69,8 @@ from markov.choices import SOLVERS
 from markov.errors import CorruptFileError, InvalidParameterError, StateSpaceTooLargeError
 from markov.files import write_bytes_atomic
 from markov.model.ring import PARALLEL, Ring
+from markov.solvers.archive import (SUM_TOLERANCE, _Bad, _canonical_json, _check_probabilities,
+                                    _digest, _package_version)
 from markov.solvers.road_storage import (ROAD_DTYPES, ROAD_FORMAT, ROAD_FORMAT_VERSION,
                                          read_road_parts, save_road_solution)
 from markov.solvers.stationary import StationaryResult
@@ -85,7 +86,6 @@ FORMAT = "nasch-stationary"
 FORMAT_VERSION = 2
 READ_VERSIONS = (1, 2)
 #: ``|sum(probabilities) - 1|`` allowed on loading (the solvers normalise to ~1e-15).
-SUM_TOLERANCE = 1e-9
 ENCODING = ("key = sum_x d_x B**x over cells x = 0..L-1, B = vmax + 2, d_x = 0 for an empty"
             " cell and v + 1 for a car of velocity v; cars move toward larger x; lumped:"
             " smallest key over the L rotations, weight = sum over the rotation class")
@@ -109,15 +109,6 @@ _KEY_FAULTS = {
     6: "has {rot} rotations stored, not the number of its distinct rotations",
     7: "lacks its rotation by one cell among the states, as unlumped states must not",
 }
-
-
-def _package_version() -> str:
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("nasch-exact")
-    except PackageNotFoundError:  # pragma: no cover - running from a bare checkout
-        return "unknown"
 
 
 def decode_keys(keys, length: int, vmax: int) -> np.ndarray:
@@ -284,17 +275,6 @@ def unlumped(sol, max_states: int = UNLUMP_LIMIT):
                                lumped=False, level_sizes=None)
 
 
-def _digest(data) -> str:
-    """SHA-256 of a buffer (an array's bytes as stored), in hex."""
-    return hashlib.sha256(data).hexdigest()
-
-
-def _canonical_json(meta: dict) -> str:
-    """The metadata as hashed: sorted keys, no spaces, ASCII (parsing and dumping again
-    gives the same text, so the hash does not depend on how the JSON was laid out)."""
-    return json.dumps(meta, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
-
-
 def save_solution(sol, path) -> Path:
     """Write a solution to ``path`` (``.npz``) atomically; see the module docstring.
 
@@ -345,10 +325,6 @@ def save_solution(sol, path) -> Path:
 
 
 # ----------------------------------------------------------------- reading, checked
-
-class _Bad(Exception):
-    """What is wrong with the file being read (becomes one CorruptFileError line)."""
-
 
 def _read_npy(zf: zipfile.ZipFile, info: zipfile.ZipInfo, size: int):
     """One ``.npy`` member: ``(array, sha256 of its data bytes)``.
@@ -620,19 +596,6 @@ def _check_keys(ring: Ring, keys: np.ndarray, rot: np.ndarray, lumped: bool) -> 
     if faults[i] != 1:
         what += f", {to_text(decode(key, ring.length, ring.vmax))!r}"
     raise _Bad(f"{what}) {_KEY_FAULTS[int(faults[i])].format(ring=ring, rot=int(rot[i]))}")
-
-
-def _check_probabilities(pi: np.ndarray) -> None:
-    finite = np.isfinite(pi)
-    if not finite.all():
-        i = int(np.argmin(finite))
-        raise _Bad(f"probability {i} is {pi[i]}, not a finite number")
-    if pi.min() < 0:
-        i = int(np.argmin(pi))
-        raise _Bad(f"probability {i} is {pi[i]!r}, negative")
-    total = float(pi.sum())
-    if abs(total - 1.0) > SUM_TOLERANCE:
-        raise _Bad(f"the probabilities sum to {total!r}, not 1 (tolerance {SUM_TOLERANCE:g})")
 
 
 def read_solution(path) -> tuple[Ring, np.ndarray, StationaryResult, bool, str]:
