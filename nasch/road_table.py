@@ -34,13 +34,13 @@ from .extrapolate import Extrapolation, extrapolate
 from .formatting import RenderedTable, plus_minus
 
 __all__ = ["RoadExtrapolation", "road_extrapolation", "known_limit", "boundary_densities",
-           "ring_fundamental_diagram", "approximate_fundamental_diagram", "RoadRow",
+           "ring_fundamental_diagram", "one_sided_densities", "approximate_fundamental_diagram", "RoadRow",
            "ExtremalRow", "RoadTable", "road_table", "EXTREMAL_METHODS", "DEFINITIONS"]
 
 #: Approximations whose fundamental diagrams the extremal comparison reads.
 EXTREMAL_METHODS = ("mf", "pmf", "cluster2", "cluster3", "comf")
 #: Definitions of the boundary densities (:func:`boundary_densities`).
-DEFINITIONS = ("auto", "reservoir", "profile")
+DEFINITIONS = ("auto", "reservoir", "profile", "one-sided")
 
 
 # --- the L -> infinity limit of a road ----------------------------------------------
@@ -225,7 +225,9 @@ def boundary_densities(road: Road, definition: str = "auto",
           imagine: cell 0 holds a car with probability ``alpha`` (the
           reservoir's virtual car), cell ``L + 1`` an obstacle with probability
           ``1 - beta`` (the wall): ``rho_- = alpha``, ``rho_+ = 1 - beta``;
-        * ``profile``: the exact road's density on cells 1 and ``L`` (``profile``).
+        * ``profile``: the exact road's density on cells 1 and ``L`` (``profile``);
+        * ``one-sided``: read off the exact roads with the other boundary wide
+          open (:func:`one_sided_densities`, in :func:`road_table`; not here).
     profile : ndarray, optional
         The density profile of the largest exact road (``profile`` only).
 
@@ -249,11 +251,43 @@ def boundary_densities(road: Road, definition: str = "auto",
         return (side(alpha), 1 - side(beta),
                 "exact parallel-TASEP reservoirs: alpha(1-alpha)/(q-alpha^2),"
                 " 1 - beta(1-beta)/(q-beta^2), clipped to [0, 1]")
+    if definition == "one-sided":
+        raise InvalidParameterError("the one-sided densities need the exact roads and a"
+                                    " fundamental diagram: see one_sided_densities")
     if definition == "profile":
         if profile is None:
             raise InvalidParameterError("the profile definition needs the road's density profile")
         return float(profile[0]), float(profile[-1]), "exact road density on cells 1 and L"
     return road.alpha, 1.0 - road.beta, "reservoir occupation: alpha, 1 - beta"
+
+
+def one_sided_densities(fd: tuple[np.ndarray, np.ndarray], j_entry: float,
+                        j_exit: float) -> tuple[float, float]:
+    """Boundary densities from the currents each boundary carries with the other wide open.
+
+    ``j_entry`` is the road's ``J_inf`` at ``(alpha, beta = 1)``, ``j_exit`` at
+    ``(alpha = 1, beta)``.  ``rho_-`` is the density on the rising branch of the
+    fundamental diagram where ``j = j_entry`` (1 where the entry supplies the
+    maximum or more), ``rho_+`` on the falling branch where ``j = j_exit`` (0
+    likewise).  For the TASEP these are exactly ``alpha`` and ``1 - beta``
+    (``J(alpha, 1) = alpha (1 - alpha)`` for ``alpha < 1/2``).
+
+    Parameters
+    ----------
+    fd : (rho, j) sampled curve, one maximum
+    j_entry, j_exit : float
+
+    Returns
+    -------
+    (float, float)
+    """
+    rho, j = (np.asarray(x, dtype=float) for x in fd)
+    k = int(np.argmax(j))
+    rising_r, rising_j = rho[:k + 1], np.maximum.accumulate(j[:k + 1])
+    falling_r, falling_j = rho[k:][::-1], np.maximum.accumulate(j[k:][::-1])
+    rho_minus = 1.0 if j_entry >= j[k] else float(np.interp(j_entry, rising_j, rising_r))
+    rho_plus = 0.0 if j_exit >= j[k] else float(np.interp(j_exit, falling_j, falling_r))
+    return rho_minus, rho_plus
 
 
 def ring_fundamental_diagram(road: Road, length: int) -> tuple[np.ndarray, np.ndarray, list]:
@@ -356,10 +390,13 @@ class ExtremalRow:
     density: float
     phase: str
     deviation: float | None   # prediction - the exact road's J_inf
+    rho_minus: float | None = None
+    rho_plus: float | None = None
 
     def to_dict(self) -> dict:
         return {"source": self.source, "current": self.current, "density": self.density,
-                "phase": self.phase, "deviation": self.deviation}
+                "phase": self.phase, "deviation": self.deviation, "rho_minus": self.rho_minus,
+                "rho_plus": self.rho_plus}
 
 
 @dataclass(frozen=True)
@@ -449,8 +486,10 @@ class RoadTable(RenderedTable):
         return head, body
 
     def _extremal_cells(self):
-        head = ["fundamental diagram", "J predicted", "bulk rho", "phase", "J - J_inf(road)"]
-        body = [[e.source, f"{e.current:.6f}", f"{e.density:.4f}", e.phase,
+        head = ["fundamental diagram", "rho_-", "rho_+", "J predicted", "bulk rho", "phase",
+                "J - J_inf(road)"]
+        body = [[e.source, f"{e.rho_minus:.4f}", f"{e.rho_plus:.4f}", f"{e.current:.6f}",
+                 f"{e.density:.4f}", e.phase,
                  "" if e.deviation is None else f"{e.deviation:+.6f}"] for e in self.extremal]
         return head, body
 
@@ -467,8 +506,9 @@ class RoadTable(RenderedTable):
     def _extremal_caption(self) -> str:
         ring = (f"exact ring: the ring of L = {self.ring_length} cells, N = 0..L"
                 if self.ring_length else "")
-        return (f"extremal-current principle, rho_- = {self.rho_minus:.6f},"
-                f" rho_+ = {self.rho_plus:.6f} ({self.definition}); {ring}")
+        where = ("" if self.rho_minus is None else
+                 f", rho_- = {self.rho_minus:.6f}, rho_+ = {self.rho_plus:.6f}")
+        return f"extremal-current principle{where} ({self.definition}); {ring}"
 
     def _footnote(self) -> str:
         parts = ["J_L: exact stationary exit flux (cars leaving per time step) of the road of L"
@@ -609,8 +649,20 @@ def road_table(road: Road, lengths: Sequence[int], order: int = 2, *, extremal: 
     from markov.analysis.extremal_current import extremal_current
     from symbolic import label, supported
 
-    rho_m, rho_p, words = boundary_densities(roads[-1], definition,
-                                             solutions[-1].density_profile)
+    if definition == "one-sided":
+        if ex is None:
+            raise InvalidParameterError("the one-sided densities need the L = inf row")
+
+        def limit(**change):
+            js = [RoadChain(r.with_params(**change)).solution().flux for r in roads]
+            return road_extrapolation(lengths, js, order).f_inf
+        j_entry, j_exit = limit(beta=1.0), limit(alpha=1.0)
+        rho_m = rho_p = None
+        words = (f"one-sided: the exact J_inf with the other boundary open, J(alpha, 1) ="
+                 f" {j_entry:.6f}, J(1, beta) = {j_exit:.6f}, on each diagram's branches")
+    else:
+        rho_m, rho_p, words = boundary_densities(roads[-1], definition,
+                                                 solutions[-1].density_profile)
     target = None if ex is None else ex.f_inf
     fds = []
     rho, j, ring_notes = ring_fundamental_diagram(roads[-1], ring_length)
@@ -635,8 +687,14 @@ def road_table(road: Road, lengths: Sequence[int], order: int = 2, *, extremal: 
         fds.insert(0, ("exact infinite ring", exact_j))
     extremal_rows = []
     for source, fd in fds:
-        e = extremal_current(fd, rho_m, rho_p)
+        rm, rp = rho_m, rho_p
+        if definition == "one-sided":
+            sampled = fd if not callable(fd) else (
+                np.linspace(0, 1, 2001), np.array([fd(r) for r in np.linspace(0, 1, 2001)]))
+            rm, rp = one_sided_densities(sampled, j_entry, j_exit)
+        e = extremal_current(fd, rm, rp)
         extremal_rows.append(ExtremalRow(source, e.current, e.density, e.phase,
-                                         None if target is None else e.current - target))
+                                         None if target is None else e.current - target,
+                                         rm, rp))
     return RoadTable(**table, rho_minus=rho_m, rho_plus=rho_p, definition=words,
                      ring_length=ring_length, extremal=tuple(extremal_rows), notes=tuple(notes))

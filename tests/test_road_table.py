@@ -220,3 +220,20 @@ def test_cli_bad_road_table_input_is_one_line(args, words):
     r = CliRunner().invoke(main, ["table"] + args)
     assert r.exit_code == 2, r.output
     assert words in r.stderr and len(r.stderr.strip().splitlines()) == 1
+
+
+def test_one_sided_densities_are_the_tasep_reservoirs():
+    # J(alpha, beta = 1) = alpha (1 - alpha) below 1/2, J(1, beta) = beta (1 - beta): on the
+    # branches of j = rho (1 - rho) these give rho_- = alpha, rho_+ = 1 - beta exactly
+    from nasch.road_table import one_sided_densities
+
+    rho = np.linspace(0, 1, 4001)
+    fd = (rho, rho * (1 - rho))
+    for a, b in ((0.1, 0.3), (0.3, 0.45), (0.8, 0.2), (0.2, 0.9)):
+        ja = a * (1 - a) if a < 0.5 else 0.25
+        jb = b * (1 - b) if b < 0.5 else 0.25
+        rm, rp = one_sided_densities(fd, ja, jb)
+        assert rm == pytest.approx(a if a < 0.5 else 1.0, abs=1e-6)
+        assert rp == pytest.approx(1 - b if b < 0.5 else 0.0, abs=1e-6)
+        assert extremal_current(fd, rm, rp).current == pytest.approx(
+            _tasep_phase(a, b)[1], abs=1e-6)

@@ -58,10 +58,11 @@ __all__ = ["table"]
 @click.option("--ring-length", type=int, default=16, show_default=True,
               help="Road, --extremal: the exact ring whose fundamental diagram is read.")
 @click.option("--boundary-densities", "definition",
-              type=click.Choice(["auto", "reservoir", "profile"]), default="auto",
+              type=click.Choice(["auto", "reservoir", "profile", "one-sided"]), default="auto",
               show_default=True,
               help="Road, --extremal: rho_- and rho_+ (auto: exact for the TASEP, else"
-                   " reservoir = alpha, 1 - beta; profile: the exact road's cells 1 and L).")
+                   " reservoir = alpha, 1 - beta; profile: the exact road's cells 1 and L;"
+                   " one-sided: from the exact roads at (alpha, 1) and (1, beta)).")
 @model_options
 @road_options
 @quiet_option
