@@ -49,7 +49,7 @@ __all__ = [
     "SOLVERS", "METHODS", "OPERATORS",
     "simulate", "SimulationResult", "trajectory",
     "relaxation_spectrum", "sensitivity", "autocorrelation", "autocorrelation_time",
-    "current_fluctuations",
+    "current_fluctuations", "extremal_current",
     "NaschError", "InvalidParameterError", "CorruptFileError", "NoUniqueStationaryStateError",
     "StateSpaceTooLargeError", "ConvergenceError", "OutputError",
 ]
@@ -80,6 +80,7 @@ _WHERE = {
     "autocorrelation": "markov.analysis.correlations",
     "autocorrelation_time": "markov.analysis.correlations",
     "current_fluctuations": "markov.analysis.fluctuations",
+    "extremal_current": "markov.analysis.extremal_current",
     **{name: "markov.errors" for name in ("NaschError", "InvalidParameterError",
                                          "CorruptFileError", "NoUniqueStationaryStateError",
                                          "StateSpaceTooLargeError", "ConvergenceError",

@@ -375,6 +375,12 @@ class RoadRow:
     covered: bool | None = None
 
     def to_dict(self) -> dict:
+        """The row as in ``nasch table --road --format json``.
+
+        Returns
+        -------
+        dict
+        """
         return {"kind": self.kind, "length": self.length, "flux": self.flux,
                 "flux_error": self.flux_error, "inflow": self.inflow,
                 "middle_density": self.middle_density, "states": self.states,
@@ -394,6 +400,12 @@ class ExtremalRow:
     rho_plus: float | None = None
 
     def to_dict(self) -> dict:
+        """The prediction as in the JSON's ``extremal.predictions``.
+
+        Returns
+        -------
+        dict
+        """
         return {"source": self.source, "current": self.current, "density": self.density,
                 "phase": self.phase, "deviation": self.deviation, "rho_minus": self.rho_minus,
                 "rho_plus": self.rho_plus}
@@ -431,6 +443,12 @@ class RoadTable(RenderedTable):
     notes: tuple = ()
 
     def to_dict(self) -> dict:
+        """JSON-ready dict: the road's conventions, the rows, the extrapolation, the predictions.
+
+        Returns
+        -------
+        dict
+        """
         d = {"road": {k: v for k, v in self.road.describe().items() if k != "length"},
              "summary": self.road.summary(), "extrapolation_order": self.order,
              "rows": [r.to_dict() for r in self.rows],
@@ -522,6 +540,12 @@ class RoadTable(RenderedTable):
         return "; ".join(parts + list(self.notes))
 
     def to_text(self) -> str:
+        """The table as aligned plain text with its caption and footnote.
+
+        Returns
+        -------
+        str
+        """
         head, body = self._cells(False)
         out = [self._caption()] + self._aligned(head, body)
         if self.extremal:
@@ -533,12 +557,24 @@ class RoadTable(RenderedTable):
             ["| " + " | ".join(c) + " |" for c in body]
 
     def to_md(self) -> str:
+        """The table as Markdown with its caption and footnote.
+
+        Returns
+        -------
+        str
+        """
         out = [f"*{self._caption()}*", ""] + self._md(*self._cells(False))
         if self.extremal:
             out += ["", f"*{self._extremal_caption()}*", ""] + self._md(*self._extremal_cells())
         return "\n".join(out) + "\n\n" + self._footnote() + "\n"
 
     def to_latex(self) -> str:
+        """The table as LaTeX ``tabular`` environments (booktabs rules).
+
+        Returns
+        -------
+        str
+        """
         head, body = self._cells(True)
         out = [f"% {self._caption()}", f"% {self._footnote()}",
                r"\begin{tabular}{" + "r" * len(head) + "}", r"\toprule",
@@ -560,7 +596,7 @@ def _middle(profile: np.ndarray) -> float:
 
 
 def road_table(road: Road, lengths: Sequence[int], order: int = 2, *, extremal: bool = False,
-               ring_length: int = 16, methods: Sequence[str] = EXTREMAL_METHODS,
+               ring_length: int | None = None, methods: Sequence[str] = EXTREMAL_METHODS,
                definition: str = "auto", extrapolation: bool = True) -> RoadTable:
     """Exact exit fluxes of ``road`` at each length, extrapolated; the extremal comparison.
 
@@ -575,8 +611,11 @@ def road_table(road: Road, lengths: Sequence[int], order: int = 2, *, extremal: 
         Order of the 1/L series (:func:`road_extrapolation`).
     extremal : bool
         Add the extremal-current predictions (a homogeneous road only).
-    ring_length : int
-        The exact ring whose fundamental diagram the principle reads.
+    ring_length : int, optional
+        The exact ring whose fundamental diagram the principle reads: default
+        16 cells under parallel update, 12 under the sequential ones (a
+        random-sequential vmax-2 ring of 14 cells at half filling has 536,129
+        states and takes 110 s here).
     methods : sequence of str
         Approximations whose fundamental diagrams are read too (parallel update;
         those a model refuses are left out with a note).
@@ -615,7 +654,8 @@ def road_table(road: Road, lengths: Sequence[int], order: int = 2, *, extremal: 
             "the extremal-current principle is for a homogeneous road: no --stretch or"
             " --on-ramp with --extremal")
     if extremal:
-        ring_length = ensure_int("ring length", ring_length, 2)
+        ring_length = ((16 if road.update == PARALLEL else 12) if ring_length is None
+                       else ensure_int("ring length", ring_length, 2))
     roads = [Road(L, road.model, road.update, road.alpha, road.beta, road.entry, road.exit,
                   road.v_in, road.stretches, road.ramps) for L in lengths]   # checks them all
     rows, notes, solutions = [], [], []

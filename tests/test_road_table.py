@@ -237,3 +237,19 @@ def test_one_sided_densities_are_the_tasep_reservoirs():
         assert rp == pytest.approx(1 - b if b < 0.5 else 0.0, abs=1e-6)
         assert extremal_current(fd, rm, rp).current == pytest.approx(
             _tasep_phase(a, b)[1], abs=1e-6)
+
+
+def test_cli_road_table_extremal_every_format():
+    args = ["table", "--road", "--vmax", "1", "--p", "0.25", "--alpha", "0.2", "--beta", "0.6",
+            "-L", "3,4,5", "--extremal", "--ring-length", "6"]
+    r = CliRunner().invoke(main, args + ["--format", "json"])
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.stdout)["extremal"]
+    assert d["ring_length"] == 6 and d["definition"].startswith("exact parallel-TASEP")
+    first = d["predictions"][0]
+    assert first["source"] == "exact infinite ring" and first["phase"] == "low density"
+    road = Road(3, _nasch(1, 0.25), "parallel", 0.2, 0.6)
+    assert first["current"] == pytest.approx(known_limit(road)[0], abs=1e-9)
+    for fmt in ("text", "csv", "md", "latex"):
+        r = CliRunner().invoke(main, args + ["--format", fmt])
+        assert r.exit_code == 0 and "exact ring L=6" in r.stdout, fmt

@@ -55,8 +55,9 @@ __all__ = ["table"]
 @click.option("--extremal", is_flag=True,
               help="Road: add the extremal-current predictions from the exact ring's and the"
                    " approximations' fundamental diagrams (docs/roads.md).")
-@click.option("--ring-length", type=int, default=16, show_default=True,
-              help="Road, --extremal: the exact ring whose fundamental diagram is read.")
+@click.option("--ring-length", type=int, default=None,
+              help="Road, --extremal: the exact ring whose fundamental diagram is read"
+                   " [16 cells for parallel update, else 12].")
 @click.option("--boundary-densities", "definition",
               type=click.Choice(["auto", "reservoir", "profile", "one-sided"]), default="auto",
               show_default=True,
@@ -101,7 +102,7 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
                            stretches, ramps)
     for flag, given in (("--extremal", extremal), ("--stretch", stretches),
                         ("--boundary-densities", definition != "auto"),
-                        ("--ring-length", ring_length != 16)):
+                        ("--ring-length", ring_length is not None)):
         if given:
             raise InvalidParameterError(f"{flag} belongs to the road table: add --road")
     if cars_text is not None and density_text is not None:
