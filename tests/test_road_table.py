@@ -212,6 +212,7 @@ def test_cli_road_table_json_and_text():
 @pytest.mark.parametrize("args, words", [
     (["--road", "--density", "0.5"], "ring table"),
     (["--extremal"], "add --road"),
+    (["--alpha", "0.3"], "add --road"),
     (["--road", "-L", "6,6"], "distinct"),
     (["--road", "-L", "6,8", "--alpha", "2"], "alpha"),
     (["--road", "-L", "6,8", "--extremal", "--stretch", "2-3:p=0.8"], "homogeneous"),

@@ -100,7 +100,10 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
                            density_text, update, fmt, output, order, no_extrapolation,
                            extremal, ring_length, definition, alpha, beta, entry, exit_, v_in,
                            stretches, ramps)
-    for flag, given in (("--extremal", extremal), ("--stretch", stretches),
+    for flag, given in (("--alpha", alpha is not None), ("--beta", beta is not None),
+                        ("--entry", entry), ("--exit", exit_), ("--v-in", v_in is not None),
+                        ("--on-ramp", ramps),
+                        ("--extremal", extremal), ("--stretch", stretches),
                         ("--boundary-densities", definition != "auto"),
                         ("--ring-length", ring_length is not None)):
         if given:
