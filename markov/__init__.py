@@ -50,7 +50,7 @@ __all__ = [
     "simulate", "SimulationResult", "trajectory",
     "relaxation_spectrum", "sensitivity", "autocorrelation", "autocorrelation_time",
     "current_fluctuations", "road_spectrum", "road_sensitivity", "exit_fluctuations",
-    "road_autocorrelation",
+    "road_autocorrelation", "extremal_current",
     "NaschError", "InvalidParameterError", "CorruptFileError", "NoUniqueStationaryStateError",
     "StateSpaceTooLargeError", "ConvergenceError", "OutputError",
 ]
@@ -84,6 +84,7 @@ _WHERE = {
     "autocorrelation": "markov.analysis.correlations",
     "autocorrelation_time": "markov.analysis.correlations",
     "current_fluctuations": "markov.analysis.fluctuations",
+    "extremal_current": "markov.analysis.extremal_current",
     **{name: "markov.errors" for name in ("NaschError", "InvalidParameterError",
                                          "CorruptFileError", "NoUniqueStationaryStateError",
                                          "StateSpaceTooLargeError", "ConvergenceError",

@@ -9,6 +9,7 @@ from ..cli_common import (ensure_dask_options, ensure_probabilities, handle_erro
                           quiet_option)
 from ..formatting import format_for_path
 from ..model_options import build_model, model_options
+from ..road_options import road_options
 
 __all__ = ["table"]
 
@@ -20,8 +21,9 @@ __all__ = ["table"]
 @click.option("--p", "p_text", default=None,
               help="Braking probability (the model's parameter p), or a comma-separated"
                    " list [0.5 for NaSch, else the model's].")
-@click.option("--lengths", "lengths_text", default=None,
-              help="Ring lengths, comma-separated [chosen per density by --budget].")
+@click.option("--lengths", "-L", "lengths_text", default=None,
+              help="Ring (or --road: road) lengths, comma-separated [chosen per density by"
+                   " --budget; a road: 6,8,10,12].")
 @click.option("--budget", "budget_text", default=None,
               help="Time for the exact rings of each density and p, e.g. 60s or 5m: the"
                    " largest rings that fit it and 75% of the memory, named on stderr"
@@ -50,11 +52,26 @@ __all__ = ["table"]
               help="Address of a running Dask scheduler, tcp://HOST:PORT.")
 @click.option("--workers", type=int, default=None,
               help="Local Dask workers [cores; more than the cores are capped, with a note].")
+@click.option("--extremal", is_flag=True,
+              help="Road: add the extremal-current predictions from the exact ring's and the"
+                   " approximations' fundamental diagrams (docs/roads.md).")
+@click.option("--ring-length", type=int, default=None,
+              help="Road, --extremal: the exact ring whose fundamental diagram is read"
+                   " [16 cells for parallel update, else 12].")
+@click.option("--boundary-densities", "definition",
+              type=click.Choice(["auto", "reservoir", "profile", "one-sided"]), default="auto",
+              show_default=True,
+              help="Road, --extremal: rho_- and rho_+ (auto: exact for the TASEP, else"
+                   " reservoir = alpha, 1 - beta; profile: the exact road's cells 1 and L;"
+                   " one-sided: from the exact roads at (alpha, 1) and (1, beta)).")
 @model_options
+@road_options
 @quiet_option
 @handle_errors
 def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, density_text, update, fmt, output,
-          mc_steps, mc_length, seed, order, no_extrapolation, serial, scheduler, workers):
+          mc_steps, mc_length, seed, order, no_extrapolation, serial, scheduler, workers,
+          extremal, ring_length, definition, road, alpha, beta, entry, exit_, v_in, stretches,
+          ramps):
     """Exact finite-ring fluxes beside MF, pMF, 2-cluster and Monte Carlo.
 
     \b
@@ -63,6 +80,12 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
       nasch table --vmax 2 --p 0.5 --density 0.5,0.25 --budget 30s
       nasch table --vmax 1 --p 0.25,0.5 --lengths 8,12,16 --format latex -o flux.tex
       nasch table --model vdr --param p0=0.75 --p 0.1 --lengths 8,10,12 --mc-steps 0
+      nasch table --road --vmax 2 --p 0.25 --alpha 0.3 --beta 0.6 -L 6,8,10,12 --extremal
+
+    With --road: one row per road length (the exact exit flux, the inflow, the
+    density of the middle cell, the states), the L -> inf extrapolation with
+    its bar, the closed-form limit of a TASEP road beside it, and with
+    --extremal the extremal-current predictions (no Monte Carlo; docs/roads.md).
 
     For a model other than NaSch the approximations it refuses (pMF, pMF2) are
     left out with a note, and a ring with several closed classes gets a note
@@ -72,6 +95,19 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
     from markov.files import check_output_path, write_atomic
     from ..tables import flux_table as _flux_table
 
+    if road:
+        return _road_table(model, params, vmax, p_text, lengths_text, budget_text, cars_text,
+                           density_text, update, fmt, output, order, no_extrapolation,
+                           extremal, ring_length, definition, alpha, beta, entry, exit_, v_in,
+                           stretches, ramps)
+    for flag, given in (("--alpha", alpha is not None), ("--beta", beta is not None),
+                        ("--entry", entry), ("--exit", exit_), ("--v-in", v_in is not None),
+                        ("--on-ramp", ramps),
+                        ("--extremal", extremal), ("--stretch", stretches),
+                        ("--boundary-densities", definition != "auto"),
+                        ("--ring-length", ring_length is not None)):
+        if given:
+            raise InvalidParameterError(f"{flag} belongs to the road table: add --road")
     if cars_text is not None and density_text is not None:
         raise InvalidParameterError("give either --cars or --density, not both")
     ensure_dask_options(serial, scheduler)
@@ -121,6 +157,60 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
     if flagged:
         click.echo(f"warning: {len(flagged)} Monte Carlo value(s) marked * have no honest error"
                    f" bar ({next(iter(flagged.values()))}); use more --mc-steps", err=True)
+    text = t.render(fmt)
+    if output:
+        write_atomic(output, text)
+        click.echo(f"wrote {output} ({len(t.rows)} rows, {fmt})", err=True)
+    else:
+        click.echo(text, nl=False)
+
+
+def _road_table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, density_text,
+                update, fmt, output, order, no_extrapolation, extremal, ring_length, definition,
+                alpha, beta, entry, exit_, v_in, stretches, ramps) -> None:
+    """``nasch table --road``: checked in one line each, then solved (nasch.road_table)."""
+    import warnings
+
+    from markov.files import check_output_path, write_atomic
+    from ..road_options import build_system
+    from ..road_table import road_table
+
+    for flag, given in (("--cars", cars_text), ("--density", density_text),
+                        ("--budget", budget_text)):
+        if given is not None:
+            raise InvalidParameterError(f"{flag} is the ring table's: a road table takes"
+                                        " --lengths (-L) only")
+    ps = None if p_text is None else ensure_probabilities(number_list("--p", p_text),
+                                                         closed=True)
+    if ps is not None and len(ps) > 1:
+        raise InvalidParameterError("a road table takes one --p")
+    the_model = build_model(model, params, vmax=vmax, p=None if ps is None else ps[0])
+    lengths = [6, 8, 10, 12] if lengths_text is None else number_list("--lengths", lengths_text,
+                                                                      int)
+    if len(set(lengths)) != len(lengths):
+        raise InvalidParameterError(f"--lengths must be distinct, got {lengths_text}")
+    system = build_system(min(lengths), None, the_model, update, road=True, alpha=alpha,
+                          beta=beta, entry=entry, exit_=exit_, v_in=v_in, stretches=stretches,
+                          ramps=ramps)
+    if output is not None:
+        check_output_path(output)   # before the work, not after it
+    if fmt is None:
+        fmt = format_for_path(output)
+    if no_extrapolation:
+        order_or_none = None
+    else:
+        from markov.validate import ensure_int
+        order_or_none = ensure_int("--order", order, 1)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        t = road_table(system, lengths, order_or_none or 2, extremal=extremal,
+                       ring_length=ring_length, definition=definition,
+                       extrapolation=not no_extrapolation)
+    for w in caught:
+        click.echo(f"warning: {w.message}", err=True)
+    if output or fmt == "csv":
+        for note in t.notes:
+            click.echo(f"note: {note}", err=True)
     text = t.render(fmt)
     if output:
         write_atomic(output, text)
