@@ -32,7 +32,7 @@ _METHOD_HELP = ("Approximation: mf, pmf, pmf2, cluster (with --order N; cluster2
 @click.option("--density", "-c", type=float, required=True, help="Car density, 0 < c < 1.")
 @model_options
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
-@ring_only("the approximations describe the bulk of a ring (a translation-invariant stationary state); a road's current is predicted from them by the extremal-current principle (docs/roads.md)")
+@ring_only("the approximations describe the bulk of a ring (a translation-invariant stationary state); nasch table --road --extremal predicts a road's current from each of them (the extremal-current principle, docs/roads.md)")
 @handle_errors
 def approx(method, order, vmax, p, density, model, params, as_json):
     """Stationary c_v and flux of an analytic approximation.
@@ -80,7 +80,7 @@ def approx(method, order, vmax, p, density, model, params, as_json):
               help="Maximal velocity >= 1 [default: 2, or the model's].")
 @model_options
 @click.option("--latex", is_flag=True, help="Print LaTeX instead of sympy syntax.")
-@ring_only("the approximations describe the bulk of a ring (a translation-invariant stationary state); a road's current is predicted from them by the extremal-current principle (docs/roads.md)")
+@ring_only("the approximations describe the bulk of a ring (a translation-invariant stationary state); nasch table --road --extremal predicts a road's current from each of them (the extremal-current principle, docs/roads.md)")
 @handle_errors
 def derive(method, order, vmax, model, params, latex):
     """Print the equations of an approximation, derived from the update rules.
