@@ -43,6 +43,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 __all__ = [
     "Ring", "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL", "ORDERED_SEQUENTIAL",
     "Road", "Stretch", "OnRamp", "RoadChain", "RoadSolution", "solve_road",
+    "phase_grid", "PhaseGrid",
     "rule", "ModelSpec", "Model", "load_model", "MODELS", "available_models", "tabulate",
     "RingChain", "Solution", "ClassSolution", "ClassSolutions", "solve", "solve_classes",
     "to_frame", "load_solution", "stationary", "StationaryResult",
@@ -63,6 +64,7 @@ _WHERE = {
     "Stretch": "markov.model.stretch",
     **{name: "markov.solvers.road_chain" for name in ("RoadChain", "RoadSolution",
                                                      "solve_road")},
+    "phase_grid": "markov.solvers.road_grid", "PhaseGrid": "markov.solvers.road_grid",
     "rule": "markov.model.spec", "ModelSpec": "markov.model.spec",
     **{name: "markov.model.load" for name in ("Model", "load_model", "MODELS",
                                              "available_models")},

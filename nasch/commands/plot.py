@@ -358,3 +358,220 @@ def relaxation(length, model, params, vmax, vary, values_text, p_text, update, s
         click.echo(f"note: {line}", err=True)
     save_figure(relaxation_figure(data, spec, notes=notes), output)
     click.echo(f"wrote {output}", err=True)
+
+
+# ------------------------------------------------------------------ roads
+
+def _road_base(length, model, params, vmax, p, update, entry, exit_, v_in, stretches, ramps,
+               alpha=0.5, beta=0.5):
+    """The road every curve/grid point shares (``docs/roads.md``)."""
+    from markov.model.road import OnRamp, Road
+    from markov.model.stretch import Stretch
+    from markov.validate import ensure_int
+
+    from ..model_options import build_model
+
+    m = build_model(model, params, vmax=vmax, p=p)
+    return Road(ensure_int("--length", length, 1), m, update, alpha, beta, entry, exit_,
+                0 if v_in is None else v_in, tuple(Stretch.parse(s) for s in stretches),
+                tuple(OnRamp.parse(r) for r in ramps))
+
+
+def _road_convention_options(func):
+    options = [
+        click.option("--length", "-L", type=int, default=8, show_default=True,
+                     help="Road length L (cells 1..L)."),
+        click.option("--vmax", type=int, default=None,
+                     help="Maximal velocity [the model's default; nasch: 2]."),
+        click.option("--p", "p", type=float, default=None,
+                     help="The model's braking probability p [its default; nasch: 0.5]."),
+        model_options,
+        click.option("--update", type=click.Choice(_UPDATES), default="parallel",
+                     show_default=True, help="Update order."),
+        click.option("--entry", type=click.Choice(["site1", "reservoir", "insert"]),
+                     default=None, help="Entry convention [site1 for vmax 1, else reservoir]."),
+        click.option("--exit", "exit_", type=click.Choice(["sink", "wall"]), default=None,
+                     help="Exit convention [sink for vmax 1, else wall]."),
+        click.option("--v-in", "v_in", type=int, default=None,
+                     help="site1 entry: velocity of an entering car [0]."),
+        click.option("--stretch", "stretches", multiple=True,
+                     metavar="FIRST-LAST:NAME=VALUE[,NAME=VALUE]",
+                     help="Cells whose cars use other model values; repeatable."),
+        click.option("--on-ramp", "ramps", multiple=True, metavar="CELL:ALPHA_R[:V]",
+                     help="A car put on CELL, if empty, with probability ALPHA_R; repeatable."),
+    ]
+    for option in reversed(options):
+        func = option(func)
+    return func
+
+
+def _grid_axis(name, text):
+    from markov.solvers.road_grid import grid_values
+
+    from ..road_figures import DEFAULT_GRID
+
+    if text is None:
+        return grid_values(name, DEFAULT_GRID)
+    parts = text.split(":")
+    if len(parts) == 3:         # LO:HI:N
+        try:
+            lo, hi, n = float(parts[0]), float(parts[1]), int(parts[2])
+        except ValueError:
+            raise InvalidParameterError(f"--{name}s is LO:HI:N or a list, got {text!r}") from None
+        if not 1 <= n <= 201:
+            raise InvalidParameterError(f"--{name}s N must be 1..201, got {n}")
+        import numpy as np
+
+        return grid_values(name, np.linspace(lo, hi, n) if n > 1 else [lo])
+    return grid_values(name, number_list(f"--{name}s", text))
+
+
+#: Seconds per transition and grid point of the phase grid's solves (BiCGSTAB, about 80
+#: products x P): 0.51 s per point at 1.96e6 transitions, L = 12 vmax 2, on the 2-core VM.
+PHASE_SECONDS_PER_NONZERO = 2.6e-7
+
+
+@plot.command("phase-diagram", short_help="Exact flux and bulk density of a road over (alpha, beta).")
+@_road_convention_options
+@click.option("--alphas", "alphas_text", default=None,
+              help="Entry rates: LO:HI:N or a comma list [0.05:1:21].")
+@click.option("--betas", "betas_text", default=None,
+              help="Exit rates: LO:HI:N or a comma list [0.05:1:21].")
+@click.option("--budget", "budget_text", default=None,
+              help="Time for the grid, e.g. 2m: refused after the states are built if the"
+                   " predicted solves exceed it.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
+              help="Also write the grid's data (JSON) to this file.")
+@click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
+              help="Figure file, .png or .pdf.")
+@quiet_option
+@handle_errors
+def phase_diagram(length, vmax, p, model, params, update, entry, exit_, v_in, stretches, ramps,
+                  alphas_text, betas_text, budget_text, json_path, output):
+    """Heat maps of the exact exit flux J and of the bulk density over (alpha, beta).
+
+    The bulk density is the occupation of the middle cell (odd L) or the mean
+    of the two middle cells (even L).  The chain's states are built once and
+    every transition probability is bilinear in (alpha, beta)
+    (markov.solvers.road_grid), so each grid point costs one stationary solve.
+    On NaSch vmax 1 roads (site1/sink or reservoir/wall, parallel or
+    random-sequential) the L -> infinity TASEP phase boundaries are drawn.
+    Progress goes to stderr, one line per grid row.
+
+    \b
+    Example:
+      nasch plot phase-diagram -L 12 --vmax 2 -o phase.png
+      nasch plot phase-diagram -L 10 --vmax 1 --p 0.25 --alphas 0.05:1:11 -o tasep.png
+    """
+    import json
+    import sys
+    import time
+
+    from markov.files import check_output_path, write_atomic
+    from markov.solvers.road_grid import phase_grid
+
+    from ..budget import parse_budget
+    from ..plot import FIGURE_FORMATS, save_figure
+    from ..road_figures import phase_diagram_figure
+
+    started = time.perf_counter()
+    check_output_path(output, suffixes=FIGURE_FORMATS)   # before the work
+    if json_path is not None:
+        check_output_path(json_path, suffixes=(".json",))
+    budget = None if budget_text is None else parse_budget(budget_text)
+    alphas = _grid_axis("alpha", alphas_text)
+    betas = _grid_axis("beta", betas_text)
+    road = _road_base(length, model, params, vmax, p, update, entry, exit_, v_in, stretches,
+                      ramps)
+    click.echo(f"phase grid: {road.summary()}; {len(alphas)} x {len(betas)} points",
+               err=True)
+
+    def check(states, nonzeros, spent):
+        points = len(alphas) * len(betas)
+        from markov.solvers.stationary import DIRECT_LIMIT
+
+        # iterative: ~80 products per point (random-sequential mixes slower: ~2.5 x);
+        # direct: a dense LU of n states
+        per = (nonzeros * PHASE_SECONDS_PER_NONZERO if states > DIRECT_LIMIT
+               else 0.01 + 3e-11 * states ** 3)
+        if update == "random-sequential":
+            per *= 2.5
+        predicted = points * per
+        of = "" if budget is None else f" (budget {budget:g} s)"
+        print(f"predicted: {states:,} states, {nonzeros:,} transitions; {points} solves"
+              f" about {predicted:.2g} s after {spent:.2g} s of building{of}", file=sys.stderr)
+        if budget is not None and spent + predicted > budget:
+            raise InvalidParameterError(
+                f"the grid needs about {spent + predicted:.0f} s, over --budget {budget:g} s:"
+                " fewer points (--alphas/--betas LO:HI:N) or a shorter road")
+
+    grid = phase_grid(road, alphas, betas, before_solves=check)
+    for note in grid.notes:
+        click.echo(f"note: {note}", err=True)
+    if json_path is not None:
+        from ..cli_common import _nan_to_none
+
+        write_atomic(json_path, json.dumps(_nan_to_none(grid.to_dict()), indent=1,
+                                           allow_nan=False))
+    save_figure(phase_diagram_figure(grid), output)
+    click.echo(f"wrote {output} ({time.perf_counter() - started:.1f} s)", err=True)
+
+
+@plot.command(short_help="Exact density and velocity profiles along a road, several curves.")
+@_road_convention_options
+@click.option("--alpha", "alpha_text", default="0.5", show_default=True,
+              help="Entry rate(s), comma list: one curve per (alpha, beta).")
+@click.option("--beta", "beta_text", default="0.5", show_default=True,
+              help="Exit rate(s), comma list.")
+@click.option("--case", "cases", multiple=True, metavar="KEY=VALUE;...",
+              help="One curve (repeatable): keys alpha, beta, stretch, on-ramp (repeatable;"
+                   " replace the base's; 'none' removes), label; e.g."
+                   " 'alpha=0.3;stretch=5-7:p=0.8;label=slow'.")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
+              help="Also write the curves' data (JSON) to this file.")
+@click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
+              help="Figure file, .png or .pdf.")
+@quiet_option
+@handle_errors
+def profile(length, vmax, p, model, params, update, entry, exit_, v_in, stretches, ramps,
+            alpha_text, beta_text, cases, json_path, output):
+    """Density rho(x) and mean velocity <v>(x) along the cells 1..L, exactly.
+
+    Curves: every (alpha, beta) of --alpha x --beta, or one per --case (then
+    --alpha/--beta give the base values the cases change).  --stretch and
+    --on-ramp apply to every curve unless a case names its own.  Stretches are
+    shaded, on-ramps marked by a triangle; the legend names each curve.
+
+    \b
+    Example:
+      nasch plot profile -L 10 --vmax 2 --alpha 0.2,0.6 --beta 0.3 -o prof.png
+      nasch plot profile -L 10 --case 'label=open' --case 'stretch=5-7:p=0.8;label=slow'
+          --case 'stretch=5-7:vmax=1;label=speed limit' -o stretch.png
+    """
+    import json
+
+    from markov.files import check_output_path, write_atomic
+
+    from ..cli_common import _nan_to_none
+    from ..plot import FIGURE_FORMATS, save_figure
+    from ..road_figures import profile_cases, profile_data, profile_figure
+
+    check_output_path(output, suffixes=FIGURE_FORMATS)   # before the work
+    if json_path is not None:
+        check_output_path(json_path, suffixes=(".json",))
+    alphas = number_list("--alpha", alpha_text)
+    betas = number_list("--beta", beta_text)
+    for name, vals in (("--alpha", alphas), ("--beta", betas)):
+        bad = [v for v in vals if not 0 <= v <= 1]
+        if bad:
+            raise InvalidParameterError(f"every {name} must lie in [0, 1], got {bad[0]:g}")
+    base = _road_base(length, model, params, vmax, p, update, entry, exit_, v_in, stretches,
+                      ramps, alphas[0], betas[0])
+    chosen = profile_cases(base, alphas, betas, cases)
+    data = profile_data(chosen)
+    if json_path is not None:
+        dump = [{k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in d.items()
+                 if k != "_road"} for d in data]
+        write_atomic(json_path, json.dumps(_nan_to_none(dump), indent=1, allow_nan=False))
+    save_figure(profile_figure(data), output)
+    click.echo(f"wrote {output}", err=True)
