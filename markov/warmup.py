@@ -37,6 +37,23 @@ def warm() -> None:
             solution.top_configurations(3)
         simulate(Ring(64, 16, 2, 0.5, update), steps=200, seed=1)
     RingChain(Ring(8, 4, 2, 0.5), lump=False, operator="matrix").solution().to_dict()
+    warm_roads()
+
+
+def warm_roads() -> None:
+    """The road's row generator and observables (lumped and full), once per update."""
+    from markov.model.load import load_model
+    from markov.model.road import Road
+    from markov.model.ring import UPDATES
+    from markov.solvers.road_chain import RoadChain
+
+    for update in UPDATES:
+        for vmax in (1, 2):
+            road = Road(4, load_model("nasch", {"vmax": vmax}), update)
+            for lump in (True, False):
+                solution = RoadChain(road, lump=lump).solution()
+                solution.to_dict()
+                solution.top_configurations(3)
 
 
 def build_copies():

@@ -214,7 +214,6 @@ def test_cli_solve_road_json_and_text():
     (["--road", "--vmax", "1", "--on-ramp", "1:0.3"], "on-ramp on cell 1 with the site1"),
     (["--road", "--on-ramp", "9:0.3"], "outside the cells 1..6"),
     (["--road", "--on-ramp", "3:x"], "CELL:ALPHA_R"),
-    (["--road", "--no-lump"], "--no-lump is for rings"),
     (["--road", "--operator", "matrix-free"], "matrix-free is for rings"),
     (["--road", "--v-in", "5"], "v_in"),
 ])

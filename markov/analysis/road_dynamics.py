@@ -101,8 +101,10 @@ def _prepare(system, solution: RoadSolution | None = None) -> _Solved:
     """The road's chain, its solution and matrix; one closed class, or the refusal."""
     if isinstance(system, RoadChain):
         chain = system
+        if chain.lattice.lumping is not None:    # the analyses read every velocity
+            chain = RoadChain(chain.system, max_memory=chain.max_memory, lump=False)
     elif isinstance(system, Road):
-        chain = RoadChain(system)
+        chain = RoadChain(system, lump=False)
     else:
         raise InvalidParameterError(
             f"expected a markov Road or RoadChain, got {type(system).__name__}")
@@ -110,6 +112,8 @@ def _prepare(system, solution: RoadSolution | None = None) -> _Solved:
         raise InvalidParameterError(
             "these are the analyses of an open road; a ring (with stretches or not) has"
             " markov.analysis.spectrum, sensitivity, correlations and fluctuations")
+    if solution is not None and getattr(solution, "lumping", None) is not None:
+        solution = None           # solved on lumped states: solved again on the full ones
     if solution is not None:
         if not isinstance(solution, RoadSolution) or solution.system != chain.system:
             raise InvalidParameterError("the solution is not of this road")

@@ -20,7 +20,11 @@ and leave.  This module is their row generator, written once from
   inflow and the bond currents.
 
 A state is the key of :mod:`markov.chain.encoding` over all ``L`` cells (base
-``Vmax + 2``, ``Vmax`` the largest ``vmax`` of any zone), never lumped.  Every
+``Vmax + 2``, ``Vmax`` the largest ``vmax`` of any zone).  A lattice built with
+``lump=True`` stores each car's velocity as the smallest of its class
+(:mod:`markov.model.lumping`): every successor key is written with its
+velocities mapped so, while the branch's counts (and the velocities counted
+after the step) keep the exact ones.  Every
 branch of a step is enumerated: the exit coin (``wall``), the entry coin, each
 car's outcome (an odometer for parallel update, a depth-first walk with undo
 for ordered-sequential, one position at a time for random-sequential), then
@@ -38,15 +42,16 @@ from markov._jit import njit, prange
 from markov.chain.encoding import check_encodable, powers
 from markov.model.ring import UPDATE_CODES
 
-__all__ = ["Lattice", "lattice_of", "successors", "successor_branches", "increments", "count_layout", "start_key",
+__all__ = ["Lattice", "lattice_of", "can_lump", "successors", "successor_branches", "increments", "count_layout", "start_key",
            "count_configurations", "all_lattice_keys", "successor_set", "reachable_keys",
            "ENTRY_CODES", "EXIT_CODES"]
 
 ENTRY_CODES = {"site1": 0, "reservoir": 1, "insert": 2}
 EXIT_CODES = {"sink": 0, "wall": 1}
 
-# positions in the integer parameters of the kernels
-_L, _B, _H, _VT, _PERIODIC, _UPDATE, _ENTRY, _EXIT, _VIN, _R, _VBULK, _NZ = range(12)
+# positions in the integer parameters of the kernels; from _DIGIT on, the digit each
+# key digit is written as (the velocity lumping; the identity when not lumped)
+_L, _B, _H, _VT, _PERIODIC, _UPDATE, _ENTRY, _EXIT, _VIN, _R, _VBULK, _NZ, _DIGIT = range(13)
 # positions in a branch's counts: then one per ramp, then the bonds 0..L
 _LEFT, _ENTERED, _ADVANCE, _RAMPS = 0, 1, 2, 3
 
@@ -64,12 +69,15 @@ def count_layout(n_ramps: int, length: int) -> dict:
         ``left``, ``entered``, ``advance`` (ints), ``ramps`` and ``bonds``
         (slices; bond ``k`` lies between cells ``k`` and ``k + 1``, bond 0 is
         the entry and bond ``L`` the exit, or on a ring the bond from cell ``L``
-        to cell 1), ``size``.
+        to cell 1), ``velocity`` (slice: the exact velocity of the car on each
+        cell ``1..L`` after the step, 0 for an empty cell), ``size``.
     """
+    bonds = _RAMPS + n_ramps
     return {"left": _LEFT, "entered": _ENTERED, "advance": _ADVANCE,
-            "ramps": slice(_RAMPS, _RAMPS + n_ramps),
-            "bonds": slice(_RAMPS + n_ramps, _RAMPS + n_ramps + length + 1),
-            "size": _RAMPS + n_ramps + length + 1}
+            "ramps": slice(_RAMPS, bonds),
+            "bonds": slice(bonds, bonds + length + 1),
+            "velocity": slice(bonds + length + 1, bonds + 2 * length + 1),
+            "size": bonds + 2 * length + 1}
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,7 +91,10 @@ class Lattice:
         Cells, the largest velocity a car may carry, the largest gap a table
         tells apart (an open exit shows this gap).
     ints : int64 array
-        ``L, B, H, Vmax, periodic, update, entry, exit, v_in, ramps, bulk vmax, cars``.
+        ``L, B, H, Vmax, periodic, update, entry, exit, v_in, ramps, bulk vmax, cars``,
+        then the digit each key digit ``0..B-1`` is written as (the lumping).
+    lumping : VelocityClasses or None
+        The velocity classes the keys are lumped by (None: every velocity kept).
     floats : float64 array
         ``alpha, beta``.
     zone_of : int64 array
@@ -118,6 +129,7 @@ class Lattice:
     ramp_down: np.ndarray
     ramp_up: np.ndarray
     pw: np.ndarray
+    lumping: object = None
 
     @property
     def periodic(self) -> bool:
@@ -131,6 +143,44 @@ class Lattice:
     def layout(self) -> dict:
         """:func:`count_layout` of this lattice."""
         return count_layout(self.n_ramps, self.length)
+
+    def unlumped(self) -> "Lattice":
+        """This lattice with every velocity kept (the full chain).
+
+        Returns
+        -------
+        Lattice
+        """
+        if self.lumping is None:
+            return self
+        from dataclasses import replace
+
+        ints = self.ints.copy()
+        ints[_DIGIT:] = np.arange(self.top_vmax + 2)
+        return replace(self, ints=ints, lumping=None)
+
+    def lump_keys(self, keys: np.ndarray) -> np.ndarray:
+        """``keys`` with every velocity written as its class's (unchanged if not lumped).
+
+        Parameters
+        ----------
+        keys : int64 array
+
+        Returns
+        -------
+        int64 array
+        """
+        keys = np.asarray(keys, dtype=np.int64)
+        if self.lumping is None:
+            return keys
+        digit = self.ints[_DIGIT:]
+        B = self.top_vmax + 2
+        out = np.zeros_like(keys)
+        rest = keys.copy()
+        for x in range(self.length):
+            out += digit[rest % B] * self.pw[x]
+            rest //= B
+        return out
 
     def kernel_args(self) -> tuple:
         """The arguments every kernel of this module takes, in order.
@@ -161,12 +211,36 @@ def _stack_tables(models, top_vmax: int, horizon: int):
     return count, new, weight
 
 
-def lattice_of(system) -> Lattice:
+def can_lump(system) -> bool:
+    """Whether merging indistinguishable velocities keeps every observable exact.
+
+    Under parallel and ordered-sequential update every car moves in a step, so
+    the full stationary vector is one step from the lumped one; a
+    random-sequential sub-step moves one car and keeps the others' (merged)
+    velocities, so there the velocities are kept.
+
+    Parameters
+    ----------
+    system : Road or Ring
+
+    Returns
+    -------
+    bool
+    """
+    return system.update != "random-sequential"
+
+
+def lattice_of(system, lump: bool = False) -> Lattice:
     """The :class:`Lattice` of a road, or of a ring with stretches.
 
     Parameters
     ----------
     system : Road or Ring
+    lump : bool
+        Store each velocity as the smallest of its class
+        (:func:`markov.model.lumping.velocity_classes` of the zones' tables),
+        where :func:`can_lump`; the lattice's ``lumping`` is None where nothing
+        merges.
 
     Returns
     -------
@@ -177,13 +251,22 @@ def lattice_of(system) -> Lattice:
     check_encodable(L, top)
     horizon = max(max(m.horizon(top), m.vmax) for m in system.zones)
     count, new, weight = _stack_tables(system.zones, top, horizon)
+    lumping = None
+    digits = np.arange(top + 2, dtype=np.int64)
+    if lump and can_lump(system):
+        from markov.model.lumping import velocity_classes
+
+        classes = velocity_classes(count, new, weight)
+        if not classes.trivial:
+            lumping = classes
+            digits = classes.digit_map()
     periodic = bool(system.periodic)
     ramps = () if periodic else system.ramps
     ints = np.array([L, top + 2, horizon, top, int(periodic), UPDATE_CODES[system.update],
                      -1 if periodic else ENTRY_CODES[system.entry],
                      -1 if periodic else EXIT_CODES[system.exit],
                      0 if periodic else system.v_in, len(ramps), system.model.vmax,
-                     system.cars if periodic else 0], dtype=np.int64)
+                     system.cars if periodic else 0, *digits], dtype=np.int64)
     floats = np.array([0.0, 0.0] if periodic else [system.alpha, system.beta])
     cells = np.array([r.cell for r in ramps], dtype=np.int64)
     order = sorted(range(len(ramps)), key=lambda i: cells[i])
@@ -195,7 +278,7 @@ def lattice_of(system) -> Lattice:
         np.array([r.alpha for r in ramps], dtype=np.float64),
         np.array(order, dtype=np.int64),
         np.array(sorted(range(len(ramps)), key=lambda i: -cells[i]), dtype=np.int64),
-        powers(L, top))
+        powers(L, top), lumping)
 
 
 # ----------------------------------------------------------------- small pieces
@@ -268,27 +351,34 @@ def _cross(cnt, base, x, dest, L, periodic, sign):
 
 
 @njit(cache=True)
-def _key(cells, L, pw):
+def _key(cells, ip, pw):
+    """The key of ``cells``, each digit written as its class's (``ip[_DIGIT:]``)."""
     k = np.int64(0)
-    for x in range(L):
-        k += cells[x] * pw[x]
+    for x in range(ip[_L]):
+        k += ip[_DIGIT + cells[x]] * pw[x]
     return k
 
 
 @njit(cache=True)
 def _emit(mode, at, cells, w, cnt, ip, pw, out_keys, out_w, incr, row, scale):
+    nc = cnt.shape[0]
     if mode == 1:
-        out_keys[at] = _key(cells, ip[_L], pw)
+        out_keys[at] = _key(cells, ip, pw)
         out_w[at] = w
     elif mode == 2:
         f = scale * w
-        for j in range(cnt.shape[0]):
+        for j in range(nc):
             incr[row, j] += f * cnt[j]
+        for y in range(ip[_L]):       # the exact velocities after the step
+            if cells[y] > 1:
+                incr[row, nc + y] += f * (cells[y] - 1)
     elif mode == 3:     # the rows with each branch's own counts (successor_branches)
-        out_keys[at] = _key(cells, ip[_L], pw)
+        out_keys[at] = _key(cells, ip, pw)
         out_w[at] = w
-        for j in range(cnt.shape[0]):
+        for j in range(nc):
             incr[at, j] = cnt[j]
+        for y in range(ip[_L]):
+            incr[at, nc + y] = max(cells[y] - 1, 0)
     return at + 1
 
 
@@ -1011,7 +1101,8 @@ def count_configurations(lattice: Lattice) -> int:
 
 
 def all_lattice_keys(lattice: Lattice) -> np.ndarray:
-    """Sorted keys of every configuration (:func:`count_configurations` of them).
+    """Sorted keys of every configuration (:func:`count_configurations` of them; of
+    every lumped one where the lattice is lumped).
 
     Parameters
     ----------
@@ -1027,14 +1118,15 @@ def all_lattice_keys(lattice: Lattice) -> np.ndarray:
 
     L, top = lattice.length, lattice.top_vmax
     if not lattice.periodic:
-        return np.arange((top + 2) ** L, dtype=np.int64)
+        keys = np.arange((top + 2) ** L, dtype=np.int64)
+        return keys[lattice.lump_keys(keys) == keys]
     n = int(lattice.ints[_NZ])
     if n == 0:
         return np.zeros(1, np.int64)
     places = np.array(list(itertools.combinations(range(L), n)), dtype=np.int64)
     digits = np.array(list(itertools.product(range(1, top + 2), repeat=n)), dtype=np.int64)
     keys = (lattice.pw[places][:, None, :] * digits[None, :, :]).sum(axis=2).ravel()
-    return unique_keys(keys)
+    return unique_keys(lattice.lump_keys(keys))
 
 
 def successor_set(lattice: Lattice, keys: np.ndarray) -> np.ndarray:

@@ -102,7 +102,7 @@ def road_kernel_args(road) -> tuple:
     ramps = road.ramps
     ints = np.array([L, top + 2, horizon, top, 0, UPDATE_CODES[road.update],
                      ENTRY_CODES[road.entry], EXIT_CODES[road.exit], road.v_in, len(ramps),
-                     road.model.vmax, 0], dtype=np.int64)
+                     road.model.vmax, 0, *range(top + 2)], dtype=np.int64)
     floats = np.array([road.alpha, road.beta], dtype=np.float64)
     cells = np.array([r.cell for r in ramps], dtype=np.int64)
     return (ints, floats, np.array(road.zone_of_cell, dtype=np.int64),

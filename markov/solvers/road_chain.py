@@ -95,6 +95,10 @@ class RoadChain:
         How ``x -> x P`` is applied: the assembled CSR matrix.
     start : str, optional
         A start configuration (text): the classes it reaches.
+    lump : bool
+        Merge the velocities the rule cannot tell apart (default; exact under
+        parallel and ordered-sequential update, :mod:`markov.model.lumping`);
+        False keeps every velocity.
 
     Examples
     --------
@@ -109,8 +113,9 @@ class RoadChain:
     """
 
     def __init__(self, system, max_memory: float | None = None, operator: str = "auto",
-                 start: str | None = None):
+                 start: str | None = None, lump: bool = True):
         self.system = _ensure_system(system)
+        self.lump = bool(lump)
         self.max_memory = ensure_max_memory(max_memory)
         self.limit = memory.memory_limit(max_memory)
         if operator not in OPERATORS:
@@ -120,7 +125,7 @@ class RoadChain:
             raise InvalidParameterError(
                 "a road is solved with its matrix here; matrix-free roads are not built yet")
         self.operator = operator
-        self.start = _start_key(system, start)
+        self._start = _start_key(system, start)
         self.build_seconds = 0.0
         self.unverified = False
         self.census: ClassCensus | None = None
@@ -132,7 +137,14 @@ class RoadChain:
     @cached_property
     def lattice(self) -> Lattice:
         """The arrays the row generator reads (:func:`markov.chain.lattice.lattice_of`)."""
-        return lattice_of(self.system)
+        return lattice_of(self.system, lump=self.lump)
+
+    @cached_property
+    def start(self) -> int | None:
+        """The start key, its velocities lumped as the states are (None: the default start)."""
+        if self._start is None:
+            return None
+        return int(self.lattice.lump_keys(np.array([self._start]))[0])
 
     @cached_property
     def reachable(self) -> np.ndarray:
@@ -295,9 +307,9 @@ class RoadChain:
 
 
 @njit(cache=True)
-def _profiles(keys, pi, length, b, density, velocity, cars):
-    """``density[x] = sum pi [cell x holds a car]``, ``velocity[x]`` the same times its
-    velocity, ``cars[n]`` the probability of ``n`` cars."""
+def _occupation(keys, pi, length, b, density, cars):
+    """``density[x] = sum pi [cell x holds a car]``, ``cars[n]`` the probability of ``n``
+    cars (both the same on lumped and full keys)."""
     for i in range(keys.shape[0]):
         k = keys[i]
         n = 0
@@ -306,9 +318,32 @@ def _profiles(keys, pi, length, b, density, velocity, cars):
             k //= b
             if d > 0:
                 density[x] += pi[i]
-                velocity[x] += pi[i] * (d - 1)
                 n += 1
         cars[n] += pi[i]
+
+
+#: States per call of the row generator when summing over a solved chain.
+_CHUNK = 1 << 16
+
+
+def expected_counts(lattice: Lattice, keys: np.ndarray, pi: np.ndarray) -> np.ndarray:
+    """``sum_i pi_i E[counts of a step | state i]`` (:func:`markov.chain.lattice.increments`),
+    summed chunk by chunk so that no per-state table is held.
+
+    Parameters
+    ----------
+    lattice : Lattice
+    keys : (n,) int64 array
+    pi : (n,) float array
+
+    Returns
+    -------
+    (size,) float64 array
+    """
+    total = np.zeros(lattice.layout["size"])
+    for lo in range(0, len(keys), _CHUNK):
+        total += increments(lattice, keys[lo:lo + _CHUNK], pi[lo:lo + _CHUNK]).sum(axis=0)
+    return total
 
 
 @dataclass(frozen=True)
@@ -322,7 +357,7 @@ class RoadSolution:
     ----------
     system : Road or Ring
     keys : (n,) int64 array
-        States (all cells, never lumped).
+        States (all cells; velocities lumped where ``lattice.lumping`` says so).
     result : StationaryResult
     nonzeros : int
     build_seconds : float
@@ -357,7 +392,24 @@ class RoadSolution:
 
     @property
     def lumped(self) -> bool:
+        """False: a road has no rotation classes (a ring's ``lumped``); see :attr:`lumping`."""
         return False
+
+    @property
+    def lumping(self):
+        """The :class:`~markov.model.lumping.VelocityClasses` the states are lumped by, or
+        None (every velocity kept)."""
+        return self.lattice.lumping
+
+    @property
+    def velocities(self) -> str:
+        """The velocity convention of the states, in words (echoed by every output)."""
+        if self.lumping is not None:
+            return f"lumped: {self.lumping.describe()}"
+        from markov.chain.lattice import can_lump
+
+        return "every velocity kept" + ("" if can_lump(self.system) else
+                                        " (random-sequential: a sub-step moves one car)")
 
     @property
     def steps_per_time_step(self) -> int:
@@ -368,16 +420,51 @@ class RoadSolution:
         return self.system.length + (0 if self.system.periodic else 1)
 
     @cached_property
+    def _step(self) -> np.ndarray:
+        """Expected counts of one chain step from the stationary state; its velocity
+        slice is the exact velocity on each cell after the step, which is the stationary
+        one (the full vector is one step from the lumped one, :mod:`markov.model.lumping`)."""
+        return expected_counts(self.lattice, self.keys, self.pi)
+
+    @cached_property
     def _counts(self) -> np.ndarray:
-        per_step = increments(self.lattice, self.keys, self.pi).sum(axis=0)
-        return per_step * self.steps_per_time_step
+        return self._step * self.steps_per_time_step
 
     @cached_property
     def _profiles(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         L = self.system.length
-        density, velocity, cars = np.zeros(L), np.zeros(L), np.zeros(L + 1)
-        _profiles(self.keys, self.pi, L, self.system.top_vmax + 2, density, velocity, cars)
-        return density, velocity, cars
+        density, cars = np.zeros(L), np.zeros(L + 1)
+        _occupation(self.keys, self.pi, L, self.system.top_vmax + 2, density, cars)
+        return density, self._step[self.lattice.layout["velocity"]], cars
+
+    def expanded(self) -> "RoadSolution":
+        """The full stationary vector, every velocity kept: one step of the full chain
+        from the lumped vector (exact, :mod:`markov.model.lumping`); ``self`` where
+        nothing is lumped.
+
+        Returns
+        -------
+        RoadSolution
+        """
+        if self.lumping is None:
+            return self
+        from markov.chain.encoding import unique_keys
+        from markov.chain.lattice import successors
+
+        full = self.lattice.unlumped()
+        parts_k, parts_w = [], []
+        for lo in range(0, len(self.keys), _CHUNK):
+            indptr, succ, w = successors(full, self.keys[lo:lo + _CHUNK])
+            parts_k.append(succ)
+            parts_w.append(w * np.repeat(self.pi[lo:lo + _CHUNK], np.diff(indptr)))
+        succ = np.concatenate(parts_k)
+        w = np.concatenate(parts_w)
+        keys = unique_keys(succ)
+        pi = np.bincount(np.searchsorted(keys, succ), weights=w, minlength=len(keys))
+        r = self.result
+        result = StationaryResult(pi, r.method, r.residual, r.iterations, r.seconds)
+        return RoadSolution(self.system, keys, result, None, self.build_seconds, self.operator,
+                            self.census, full)
 
     @property
     def flux(self) -> float:
@@ -473,6 +560,8 @@ class RoadSolution:
             "solve_seconds": self.result.seconds,
             "seconds": self.build_seconds + self.result.seconds,
             "closed_classes": self.census.to_dict() if self.census else None,
+            "velocities": self.velocities,
+            "velocity_classes": None if self.lumping is None else self.lumping.to_dict(),
             "time_step": (f"{self.steps_per_time_step} sub-steps" if self.steps_per_time_step > 1
                           else "one step"),
         })
@@ -509,6 +598,8 @@ class RoadSolution:
         -------
         list of dict
         """
+        if self.lumping is not None:
+            return self.expanded().top_configurations(k)
         order = np.argsort(-self.pi, kind="stable")[:k]
         return [{"configuration": to_text(decode(int(self.keys[i]), self.system.length,
                                                  self.system.top_vmax)),
@@ -527,11 +618,12 @@ class RoadSolution:
         """
         from markov.solvers.storage import save_road_solution
 
-        return save_road_solution(self, path)
+        return save_road_solution(self.expanded(), path)
 
 
 def solve_road(system, method: str = "auto", tol: float = DEFAULT_TOL,
-               max_memory: float | None = None, start: str | None = None) -> RoadSolution:
+               max_memory: float | None = None, start: str | None = None,
+               lump: bool = True) -> RoadSolution:
     """Exact stationary state of a road, or of a ring with stretches.
 
     Parameters
@@ -543,6 +635,8 @@ def solve_road(system, method: str = "auto", tol: float = DEFAULT_TOL,
         Bytes allowed.
     start : str, optional
         A start configuration: the class it falls into.
+    lump : bool
+        Merge the velocities the rule cannot tell apart (:class:`RoadChain`).
 
     Returns
     -------
@@ -553,4 +647,4 @@ def solve_road(system, method: str = "auto", tol: float = DEFAULT_TOL,
     NoUniqueStationaryStateError
         Several closed classes (``classes`` holds each solved).
     """
-    return RoadChain(system, max_memory=max_memory, start=start).solution(method, tol)
+    return RoadChain(system, max_memory=max_memory, start=start, lump=lump).solution(method, tol)

@@ -187,10 +187,11 @@ def _interior(road):
 class _Rows:
     """The rows of one road's chain on a fixed state set, at any ``(alpha, beta)``."""
 
-    def __init__(self, road, keys: np.ndarray):
+    def __init__(self, road, keys: np.ndarray, lump: bool):
         from markov.chain.lattice import lattice_of
 
         self.road = road
+        self.lump = lump
         self.keys = keys
         self.n = len(keys)
         self.lattice_of = lattice_of
@@ -200,7 +201,8 @@ class _Rows:
         successors must lie in the state set."""
         from markov.chain.lattice import increments, successors
 
-        lat = self.lattice_of(self.road.with_params(alpha=float(alpha), beta=float(beta)))
+        lat = self.lattice_of(self.road.with_params(alpha=float(alpha), beta=float(beta)),
+                              lump=self.lump)
         indptr, succ, weight = successors(lat, self.keys)
         col = np.searchsorted(self.keys, succ)
         col[col == self.n] = 0
@@ -323,7 +325,7 @@ def phase_grid(road, alphas, betas, *, tol: float = DEFAULT_TOL,
         chain.solution(tol=tol)
     n = len(keys)
     t_states = time.perf_counter() - t0
-    rows = _Rows(road, keys)
+    rows = _Rows(road, keys, chain.lump)
     corners = [rows.at(a, b) for a, b in ((0, 0), (1, 0), (0, 1), (1, 1))]
     lin = np.unique(np.concatenate([c[1] * n + c[0] for c in corners]))
     data = np.stack([_on_pattern(lin, n, r, c, w) for r, c, w, _, _ in corners])

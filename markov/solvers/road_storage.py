@@ -5,7 +5,9 @@ One numpy ``.npz`` archive, uncompressed, no pickles, like a ring's
 version 1, so that neither reader mistakes one for the other:
 
 ``keys``           (n,) int64: one key per state, sorted, each once (never lumped:
-                   a road, or a ring with a stretch, has no rotation symmetry).
+                   a road, or a ring with a stretch, has no rotation symmetry, and a
+                   solution on lumped velocities is written as its full vector,
+                   :meth:`~markov.solvers.road_chain.RoadSolution.expanded`).
 ``probabilities``  (n,) float64: the stationary probability of each state.
 ``metadata``       0-d unicode array, a JSON object: ``format``, ``format_version``,
                    ``system`` (the road or ring with every convention and its
@@ -133,7 +135,7 @@ def save_road_solution(sol, path) -> Path:
     >>> sol = solve_road(Road(5, alpha=0.4, beta=0.7))
     >>> with tempfile.TemporaryDirectory() as tmp:
     ...     back = load_solution(sol.save(pathlib.Path(tmp) / "road.npz"))
-    >>> back.flux == sol.flux and back.system == sol.system
+    >>> abs(back.flux - sol.flux) < 1e-15 and back.system == sol.system
     True
     """
     arrays = {"keys": np.ascontiguousarray(sol.keys, dtype=ROAD_DTYPES["keys"]),

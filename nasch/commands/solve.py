@@ -40,7 +40,9 @@ __all__ = ["solve"]
                    " factored car by car).")
 @click.option("--tol", type=float, default=DEFAULT_TOL, show_default=True,
               help="Target ||pi P - pi||_1 of the iterative solvers, 1e-15..1e-3.")
-@click.option("--no-lump", is_flag=True, help="Do not lump rotations of the ring.")
+@click.option("--no-lump", is_flag=True,
+              help="Keep every state: a ring's rotations, a road's velocities that the rule"
+                   " cannot tell apart.")
 @click.option("--max-memory", type=float, default=None,
               help="Refuse chains needing more than this many GiB (2**30 bytes; default"
                    " 75% of RAM). The Python API's max_memory is in bytes.")
@@ -71,6 +73,12 @@ def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, st
     the sum over the class; --top and --save report the classes by their
     canonical configuration.  --no-lump keeps one state per configuration.
     --json adds the gap distribution P(g), g = 0..L-N, and solver details.
+
+    An open road (--road, docs/roads.md): cars enter at cell 1 (--entry, --alpha)
+    and leave after cell L (--exit, --beta); e.g. nasch solve --road -L 16 --vmax 1
+    --alpha 0.3 --beta 0.5.  Velocities the rule cannot tell apart are one state
+    (NaSch: vmax - 1 and vmax; at vmax 1 the occupation alone), said in the output;
+    --top and --save give the full vector, --no-lump solves with every velocity.
 
     Any shipped model (nasch models) or a rule of your own
     (--model FILE.py:FUNCTION, docs/models.md).  A chain with several closed
@@ -203,8 +211,6 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
     from markov.validate import ensure_int
 
     what = "a road" if not system.periodic else "a ring with a stretch"
-    if no_lump:
-        raise click.UsageError(f"--no-lump is for rings: {what} is never lumped")
     if operator == "matrix-free":
         raise click.UsageError(f"{what} is solved with its matrix (--operator matrix-free is"
                                " for rings)")
@@ -229,7 +235,8 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
     if save is not None:
         save = check_output_path(save, suffixes=(".npz",))
     limit = None if max_memory is None else max_memory * 2**30
-    chain = RoadChain(system, max_memory=limit, start=start)
+    # the road's dynamics read every velocity (markov.analysis.road_dynamics)
+    chain = RoadChain(system, max_memory=limit, start=start, lump=not (no_lump or dynamics))
     one_state = top is not None or save is not None or dynamics
     try:
         if every_class:
@@ -246,26 +253,29 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
     data = sol.to_dict()
     if dynamics:
         data.update(_road_dynamics(chain, sol, names, fluctuations, lags, tol))
-    rows = sol.top_configurations(top) if top else None
+    # --top and --save: the full vector, every velocity (one step from the lumped one)
+    full = sol.expanded() if top is not None or save is not None else sol
+    rows = full.top_configurations(top) if top else None
     if save is not None:
-        sol.save(save)
+        full.save(save)
     if as_json:
         if rows is not None:
             data["top"] = rows
         if save is not None:
             data["saved"] = str(save)
+            data["saved_states"] = full.n_states
         emit_json(data)
         return
     _echo_lattice(system, sol, data)
     if dynamics:
         _echo_road_dynamics(data)
     if rows is not None:
-        click.echo(f"  most probable configurations ({len(rows)} of {sol.n_states:,};"
-                   " '.' empty, digit = velocity, cars move right):")
+        click.echo(f"  most probable configurations ({len(rows)} of {full.n_states:,},"
+                   " every velocity; '.' empty, digit = velocity, cars move right):")
         for r in rows:
             click.echo(f"    {r['configuration']}  {r['probability']:.12g}")
     if save is not None:
-        click.echo(f"wrote {save} ({data['states']:,} states)", err=True)
+        click.echo(f"wrote {save} ({full.n_states:,} states, every velocity)", err=True)
 
 
 def _road_sensitivity_names(system, given) -> list[str]:
@@ -352,7 +362,8 @@ def _echo_lattice(system, sol, data: dict) -> None:
         click.echo(system.summary())
         click.echo(f"  entry {system.entry}: {data['entry_convention']}")
         click.echo(f"  exit {system.exit}: {data['exit_convention']}")
-    click.echo(f"  states {data['states']:,} (no lumping), nonzeros {data['nonzeros']:,},"
+    click.echo(f"  states {data['states']:,} (velocities {data['velocities']}),"
+               f" nonzeros {data['nonzeros']:,},"
                f" method {data['method']}, residual {data['residual']:.2e},"
                f" {data['seconds']:.3f} s; per time step ({data['time_step']})")
     if system.periodic:
