@@ -36,7 +36,11 @@ from markov.solvers.class_solutions import ClassSolution, ClassSolutions
 from markov.solvers.stationary import StationaryResult, stationary
 from markov.validate import ensure_max_memory, ensure_tol
 
-__all__ = ["RoadChain", "RoadSolution", "solve_road", "is_lattice_system", "SPLIT_MAX_STATES"]
+__all__ = ["RoadChain", "RoadSolution", "solve_road", "estimate_road", "is_lattice_system", "SPLIT_MAX_STATES"]
+
+#: Roads with more configurations than this are predicted before the search
+#: (:attr:`RoadChain.prediction`): above it a search takes a second or more.
+PREDICT_CONFIGURATIONS = 3 ** 13
 
 #: Largest reachable set split into closed classes (its support graph, every
 #: successor stored); a larger one is solved as one class and verified.
@@ -99,6 +103,9 @@ class RoadChain:
         Merge the velocities the rule cannot tell apart (default; exact under
         parallel and ordered-sequential update, :mod:`markov.model.lumping`);
         False keeps every velocity.
+    predict : bool
+        Predict a large road's states, memory and time before the search
+        (:attr:`prediction`) and refuse one that will not fit ``max_memory``.
 
     Examples
     --------
@@ -113,9 +120,10 @@ class RoadChain:
     """
 
     def __init__(self, system, max_memory: float | None = None, operator: str = "auto",
-                 start: str | None = None, lump: bool = True):
+                 start: str | None = None, lump: bool = True, predict: bool = True):
         self.system = _ensure_system(system)
         self.lump = bool(lump)
+        self.predict = bool(predict)
         self.max_memory = ensure_max_memory(max_memory)
         self.limit = memory.memory_limit(max_memory)
         if operator not in OPERATORS:
@@ -147,8 +155,37 @@ class RoadChain:
         return int(self.lattice.lump_keys(np.array([self._start]))[0])
 
     @cached_property
+    def prediction(self):
+        """The predicted solve (:func:`markov.solvers.road_estimate.estimate_road`) of a road
+        with more than :data:`PREDICT_CONFIGURATIONS` configurations; None for a smaller
+        one, a ring with stretches, or ``predict=False``."""
+        if not self.predict or self.system.periodic or self._start is not None:
+            return None
+        if count_configurations(self.lattice) <= PREDICT_CONFIGURATIONS:
+            return None
+        return estimate_road(self.system, self.lump)
+
+    def check_prediction(self) -> None:
+        """Refuse, before the search, a road predicted not to fit the memory limit.
+
+        Raises
+        ------
+        StateSpaceTooLargeError
+            With the prediction in the message.
+        """
+        est = self.prediction
+        if est is not None and est.bytes > self.limit:
+            from markov.errors import StateSpaceTooLargeError
+            from markov.memory import gib
+
+            raise StateSpaceTooLargeError(
+                f"{self.system.summary()}: predicted {est.line()}; that exceeds the memory"
+                f" limit of {gib(self.limit)} (--max-memory)")
+
+    @cached_property
     def reachable(self) -> np.ndarray:
         """Sorted keys of everything reachable from the start (the empty road by default)."""
+        self.check_prediction()
         t = time.perf_counter()
         keys = reachable_keys(self.lattice, self.start, self.max_memory,
                               per_state=memory.matrix_bytes(1, 32, "direct"))
@@ -156,7 +193,19 @@ class RoadChain:
         return keys
 
     def _rows(self, keys: np.ndarray):
-        return successors(self.lattice, keys)
+        if len(keys) <= _ROW_CHUNK:
+            return successors(self.lattice, keys)
+        from markov.progress import progress_bar
+
+        parts = []
+        with progress_bar(len(keys), "rows of P", "state") as bar:
+            for lo in range(0, len(keys), _ROW_CHUNK):
+                parts.append(successors(self.lattice, keys[lo:lo + _ROW_CHUNK]))
+                bar.update(min(_ROW_CHUNK, len(keys) - lo))
+        indptr = np.zeros(len(keys) + 1, np.int64)
+        np.cumsum(np.concatenate([np.diff(p[0]) for p in parts]), out=indptr[1:])
+        return (indptr, np.concatenate([p[1] for p in parts]),
+                np.concatenate([p[2] for p in parts]))
 
     @cached_property
     def classes(self) -> list[np.ndarray]:
@@ -324,6 +373,8 @@ def _occupation(keys, pi, length, b, density, cars):
 
 #: States per call of the row generator when summing over a solved chain.
 _CHUNK = 1 << 16
+#: States per call when the rows are stored (a progress bar between calls).
+_ROW_CHUNK = 1 << 17
 
 
 def expected_counts(lattice: Lattice, keys: np.ndarray, pi: np.ndarray) -> np.ndarray:
@@ -619,6 +670,38 @@ class RoadSolution:
         from markov.solvers.storage import save_road_solution
 
         return save_road_solution(self.expanded(), path)
+
+
+def _measure(road, lump: bool) -> tuple[int, int, float]:
+    """States, transitions and seconds of one solve (a calibration road)."""
+    t = time.perf_counter()
+    sol = RoadChain(road, lump=lump, predict=False).solution()
+    return sol.n_states, sol.nonzeros, time.perf_counter() - t
+
+
+def estimate_road(road: Road, lump: bool = True, calibration_states: int | None = None):
+    """Predict the states, transitions, memory and seconds of solving a road.
+
+    Parameters
+    ----------
+    road : Road
+    lump : bool
+        Whether the velocities the rule cannot tell apart are merged.
+    calibration_states : int, optional
+        Shorter roads are solved up to the first with more states than this
+        (default :data:`markov.solvers.road_estimate.CALIBRATION_STATES`).
+
+    Returns
+    -------
+    markov.solvers.road_estimate.RoadEstimate
+    """
+    from markov.solvers import road_estimate
+
+    if not isinstance(road, Road):
+        raise InvalidParameterError(f"estimate_road takes a markov Road, got {type(road).__name__}")
+    return road_estimate.estimate_road(
+        road, _measure, lump,
+        road_estimate.CALIBRATION_STATES if calibration_states is None else calibration_states)
 
 
 def solve_road(system, method: str = "auto", tol: float = DEFAULT_TOL,

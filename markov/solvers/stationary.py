@@ -161,8 +161,17 @@ def _eigs(P, tol, maxiter):
     n = P.shape[0]
     if n < 3:  # ARPACK needs k < n - 1
         return _direct(P, tol, maxiter)
-    _, vecs = spla.eigs(P.T, k=1, which="LM", v0=np.full(n, 1.0 / n), tol=tol * 1e-3,
-                        maxiter=maxiter)
+    from markov.progress import progress_bar
+
+    A = P.T
+    with progress_bar(None, "eigs (x P products)", "product") as bar:
+        def counted(x):
+            bar.update(1)
+            return A @ x
+
+        op = spla.LinearOperator(A.shape, matvec=counted, dtype=A.dtype)
+        _, vecs = spla.eigs(op, k=1, which="LM", v0=np.full(n, 1.0 / n), tol=tol * 1e-3,
+                            maxiter=maxiter)
     return vecs[:, 0], 0
 
 

@@ -238,6 +238,7 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
     # the road's dynamics read every velocity (markov.analysis.road_dynamics)
     chain = RoadChain(system, max_memory=limit, start=start, lump=not (no_lump or dynamics))
     one_state = top is not None or save is not None or dynamics
+    _say_prediction(chain)
     try:
         if every_class:
             chain.search_all_configurations()
@@ -251,6 +252,8 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
         _echo_classes(system, exc.classes, as_json, start)
         return
     data = sol.to_dict()
+    if chain.prediction is not None:
+        data["prediction"] = chain.prediction.to_dict()
     if dynamics:
         data.update(_road_dynamics(chain, sol, names, fluctuations, lags, tol))
     # --top and --save: the full vector, every velocity (one step from the lumped one)
@@ -276,6 +279,17 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
             click.echo(f"    {r['configuration']}  {r['probability']:.12g}")
     if save is not None:
         click.echo(f"wrote {save} ({full.n_states:,} states, every velocity)", err=True)
+
+
+def _say_prediction(chain) -> None:
+    """The predicted states, memory and time of a large road, on stderr (a terminal, not
+    --quiet), and its refusal when it will not fit, before the search."""
+    from markov.progress import progress_enabled
+
+    chain.check_prediction()
+    est = chain.prediction
+    if est is not None and progress_enabled():
+        click.echo(f"predicted: {est.line()}", err=True)
 
 
 def _road_sensitivity_names(system, given) -> list[str]:
