@@ -41,7 +41,8 @@ def warm() -> None:
 
 
 def warm_roads() -> None:
-    """The road's row generator and observables (lumped and full), once per update."""
+    """The road's row generator, factored sweep and observables (lumped and full), once
+    per update."""
     from markov.model.load import load_model
     from markov.model.road import Road
     from markov.model.ring import UPDATES
@@ -54,6 +55,8 @@ def warm_roads() -> None:
                 solution = RoadChain(road, lump=lump).solution()
                 solution.to_dict()
                 solution.top_configurations(3)
+                if update == "parallel":       # the factored sweep and its search
+                    RoadChain(road, lump=lump, operator="matrix-free").solution().to_dict()
 
 
 def build_copies():

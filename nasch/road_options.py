@@ -109,9 +109,34 @@ def build_system(length, cars, model, update, *, road: bool, alpha=None, beta=No
         return Ring(length, cars, update=update, model=model, stretches=parsed)
     if cars is not None:
         raise InvalidParameterError("--cars is a ring's: a road's cars come and go (drop -N)")
-    return Road(length, model, update, 0.5 if alpha is None else alpha,
-                0.5 if beta is None else beta, entry, exit_, 0 if v_in is None else v_in,
-                parsed, tuple(OnRamp.parse(r) for r in ramps))
+    system = Road(length, model, update, 0.5 if alpha is None else alpha,
+                  0.5 if beta is None else beta, entry, exit_, 0 if v_in is None else v_in,
+                  parsed, tuple(OnRamp.parse(r) for r in ramps))
+    check_v_in(system, v_in)
+    return system
+
+
+def check_v_in(road, v_in) -> None:
+    """Refuse ``--v-in`` where the entry does not read it (it would be ignored).
+
+    Parameters
+    ----------
+    road : Road
+    v_in : int or None
+        The option as given (None: not given).
+
+    Raises
+    ------
+    InvalidParameterError
+        ``--v-in`` with the ``reservoir`` or ``insert`` entry.
+    """
+    if v_in is None or road.entry == "site1":
+        return
+    how = ("the reservoir's virtual car enters with the velocity it draws (from vmax)"
+           if road.entry == "reservoir" else "insert puts its car in with the bulk vmax")
+    raise InvalidParameterError(
+        f"--v-in is the velocity of a car entering by site1; the {road.entry} entry does not"
+        f" read it ({how}): drop --v-in or use --entry site1")
 
 
 def ring_only(reason: str):

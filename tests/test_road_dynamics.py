@@ -362,3 +362,73 @@ def test_cli_road_dynamics_refusals_are_one_line(args, words):
     res = CliRunner().invoke(main, args)
     assert res.exit_code == 2, res.output
     assert words in res.output and len(res.output.strip().splitlines()) == 1, res.output
+
+
+# ------------------------------------------- random-sequential: time step and continuous time
+
+def _one_cell(alpha, beta):
+    return Road(1, load_model("nasch", {"vmax": 1, "p": 0.0}), "random-sequential", alpha, beta,
+                "site1", "sink")
+
+
+@pytest.mark.parametrize("alpha, beta", [(0.3, 0.7), (0.6, 0.45)])
+def test_one_cell_random_sequential_in_continuous_time_is_the_renewal_process(alpha, beta):
+    # in continuous time the cell fills at rate alpha and empties at rate beta: exits are a
+    # renewal process with T = Exp(alpha) + Exp(beta), so Delta = var T / E[T]^3, and the
+    # two-state chain relaxes at rate alpha + beta
+    from markov.analysis.road_dynamics import exit_fluctuations, road_spectrum
+
+    fl = exit_fluctuations(_one_cell(alpha, beta))
+    mean, var = 1 / alpha + 1 / beta, 1 / alpha ** 2 + 1 / beta ** 2
+    assert fl.continuous_time_diffusion == pytest.approx(var / mean ** 3, rel=1e-12)
+    sp_ = road_spectrum(_one_cell(alpha, beta), count=1)
+    assert sp_.continuous_time_relaxation_time == pytest.approx(1 / (alpha + beta), rel=1e-12)
+    assert exit_fluctuations(Road(3, load_model("nasch", {"vmax": 1}))).continuous_time_diffusion \
+        is None
+
+
+@pytest.mark.parametrize("alpha, beta", [(0.3, 0.7), (0.6, 0.45)])
+def test_tau_int_exit_is_of_the_cars_leaving_per_time_step(alpha, beta):
+    # one time step is two sub-steps (entry position, cell 1), each drawn with 1/2: the
+    # cars leaving in a time step, enumerated over the four draws from the stationary state
+    from markov.analysis.road_dynamics import exit_fluctuations
+
+    fl = exit_fluctuations(_one_cell(alpha, beta))
+    occ = alpha / (alpha + beta)            # pi(occupied): alpha (1 - o) = beta o
+    pi = {0: 1 - occ, 1: occ}
+
+    def sub(state):                         # (next state, cars left, probability)
+        if state == 0:
+            return [(1, 0, 0.5 * alpha), (0, 0, 0.5 * (1 - alpha) + 0.5)]
+        return [(0, 1, 0.5 * beta), (1, 0, 0.5 * (1 - beta) + 0.5)]
+
+    moments = [0.0, 0.0]
+    for s0, p0 in pi.items():
+        for s1, m1, p1 in sub(s0):
+            for _, m2, p2 in sub(s1):
+                moments[0] += p0 * p1 * p2 * (m1 + m2)
+                moments[1] += p0 * p1 * p2 * (m1 + m2) ** 2
+    var_step = moments[1] - moments[0] ** 2
+    assert moments[0] == pytest.approx(fl.flux, abs=1e-14)
+    assert fl.to_dict()["exit_variance_per_time_step"] == pytest.approx(var_step, abs=1e-14)
+    assert fl.to_dict()["tau_int_exit"] == pytest.approx(fl.diffusion_per_time_step / var_step,
+                                                         rel=1e-12)
+
+
+def test_cli_random_sequential_gives_both_clocks_and_per_chain_step_tau():
+    from nasch.cli import main
+
+    args = ["solve", "--road", "-L", "4", "--vmax", "1", "--p", "0.25", "--update",
+            "random-sequential", "--fluctuations"]
+    d = json.loads(CliRunner().invoke(main, args + ["--json"]).stdout)
+    S = 5
+    for name in ("cars", "stopped"):
+        assert d[f"tau_int_{name}_chain_steps"] == pytest.approx(S * d[f"tau_int_{name}"],
+                                                                 rel=1e-14)
+    assert d["exit_diffusion_continuous_time"] == pytest.approx(
+        S * (d["exit_diffusion_per_chain_step"] + d["exit_current_per_chain_step"] ** 2),
+        rel=1e-14)
+    assert d["tau_int_exit"] == pytest.approx(d["exit_diffusion"]
+                                              / d["exit_variance_per_time_step"], rel=1e-12)
+    text = CliRunner().invoke(main, args).output
+    assert "continuous time" in text and "of the cars leaving per time step" in text

@@ -55,6 +55,15 @@ def test_grid_equals_fresh_solves(update, vmax, entry, exit_):
         assert abs(grid.mean_density[i, j] - sol.mean_cars / 4) < 1e-12
 
 
+def test_rows_on_two_processes_are_the_serial_snake():
+    road = Road(6, load_model("nasch", {"vmax": 2, "p": 0.3}), "parallel", 0.4, 0.6)
+    alphas, betas = [0.0, 0.2, 0.6, 1.0], [0.1, 0.5, 1.0]
+    one = phase_grid(road, alphas, betas, progress=False, workers=1)
+    two = phase_grid(road, alphas, betas, progress=False, workers=2)
+    for name in ("flux", "inflow", "bulk_density", "mean_density"):
+        assert np.abs(getattr(one, name) - getattr(two, name)).max() < 1e-12, name
+
+
 @pytest.mark.parametrize("update", UPDATES)
 def test_grid_equals_naive_road(update):
     road = Road(3, load_model("nasch", {"vmax": 2, "p": 0.25}), update, 0.5, 0.5,

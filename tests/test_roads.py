@@ -20,6 +20,7 @@ from click.testing import CliRunner
 from reference import dehp_Z
 
 from markov import NoUniqueStationaryStateError, OnRamp, Ring, Road, Stretch, load_model, solve
+from markov.errors import InvalidParameterError
 from markov.chain.encoding import encode
 from markov.chain.lattice import increments, lattice_of, successors
 from markov.solvers.road_chain import RoadChain
@@ -214,10 +215,20 @@ def test_cli_solve_road_json_and_text():
     (["--road", "--vmax", "1", "--on-ramp", "1:0.3"], "on-ramp on cell 1 with the site1"),
     (["--road", "--on-ramp", "9:0.3"], "outside the cells 1..6"),
     (["--road", "--on-ramp", "3:x"], "CELL:ALPHA_R"),
-    (["--road", "--operator", "matrix-free"], "matrix-free is for rings"),
+    (["--road", "--operator", "matrix-free", "--update", "random-sequential"],
+     "matrix-free is for rings and parallel roads"),
     (["--road", "--v-in", "5"], "v_in"),
 ])
 def test_cli_bad_road_input_is_one_line(args, words):
     res = CliRunner().invoke(main, ["solve", "-L", "6", *args])
     assert res.exit_code == 2, res.output
     assert words in res.output and len(res.output.strip().splitlines()) == 1, res.output
+
+
+def test_the_reservoir_needs_the_vmax_of_cell_1_in_cells():
+    # a stretch that raises vmax on cell 1: the virtual car could jump past a short road
+    # (the row generator wrote past its cells there); refused as a short bulk road is
+    with pytest.raises(InvalidParameterError, match="needs L >= 3"):
+        Road(2, _nasch(2), stretches=(Stretch(1, 1, {"vmax": 3}),))
+    assert Road(3, _nasch(2), stretches=(Stretch(1, 1, {"vmax": 3}),)).length == 3
+    assert Road(2, _nasch(2), entry="insert", stretches=(Stretch(1, 1, {"vmax": 3}),)).length == 2

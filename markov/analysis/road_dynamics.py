@@ -180,6 +180,18 @@ class RoadSpectrum:
         """``arg lambda_2`` per chain step (radians)."""
         return 0.0 if self.second is None else float(np.angle(self.second))
 
+    @property
+    def continuous_time_relaxation_time(self) -> float | None:
+        """Random-sequential update in continuous time (generator ``S (P - 1)``):
+        ``1 / (S min(1 - Re lambda))`` over the eigenvalues found, in units of time
+        (``S`` sub-steps per unit); None for the other updates."""
+        if self.steps_per_time_step == 1:
+            return None
+        if not self.eigenvalues:
+            return 0.0
+        gap = min(1.0 - float(np.real(v)) for v in self.eigenvalues)
+        return math.inf if gap <= 1e-14 else 1.0 / (self.steps_per_time_step * gap)
+
     def to_dict(self) -> dict:
         """JSON-ready, with the road and its conventions.
 
@@ -197,6 +209,7 @@ class RoadSpectrum:
                 "time_unit": "time step", "chain_step": _chain_step_name(
                     self.steps_per_time_step),
                 "steps_per_time_step": self.steps_per_time_step,
+                "relaxation_time_continuous": self.continuous_time_relaxation_time,
                 "oscillation": self.oscillation, "sectors": "one (a road has no rotation)",
                 "states": self.states, "operator": self.operator, "seconds": self.seconds}
 
@@ -652,6 +665,7 @@ class ExitFluctuations:
     steps_per_time_step: int
     states: int
     seconds: float
+    time_step_variance: float | None = None
 
     @property
     def flux(self) -> float:
@@ -674,6 +688,24 @@ class ExitFluctuations:
         increments, in chain steps."""
         return self.diffusion / self.variance if self.variance > 0 else 1.0
 
+    @property
+    def tau_int_time_steps(self) -> float:
+        """The integrated autocorrelation time of the cars leaving per *time step*
+        (``S`` chain steps summed): ``Delta_time_step / var(Y_S)``, in time steps.
+        Under parallel and ordered-sequential update this is :attr:`tau_int`."""
+        var = self.variance if self.time_step_variance is None else self.time_step_variance
+        return self.diffusion_per_time_step / var if var > 0 else 1.0
+
+    @property
+    def continuous_time_diffusion(self) -> float | None:
+        """Random-sequential update in continuous time (each of the ``S = L + 1``
+        positions updated at rate 1, the number of sub-steps in time ``t`` Poisson
+        of mean ``S t``): ``S (Delta + J^2)`` per unit time, ``Delta``, ``J`` per
+        sub-step; None for the other updates."""
+        if self.steps_per_time_step == 1:
+            return None
+        return self.steps_per_time_step * (self.diffusion + self.current ** 2)
+
     def to_dict(self) -> dict:
         """JSON-ready.
 
@@ -684,9 +716,12 @@ class ExitFluctuations:
         S = self.steps_per_time_step
         return {"exit_current": self.flux, "exit_diffusion": self.diffusion_per_time_step,
                 "exit_fano": self.fano, "exit_variance_per_chain_step": self.variance,
+                "exit_variance_per_time_step": (self.variance if self.time_step_variance is None
+                                                else self.time_step_variance),
                 "exit_current_per_chain_step": self.current,
                 "exit_diffusion_per_chain_step": self.diffusion,
-                "tau_int_exit": self.tau_int / S, "tau_int_exit_chain_steps": self.tau_int,
+                "exit_diffusion_continuous_time": self.continuous_time_diffusion,
+                "tau_int_exit": self.tau_int_time_steps, "tau_int_exit_chain_steps": self.tau_int,
                 "time_unit": "time step", "chain_step": _chain_step_name(S),
                 "steps_per_time_step": S, "states": self.states, "seconds": self.seconds}
 
@@ -728,7 +763,11 @@ def exit_fluctuations(system, solution: RoadSolution | None = None) -> ExitFluct
         h0 -= pi * h0.sum()
         w = solve_fundamental(sv.P, pi, h0)
         delta = var + 2.0 * float(w @ ex.a)
-    return ExitFluctuations(sv.road, J, delta, var, sv.S, len(pi), time.perf_counter() - start)
+    step_var = None
+    if sv.S > 1:            # var(Y_S): the cars leaving in one time step of S sub-steps
+        step_var = _count_variance(sv, ex, sv.S)[sv.S]
+    return ExitFluctuations(sv.road, J, delta, var, sv.S, len(pi), time.perf_counter() - start,
+                            step_var)
 
 
 def exit_count_variance(system, steps: int, solution: RoadSolution | None = None) -> np.ndarray:
@@ -750,7 +789,11 @@ def exit_count_variance(system, steps: int, solution: RoadSolution | None = None
     """
     steps = ensure_int("steps", steps, 0, MAX_LAGS)
     sv = _prepare(system, solution)
-    ex = _exit(sv)
+    return _count_variance(sv, _exit(sv), steps)
+
+
+def _count_variance(sv, ex, steps: int) -> np.ndarray:
+    """:func:`exit_count_variance` on a prepared chain."""
     J = float(sv.pi @ ex.a)
     var = float(sv.pi @ ex.a2) - J * J
     g = ex.b - J * sv.pi

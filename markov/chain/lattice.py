@@ -1151,7 +1151,7 @@ _CHUNK = 1 << 18
 
 
 def reachable_keys(lattice: Lattice, start: int | None = None, max_memory: float | None = None,
-                   per_state: float | None = None) -> np.ndarray:
+                   per_state: float | None = None, successors=None) -> np.ndarray:
     """Sorted keys of everything reachable from ``start`` (default :func:`start_key`).
 
     Parameters
@@ -1162,6 +1162,9 @@ def reachable_keys(lattice: Lattice, start: int | None = None, max_memory: float
         Bytes allowed (default 75 % of physical memory).
     per_state : float, optional
         Bytes per state the caller will need; at least the search's own.
+    successors : callable, optional
+        ``successors(lattice, keys) -> sorted distinct successor keys`` (default
+        :func:`successor_set`; an open parallel road passes the factored sweep's).
 
     Returns
     -------
@@ -1184,7 +1187,7 @@ def reachable_keys(lattice: Lattice, start: int | None = None, max_memory: float
     with progress_bar(None, "states", "state") as bar:
         while frontier.size:
             found = unique_keys(np.concatenate(
-                [successor_set(lattice, frontier[lo:lo + _CHUNK])
+                [(successors or successor_set)(lattice, frontier[lo:lo + _CHUNK])
                  for lo in range(0, frontier.size, _CHUNK)]))
             idx = np.searchsorted(visited, found)
             idx[idx == len(visited)] = 0

@@ -205,10 +205,13 @@ class Road:
         zones = zone_models(model, length, stretches)
         vmax_all = max(m.vmax for m in zones[0])
         v_in = ensure_int("v_in (velocity of a car entering at cell 1)", self.v_in, 0, vmax_all)
-        if entry in (RESERVOIR, INSERT) and length < model.vmax:
+        # the reservoir's virtual car takes the vmax of cell 1 (a stretch may set it)
+        reach = model.vmax if entry == INSERT else \
+            max(model.vmax, zones[0][cell_zones(length, zones[1])[0]].vmax)
+        if entry in (RESERVOIR, INSERT) and length < reach:
             raise InvalidParameterError(
-                f"the {entry} entry puts a car up to vmax = {model.vmax} cells in: the road"
-                f" needs L >= {model.vmax}, got L = {length}")
+                f"the {entry} entry puts a car up to vmax = {reach} cells in: the road"
+                f" needs L >= {reach}, got L = {length}")
         for r in ramps:
             if not isinstance(r, OnRamp):
                 raise InvalidParameterError(

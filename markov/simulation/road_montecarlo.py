@@ -300,8 +300,9 @@ def _chain_step(cells, new, ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_ce
 
 @njit(cache=True)
 def _run(cells, steps, ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_cell, ramp_v, ramp_a,
-         ramp_down, ramp_up, pw, rng, tally, draws, occupied, speed):
-    """``steps`` time steps in place; ``occupied[x]``, ``speed[x]`` add each step's end state."""
+         ramp_down, ramp_up, pw, rng, tally, draws, occupied, speed, squares):
+    """``steps`` time steps in place; ``occupied[x]``, ``speed[x]`` add each step's end state,
+    ``squares[0]`` the square of each time step's cars leaving."""
     L = ip[_L]
     width = max(newv.shape[-1], 2)
     od = np.empty((1, width), np.int64)
@@ -310,9 +311,12 @@ def _run(cells, steps, ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_cell, r
     new = np.empty(L, np.int64)
     subs = L + 1 if ip[_UPDATE] == 1 else 1
     for _ in range(steps):
+        left = tally[_LEFT]
         for _s in range(subs):
             _chain_step(cells, new, ip, fp, zone_of, zone_vmax, count, newv, wt, ramp_cell,
                         ramp_v, ramp_a, ramp_down, ramp_up, rng, tally, draws, od, ou, ow)
+        m = tally[_LEFT] - left
+        squares[0] += m * m
         for y in range(L):
             if cells[y] > 0:
                 occupied[y] += 1
@@ -425,7 +429,11 @@ class RoadSimulationResult:
     warmup_used, measured_steps : int
         Largest number of steps discarded in a replica; kept steps in all.
     tau_int : float
-        Largest integrated autocorrelation time of the flux, in time steps.
+        The integrated autocorrelation time of the cars leaving per time step that the
+        flux bar implies: ``flux_error^2 = tau_int exit_variance / measured_steps``, in
+        time steps (every term of the bar included, ``docs/validation.md``).
+    exit_variance : float
+        The variance of the cars leaving in one time step (kept steps).
     relaxed : bool
         The run lasted ``10 L^(3/2)`` steps (else the bar is extrapolated).
     start_bias : float
@@ -460,6 +468,7 @@ class RoadSimulationResult:
     warmup_used: int = 0
     measured_steps: int = 0
     tau_int: float = 1.0
+    exit_variance: float = 0.0
     relaxed: bool = False
     start_bias: float = 0.0
     deterministic: bool = False
@@ -479,7 +488,7 @@ class RoadSimulationResult:
         d.update({k: getattr(self, k) for k in (
             "summary", "steps", "warmup", "batches", "seed", "replicas", "flux", "flux_error",
             "inflow", "inflow_error", "mean_cars", "reliable", "warning", "warmup_used",
-            "measured_steps", "tau_int", "relaxed", "start_bias", "deterministic",
+            "measured_steps", "tau_int", "exit_variance", "relaxed", "start_bias", "deterministic",
             "warmup_rule", "time_step", "start", "seconds")})
         d["ramp_inflows"] = self.ramp_inflows.tolist()
         d["density_profile"] = self.density_profile.tolist()
@@ -602,9 +611,13 @@ def simulate_road(road, steps: int = DEFAULT_ROAD_STEPS, warmup: int | None = No
     transients, in_transients, frozen = [], [], []
     t0 = time.perf_counter()
 
+    squares = np.zeros(1)
+    square_b = np.empty((replicas, blocks))
+
     def advance(cells, n, rng, tally, draws, occupied, speed):
         for done in range(0, n, chunk):
-            _run(cells, min(chunk, n - done), *args, rng, tally, draws, occupied, speed)
+            _run(cells, min(chunk, n - done), *args, rng, tally, draws, occupied, speed,
+                 squares)
 
     bar = progress_bar(replicas * (blocks + 1), "simulate road", "block")
     for r in range(replicas):
@@ -629,7 +642,9 @@ def simulate_road(road, steps: int = DEFAULT_ROAD_STEPS, warmup: int | None = No
             t_before, d_before = tally.copy(), int(draws[0])
             occupied[:] = 0
             speed[:] = 0
+            squares[0] = 0.0
             advance(cells, n, rng, tally, draws, occupied, speed)
+            square_b[r, b] = squares[0] / n
             diff = tally - t_before
             flux_b[r, b] = diff[_LEFT] / n
             inflow_b[r, b] = diff[_ENTERED] / n
@@ -668,6 +683,11 @@ def simulate_road(road, steps: int = DEFAULT_ROAD_STEPS, warmup: int | None = No
 
     density = kept_mean(occ_b)
     mean_speed = kept_mean(speed_b)
+    # the cars leaving per time step: their variance, and the tau_int the flux bar implies
+    # (bar^2 = tau_int var / n over the kept steps)
+    exit_variance = max(float(kept_mean(square_b)) - float(kept_mean(flux_b)) ** 2, 0.0)
+    tau_int = (kept.sum() * error ** 2 / exit_variance) if exit_variance > 0 and error > 0 \
+        else 1.0
     with np.errstate(invalid="ignore", divide="ignore"):
         velocity = np.where(density > 0, mean_speed / np.where(density > 0, density, 1), np.nan)
     return RoadSimulationResult(
@@ -678,7 +698,7 @@ def simulate_road(road, steps: int = DEFAULT_ROAD_STEPS, warmup: int | None = No
         warning="; ".join(reasons[:3]) or None,
         warmup_used=warmup + max(int(edges[c]) for c in cuts),
         measured_steps=int(kept.sum()),
-        tau_int=float(max(a.tau * float(np.mean(sizes[a.cut:])) for a in est.analyses)),
+        tau_int=float(tau_int), exit_variance=exit_variance,
         relaxed=relaxed, start_bias=max(a.bias for a in est.analyses),
         deterministic=bool(static) or any(f < blocks for f in frozen),
         warmup_rule="automatic (MSER cut)" if auto else "explicit",

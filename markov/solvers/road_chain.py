@@ -28,7 +28,7 @@ from markov.chain.classes import (ALL_CONFIGURATIONS, FROM_COMPACT_JAM, FROM_EMP
 from markov.chain.encoding import decode, from_text, encode, to_text
 from markov.chain.lattice import (Lattice, all_lattice_keys, count_configurations, increments,
                                   lattice_of, reachable_keys, successors)
-from markov.choices import DEFAULT_TOL, OPERATORS
+from markov.choices import DEFAULT_TOL, OPERATORS, PRODUCT_METHODS
 from markov.errors import InvalidParameterError, NoUniqueStationaryStateError
 from markov.model.ring import RANDOM_SEQUENTIAL, Ring
 from markov.model.road import Road
@@ -41,6 +41,11 @@ __all__ = ["RoadChain", "RoadSolution", "solve_road", "estimate_road", "is_latti
 #: Roads with more configurations than this are predicted before the search
 #: (:attr:`RoadChain.prediction`): above it a search takes a second or more.
 PREDICT_CONFIGURATIONS = 3 ** 13
+
+#: Open parallel roads with more states than this take the factored sweep (``auto``):
+#: it builds 10-20x faster than the matrix and holds 2-4x less (measured at 16,384 to
+#: 275,807 states, ``docs/performance.md``).
+FACTORED_MIN_STATES = 20_000
 
 #: Largest reachable set split into closed classes (its support graph, every
 #: successor stored); a larger one is solved as one class and verified.
@@ -95,8 +100,11 @@ class RoadChain:
     system : Road or Ring
     max_memory : float, optional
         Bytes allowed (default 75 % of physical memory).
-    operator : {"auto", "matrix"}
-        How ``x -> x P`` is applied: the assembled CSR matrix.
+    operator : {"auto", "matrix", "matrix-free"}
+        How ``x -> x P`` is applied: the assembled CSR matrix, or the factored
+        sweep (:class:`markov.chain.road_factored.RoadFactoredOperator`: open
+        roads under parallel update); ``auto`` takes the sweep for such a road
+        of more than :data:`FACTORED_MIN_STATES` states.
     start : str, optional
         A start configuration (text): the classes it reaches.
     lump : bool
@@ -129,14 +137,39 @@ class RoadChain:
         if operator not in OPERATORS:
             raise InvalidParameterError(
                 f"operator must be one of {', '.join(OPERATORS)}, got {operator!r}")
-        if operator == "matrix-free":
+        if operator == "matrix-free" and not self.factorable:
             raise InvalidParameterError(
-                "a road is solved with its matrix here; matrix-free roads are not built yet")
+                "the matrix-free road operator is for open roads under parallel update; this"
+                f" {'ring' if self.system.periodic else 'road'} ({self.system.update}) is"
+                " solved with its matrix")
         self.operator = operator
         self._start = _start_key(system, start)
         self.build_seconds = 0.0
         self.unverified = False
         self.census: ClassCensus | None = None
+
+    @property
+    def factorable(self) -> bool:
+        """Whether the factored sweep applies: an open road under parallel update."""
+        return not self.system.periodic and self.system.update == "parallel"
+
+    def _successor_set(self):
+        """The search's successor function: the factored sweep where it applies."""
+        if not self.factorable:
+            return None
+        from markov.chain.road_factored import factored_successor_set
+
+        return factored_successor_set
+
+    @property
+    def operator_kind(self) -> str:
+        """``"factored"`` or ``"matrix"``: how this chain's products are applied."""
+        if self.operator == "matrix-free":
+            return "factored"
+        if self.operator == "auto" and self.factorable and \
+                len(self.keys) > FACTORED_MIN_STATES:
+            return "factored"
+        return "matrix"
 
     @property
     def origin(self) -> str:
@@ -163,7 +196,8 @@ class RoadChain:
             return None
         if count_configurations(self.lattice) <= PREDICT_CONFIGURATIONS:
             return None
-        return estimate_road(self.system, self.lump)
+        return estimate_road(self.system, self.lump,
+                             factored=self.factorable and self.operator != "matrix")
 
     def check_prediction(self) -> None:
         """Refuse, before the search, a road predicted not to fit the memory limit.
@@ -188,7 +222,9 @@ class RoadChain:
         self.check_prediction()
         t = time.perf_counter()
         keys = reachable_keys(self.lattice, self.start, self.max_memory,
-                              per_state=memory.matrix_bytes(1, 32, "direct"))
+                              per_state=memory.matrix_bytes(1, 32, "direct")
+                              if not self.factorable else None,
+                              successors=self._successor_set())
         self.build_seconds += time.perf_counter() - t
         return keys
 
@@ -290,6 +326,18 @@ class RoadChain:
         """
         ensure_tol(tol)
         keys = self.keys
+        # a matrix method asked of "auto" takes the matrix (of "matrix-free": refused there)
+        if self.operator_kind == "factored" and (
+                self.operator == "matrix-free" or method == "auto" or method in PRODUCT_METHODS):
+            op = self.factored
+            if method == "auto":
+                method = "iterative"
+            result = stationary(op, method=method, tol=tol)
+            if self.unverified:
+                self._verify_one_class(result.pi)
+            return RoadSolution(self.system, keys, result, None, self.build_seconds,
+                                "factored", self.census, self.lattice,
+                                step_counts=op.counts(result.pi), links=op.links)
         P = self.matrix
         result = stationary(P, method=method, tol=tol)
         if self.unverified:
@@ -297,9 +345,22 @@ class RoadChain:
         return RoadSolution(self.system, keys, result, P.nnz, self.build_seconds, "matrix",
                             self.census, self.lattice)
 
+    @cached_property
+    def factored(self):
+        """The factored sweep on :attr:`keys`
+        (:class:`markov.chain.road_factored.RoadFactoredOperator`)."""
+        from markov.chain.road_factored import RoadFactoredOperator
+
+        keys = self.keys
+        t = time.perf_counter()
+        op = RoadFactoredOperator(self.system, keys, self.lump, self.lattice)
+        self.build_seconds += time.perf_counter() - t
+        return op
+
     def _verify_one_class(self, pi: np.ndarray) -> None:
         top = int(self.keys[int(np.argmax(pi))])
-        found = reachable_keys(self.lattice, top, self.max_memory)
+        found = reachable_keys(self.lattice, top, self.max_memory,
+                               successors=self._successor_set())
         if len(found) != len(self.keys):
             raise NoUniqueStationaryStateError(
                 f"the chain of {self.system.summary() if hasattr(self.system, 'summary') else self.system}"
@@ -413,8 +474,14 @@ class RoadSolution:
     nonzeros : int
     build_seconds : float
     operator : str
+        ``"matrix"`` or ``"factored"``.
     census : ClassCensus
     lattice : Lattice
+    step_counts : (size,) array, optional
+        The expected counts of a step from ``pi`` where the solver computed them
+        (the factored sweep); else they are summed over the rows.
+    links : int, optional
+        The factored sweep's links (where ``nonzeros`` is None).
     """
 
     system: object
@@ -425,6 +492,8 @@ class RoadSolution:
     operator: str
     census: ClassCensus | None
     lattice: Lattice = field(repr=False, compare=False)
+    step_counts: np.ndarray | None = field(default=None, repr=False, compare=False)
+    links: int | None = None
 
     #: What :meth:`markov.solvers.class_solutions.ClassSolutions.common` compares.
     COMMON = ("flux", "inflow", "density_profile", "velocity_profile", "mean_cars")
@@ -475,6 +544,8 @@ class RoadSolution:
         """Expected counts of one chain step from the stationary state; its velocity
         slice is the exact velocity on each cell after the step, which is the stationary
         one (the full vector is one step from the lumped one, :mod:`markov.model.lumping`)."""
+        if self.step_counts is not None:       # the factored sweep's, from the same pi
+            return self.step_counts
         return expected_counts(self.lattice, self.keys, self.pi)
 
     @cached_property
@@ -606,6 +677,7 @@ class RoadSolution:
             "mean_cars": self.mean_cars, "car_distribution": self.car_distribution.tolist(),
             "conservation": self.conservation, "bond_check": self.bond_check,
             "states": self.n_states, "nonzeros": self.nonzeros, "operator": self.operator,
+            "links": self.links,
             "method": self.result.method, "residual": self.residual,
             "iterations": self.result.iterations, "build_seconds": self.build_seconds,
             "solve_seconds": self.result.seconds,
@@ -672,14 +744,16 @@ class RoadSolution:
         return save_road_solution(self.expanded(), path)
 
 
-def _measure(road, lump: bool) -> tuple[int, int, float]:
-    """States, transitions and seconds of one solve (a calibration road)."""
+def _measure(road, lump: bool, factored: bool) -> tuple[int, int, float]:
+    """States, transitions (or links) and seconds of one solve (a calibration road)."""
     t = time.perf_counter()
-    sol = RoadChain(road, lump=lump, predict=False).solution()
-    return sol.n_states, sol.nonzeros, time.perf_counter() - t
+    sol = RoadChain(road, lump=lump, predict=False,
+                    operator="matrix-free" if factored else "matrix").solution()
+    return sol.n_states, sol.links if factored else sol.nonzeros, time.perf_counter() - t
 
 
-def estimate_road(road: Road, lump: bool = True, calibration_states: int | None = None):
+def estimate_road(road: Road, lump: bool = True, calibration_states: int | None = None,
+                  factored: bool | None = None):
     """Predict the states, transitions, memory and seconds of solving a road.
 
     Parameters
@@ -690,6 +764,9 @@ def estimate_road(road: Road, lump: bool = True, calibration_states: int | None 
     calibration_states : int, optional
         Shorter roads are solved up to the first with more states than this
         (default :data:`markov.solvers.road_estimate.CALIBRATION_STATES`).
+    factored : bool, optional
+        Predict the factored sweep's solve (default: where it applies, an open
+        road under parallel update) or the matrix's.
 
     Returns
     -------
@@ -699,8 +776,10 @@ def estimate_road(road: Road, lump: bool = True, calibration_states: int | None 
 
     if not isinstance(road, Road):
         raise InvalidParameterError(f"estimate_road takes a markov Road, got {type(road).__name__}")
+    if factored is None:
+        factored = road.update == "parallel"
     return road_estimate.estimate_road(
-        road, _measure, lump,
+        road, _measure, lump, factored,
         road_estimate.CALIBRATION_STATES if calibration_states is None else calibration_states)
 
 

@@ -11,7 +11,9 @@ exit.  Where a closed
 form of the lumped count exists it replaces the extrapolated states
 (``docs/roads.md``: ``2^L`` for NaSch vmax 1 ``site1``/``sink``, the Pell numbers
 for vmax 2 ``site1``/``sink`` under parallel update).  The memory is that of the
-assembled matrix (:func:`markov.memory.matrix_bytes`).
+assembled matrix (:func:`markov.memory.matrix_bytes`), or of the factored sweep
+and its solver (:func:`markov.memory.road_factored_bytes`, its links
+extrapolated as the transitions are) where the road takes it.
 
 The growth ratio still rises slowly with ``L`` (vmax 2: 2.41 at L = 12 toward
 2.50), so the extrapolation errs low for states by a few percent per cell;
@@ -46,6 +48,9 @@ class RoadEstimate:
         Where the numbers come from, in words.
     exact : bool
         Whether nothing is extrapolated (the road itself was small enough to count).
+    operator : str
+        ``"matrix"`` (``transitions``: entries of the rows) or ``"factored"``
+        (``transitions``: the links of the sweep).
     """
 
     states: float
@@ -54,6 +59,7 @@ class RoadEstimate:
     seconds: float
     basis: str
     exact: bool = False
+    operator: str = "matrix"
 
     def line(self) -> str:
         """One line for stderr: ``about 1.1e6 states, 6.4e7 transitions, 2.5 GiB, 75 s (...)``.
@@ -65,7 +71,8 @@ class RoadEstimate:
         from markov.memory import gib
 
         about = "" if self.exact else "about "
-        return (f"{about}{self.states:,.0f} states, {self.transitions:.2g} transitions,"
+        what = "links (factored)" if self.operator == "factored" else "transitions"
+        return (f"{about}{self.states:,.0f} states, {self.transitions:.2g} {what},"
                 f" {gib(self.bytes)}, {_duration(self.seconds)} ({self.basis})")
 
     def to_dict(self) -> dict:
@@ -76,7 +83,8 @@ class RoadEstimate:
         dict
         """
         return {"states": self.states, "transitions": self.transitions, "bytes": self.bytes,
-                "seconds": self.seconds, "basis": self.basis, "exact": self.exact}
+                "seconds": self.seconds, "basis": self.basis, "exact": self.exact,
+                "operator": self.operator}
 
 
 def _duration(seconds: float) -> str:
@@ -135,7 +143,7 @@ def _shorter(road, length: int):
                 road.exit, road.v_in, stretches, ramps)
 
 
-def estimate_road(road, measure, lump: bool = True,
+def estimate_road(road, measure, lump: bool = True, factored: bool = False,
                   calibration_states: int = CALIBRATION_STATES) -> RoadEstimate:
     """Predict the states, transitions, memory and seconds of solving ``road``.
 
@@ -143,10 +151,13 @@ def estimate_road(road, measure, lump: bool = True,
     ----------
     road : Road
     measure : callable
-        ``measure(road, lump) -> (states, transitions, seconds)`` of a solve
+        ``measure(road, lump, factored) -> (states, size, seconds)`` of a solve,
+        ``size`` its transitions (matrix) or links (factored sweep)
         (:func:`markov.solvers.road_chain.estimate_road` passes the road chain's).
     lump : bool
         Whether the velocities the rule cannot tell apart are merged.
+    factored : bool
+        Whether the solve takes the factored sweep (else the matrix).
     calibration_states : int
         The shorter roads are built up to the first with more states than this
         (and at least three of them).
@@ -154,30 +165,34 @@ def estimate_road(road, measure, lump: bool = True,
     Returns
     -------
     RoadEstimate
+        ``transitions`` holds the links of the sweep where ``factored``.
     """
-    from markov.memory import matrix_bytes
+    from markov.memory import matrix_bytes, road_factored_bytes
+
+    need = road_factored_bytes if factored else matrix_bytes
+    what = "links" if factored else "transitions"
     first = road.model.vmax + 1
     points = []
     L = min(first, road.length)
     while L <= road.length:
-        n, nnz, sec = measure(_shorter(road, L), lump)
-        points.append((L, n, nnz, sec))
+        n, size, sec = measure(_shorter(road, L), lump, factored)
+        points.append((L, n, size, sec))
         if L == road.length:
-            return RoadEstimate(n, nnz, matrix_bytes(n, nnz), sec,
-                                f"counted at L = {L}", exact=True)
+            return RoadEstimate(n, size, need(n, size), sec, f"counted at L = {L}", exact=True,
+                                operator="factored" if factored else "matrix")
         if n > calibration_states and len(points) >= 3:
             break
         L += 1
     (L1, n1, z1, _), (L2, n2, z2, s2) = points[-2], points[-1]
-    r_states, r_nnz = n2 / n1, z2 / z1
+    r_states, r_size = n2 / n1, z2 / z1
     cells = road.length - L2
     states = n2 * r_states ** cells
     basis = f"growth {r_states:.3f} per cell from L = {L1}..{L2}"
     closed = closed_form_states(road, lump)
     if closed is not None:
         states = float(closed)
-        basis = "states: closed form; transitions " + basis
-    transitions = z2 * r_nnz ** cells
-    seconds = s2 * transitions / z2 * (road.length / L2)   # iterations grow about like L
-    return RoadEstimate(states, transitions, matrix_bytes(int(states), int(transitions)),
-                        seconds, basis)
+        basis = f"states: closed form; {what} " + basis
+    size = z2 * r_size ** cells
+    seconds = s2 * size / z2 * (road.length / L2)   # iterations grow about like L
+    return RoadEstimate(states, size, need(int(states), int(size)), seconds, basis,
+                        operator="factored" if factored else "matrix")

@@ -273,9 +273,34 @@ def _solve_point(PT: sp.csr_array, keys, x0, tol, edge: bool):
     return res.pi, res.residual
 
 
+#: What the forked row solvers of :func:`phase_grid` read (set before the fork).
+_ROWS_STATE: dict = {}
+
+
+def _solve_row(i: int):
+    """Every point of grid row ``i`` (a forked worker of :func:`phase_grid`)."""
+    g = _ROWS_STATE
+    n = len(g["keys"])
+    a = float(g["alphas"][i])
+    row = {name: np.full(len(g["betas"]), np.nan) for name in ("flux", "inflow", "bulk",
+                                                               "mean", "res")}
+    pi = None
+    for j, b in enumerate(g["betas"]):
+        b = float(b)
+        coef = _corner_coefficients(a, b)
+        PT = sp.csr_array((coef @ g["data"], g["indices"], g["indptr"]), shape=(n, n))
+        pi, res = _solve_point(PT, g["keys"], pi, g["tol"], a in (0.0, 1.0) or b in (0.0, 1.0))
+        row["flux"][j] = g["scale"] * float(pi @ (coef @ g["left"]))
+        row["inflow"][j] = g["scale"] * float(pi @ (coef @ g["entered"]))
+        row["bulk"][j] = float(pi @ g["bulk"])
+        row["mean"][j] = float(pi @ g["cars"]) / g["length"]
+        row["res"][j] = res
+    return i, row
+
+
 def phase_grid(road, alphas, betas, *, tol: float = DEFAULT_TOL,
                max_memory: float | None = None, progress: bool = True,
-               before_solves=None) -> PhaseGrid:
+               before_solves=None, workers: int = 2) -> PhaseGrid:
     """Exact flux and densities of ``road`` at every ``(alpha, beta)`` of a grid.
 
     Parameters
@@ -295,6 +320,10 @@ def phase_grid(road, alphas, betas, *, tol: float = DEFAULT_TOL,
         Called as ``before_solves(states, nonzeros, seconds_so_far)`` after the
         states and corners are built and before any solve (a budget check may
         raise there).
+    workers : int
+        Processes solving grid rows side by side (forked; 1: one process, the
+        grid walked as a snake). The numbers are the same to the solver's
+        tolerance, not bit for bit (a row's first point starts cold).
 
     Returns
     -------
@@ -367,6 +396,31 @@ def phase_grid(road, alphas, betas, *, tol: float = DEFAULT_TOL,
     out = {name: np.full(shape, np.nan) for name in ("flux", "inflow", "bulk", "mean", "res")}
     pi = None
     t1 = time.perf_counter()
+    workers = min(int(workers), shape[0])
+    if bilinear and workers > 1:
+        # rows on their own processes (forked: the corner matrices are shared, not copied),
+        # each row walked from its first point with warm starts along it
+        _ROWS_STATE.update(keys=keys, data=data, left=left, entered=entered, indices=indices,
+                           indptr=indptr, bulk=bulk, cars=cars, alphas=alphas, betas=betas,
+                           tol=tol, scale=scale, length=road.length)
+        import multiprocessing
+
+        try:
+            with multiprocessing.get_context("fork").Pool(workers) as pool:
+                for done, (i, row) in enumerate(pool.imap_unordered(_solve_row,
+                                                                    range(shape[0])), 1):
+                    for name in out:
+                        out[name][i] = row[name]
+                    if progress:
+                        spent = time.perf_counter() - t1
+                        print(f"phase grid: {done * shape[1]}/{shape[0] * shape[1]} points,"
+                              f" {spent:.1f} s, about {spent / done * (shape[0] - done):.0f} s"
+                              f" left ({workers} processes)", file=sys.stderr)
+        finally:
+            _ROWS_STATE.clear()
+        seconds = {"states": t_states, "corners": t_corners, "solves": time.perf_counter() - t1}
+        return PhaseGrid(road, alphas, betas, out["flux"], out["inflow"], out["bulk"],
+                         out["mean"], out["res"], n, len(lin), bilinear, error, seconds, notes)
     order = _snake(*shape)
     for step, (i, j) in enumerate(order):
         a, b = float(alphas[i]), float(betas[j])

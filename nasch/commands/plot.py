@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import os
 
 import click
 
@@ -371,10 +372,14 @@ def _road_base(length, model, params, vmax, p, update, entry, exit_, v_in, stret
 
     from ..model_options import build_model
 
+    from ..road_options import check_v_in
+
     m = build_model(model, params, vmax=vmax, p=p)
-    return Road(ensure_int("--length", length, 1), m, update, alpha, beta, entry, exit_,
+    road = Road(ensure_int("--length", length, 1), m, update, alpha, beta, entry, exit_,
                 0 if v_in is None else v_in, tuple(Stretch.parse(s) for s in stretches),
                 tuple(OnRamp.parse(r) for r in ramps))
+    check_v_in(road, v_in)
+    return road
 
 
 def _road_convention_options(func):
@@ -429,6 +434,8 @@ def _grid_axis(name, text):
 #: Seconds per transition and grid point of the phase grid's solves (BiCGSTAB, about 80
 #: products x P): 0.51 s per point at 1.96e6 transitions, L = 12 vmax 2, on the 2-core VM.
 PHASE_SECONDS_PER_NONZERO = 2.6e-7
+#: Processes solving grid rows side by side (markov.solvers.road_grid.phase_grid).
+PHASE_WORKERS = max(1, min(2, os.cpu_count() or 1))
 
 
 @plot.command("phase-diagram", short_help="Exact flux and bulk density of a road over (alpha, beta).")
@@ -496,7 +503,7 @@ def phase_diagram(length, vmax, p, model, params, update, entry, exit_, v_in, st
                else 0.01 + 3e-11 * states ** 3)
         if update == "random-sequential":
             per *= 2.5
-        predicted = points * per
+        predicted = points * per / min(PHASE_WORKERS, len(alphas))   # rows side by side
         of = "" if budget is None else f" (budget {budget:g} s)"
         print(f"predicted: {states:,} states, {nonzeros:,} transitions; {points} solves"
               f" about {predicted:.2g} s after {spent:.2g} s of building{of}", file=sys.stderr)
@@ -505,7 +512,7 @@ def phase_diagram(length, vmax, p, model, params, update, entry, exit_, v_in, st
                 f"the grid needs about {spent + predicted:.0f} s, over --budget {budget:g} s:"
                 " fewer points (--alphas/--betas LO:HI:N) or a shorter road")
 
-    grid = phase_grid(road, alphas, betas, before_solves=check)
+    grid = phase_grid(road, alphas, betas, before_solves=check, workers=PHASE_WORKERS)
     for note in grid.notes:
         click.echo(f"note: {note}", err=True)
     if json_path is not None:

@@ -191,7 +191,9 @@ def _simulate_road(length, density, cars, vmax, p, model, params, alpha, beta, e
     click.echo(f"  warm-up        {warm}")
     click.echo(f"  {r.replicas} x {r.steps} time steps ({r.time_step} each) in {r.batches}"
                f" blocks each, {r.seconds:.2f} s")
-    click.echo(f"  tau_int        {r.tau_int:.3g} steps; {r.measured_steps} steps kept in all")
+    click.echo(f"  tau_int        {r.tau_int:.3g} time steps, of the cars leaving per time step"
+               f" (variance {r.exit_variance:.4g}): the flux bar is sqrt(tau_int variance / n),"
+               f" n = {r.measured_steps} steps kept in all")
     terms = "none: the run is deterministic" if r.deterministic else _bar_terms(r)
     click.echo(f"  error bar      {terms}")
     if r.deterministic:

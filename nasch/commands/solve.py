@@ -157,6 +157,9 @@ def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, st
             _echo_classes(ring, exc.classes, as_json, start)
             return
     data = sol.to_dict()
+    if ring.stretches:        # every stretch has the bulk values: said, not dropped
+        data["stretches"] = [x.describe() for x in ring.stretches]
+        data["stretches_note"] = _BULK_STRETCHES
     derivatives = _sensitivities(ring if chain is None else chain, sol, names, tol)
     for name, d in derivatives.items():
         data[f"dflux_d{name}"] = d.dflux
@@ -176,6 +179,10 @@ def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, st
         return
     click.echo(f"{_title(ring)} L={length} N={cars} (c={ring.density:.4g}) {_params(ring)}"
                f" update={update}")
+    if ring.stretches:
+        click.echo("  stretches " + " ".join(
+            f"{x.first}-{x.last}:" + ",".join(f"{k}={v:g}" for k, v in x.values)
+            for x in ring.stretches) + f" ({_BULK_STRETCHES})")
     click.echo(f"  states {data['states']:,}{' (rotation classes)' if sol.lumped else ''},"
                + (f" nonzeros {data['nonzeros']:,}," if data["nonzeros"] is not None
                   else " matrix-free,")
@@ -211,9 +218,9 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
     from markov.validate import ensure_int
 
     what = "a road" if not system.periodic else "a ring with a stretch"
-    if operator == "matrix-free":
-        raise click.UsageError(f"{what} is solved with its matrix (--operator matrix-free is"
-                               " for rings)")
+    if operator == "matrix-free" and (system.periodic or system.update != "parallel"):
+        raise click.UsageError(f"{what} under {system.update} update is solved with its matrix"
+                               " (--operator matrix-free is for rings and parallel roads)")
     if method == "aggregation":
         raise click.UsageError(f"--method aggregation is for rings; {what} takes the others")
     if system.periodic:
@@ -236,7 +243,8 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
         save = check_output_path(save, suffixes=(".npz",))
     limit = None if max_memory is None else max_memory * 2**30
     # the road's dynamics read every velocity (markov.analysis.road_dynamics)
-    chain = RoadChain(system, max_memory=limit, start=start, lump=not (no_lump or dynamics))
+    chain = RoadChain(system, max_memory=limit, start=start, lump=not (no_lump or dynamics),
+                      operator="matrix" if dynamics else operator)
     one_state = top is not None or save is not None or dynamics
     _say_prediction(chain)
     try:
@@ -331,7 +339,9 @@ def _road_dynamics(chain, sol, names, fluctuations: bool, lags, tol) -> dict:
     if fluctuations:
         out.update(rd.exit_fluctuations(chain, sol).to_dict())
         for name in ("cars", "stopped"):
-            out[f"tau_int_{name}"] = rd.road_autocorrelation_time(chain, name, sol) / S
+            tau = rd.road_autocorrelation_time(chain, name, sol)
+            out[f"tau_int_{name}"] = tau / S
+            out[f"tau_int_{name}_chain_steps"] = tau
         out.pop("time_unit", None)
     if lags is not None:
         out["autocorrelation_lags"] = "chain steps"
@@ -350,9 +360,12 @@ def _echo_road_dynamics(data: dict) -> None:
         click.echo(f"  exit current   {data['exit_current']:.15g}  (cars leaving per time step)")
         click.echo(f"  exit diffusion {data['exit_diffusion']:.15g}  (lim var(cars left by t) / t,"
                    f" Fano {data['exit_fano']:.6g})")
-        click.echo(f"  tau_int exit   {data['tau_int_exit']:.10g}  tau_int cars"
-                   f" {data['tau_int_cars']:.10g}  tau_int stopped {data['tau_int_stopped']:.10g}"
-                   "  time steps")
+        if data.get("exit_diffusion_continuous_time") is not None:
+            click.echo(f"  exit diffusion {data['exit_diffusion_continuous_time']:.15g}  (continuous"
+                       " time: each of the L + 1 positions updated at rate 1)")
+        click.echo(f"  tau_int exit   {data['tau_int_exit']:.10g}  (of the cars leaving per time"
+                   f" step)  tau_int cars {data['tau_int_cars']:.10g}  tau_int stopped"
+                   f" {data['tau_int_stopped']:.10g}  time steps")
     if "autocorrelation" in data:
         c = data["autocorrelation"]
         click.echo("  autocorrelation C(t), t in chain steps:  t  exit  cars  stopped")
@@ -376,8 +389,9 @@ def _echo_lattice(system, sol, data: dict) -> None:
         click.echo(system.summary())
         click.echo(f"  entry {system.entry}: {data['entry_convention']}")
         click.echo(f"  exit {system.exit}: {data['exit_convention']}")
-    click.echo(f"  states {data['states']:,} (velocities {data['velocities']}),"
-               f" nonzeros {data['nonzeros']:,},"
+    size = (f"nonzeros {data['nonzeros']:,}" if data["nonzeros"] is not None
+            else f"factored, links {data['links']:,}")
+    click.echo(f"  states {data['states']:,} (velocities {data['velocities']}), {size},"
                f" method {data['method']}, residual {data['residual']:.2e},"
                f" {data['seconds']:.3f} s; per time step ({data['time_step']})")
     if system.periodic:
@@ -476,6 +490,10 @@ def _echo_dynamics(data: dict) -> None:
         click.echo(f"  autocorrelation C(t), t in {unit}s:  t  flux  stopped")
         for t, (a, b) in enumerate(zip(flux, stopped)):
             click.echo(f"    {t:>6}  {a: .12e}  {b: .12e}")
+
+
+#: What a ring's stretches with the bulk values change (the ring is solved as it is).
+_BULK_STRETCHES = "each with the bulk values: the homogeneous ring, rotation classes"
 
 
 def _title(ring) -> str:

@@ -227,6 +227,10 @@ def _road_spectrum(length_text, cars, density, model, params, road, alpha, beta,
     click.echo(f"  relaxation time tau = -1/(S ln|lambda_2|) = {tau_text}"
                f" (S = {s.steps_per_time_step} chain steps per time step);"
                f" oscillation arg = {s.oscillation:.6f} rad/chain step")
+    tau_c = s.continuous_time_relaxation_time
+    if tau_c is not None:
+        click.echo("  continuous time (generator S (P - 1), each position at rate 1): tau ="
+                   f" 1/(S min(1 - Re lambda)) = {tau_c:.10g}")
     if show:
         click.echo("  eigenvalues (by modulus; residual):")
         for v, r in list(zip(s.eigenvalues, s.residuals))[:show]:

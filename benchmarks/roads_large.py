@@ -1,0 +1,254 @@
+"""`make bench-large` (roads): exact open roads at scale, beside the version before.
+
+Every case runs in a fresh subprocess under a wall-clock limit, so its peak
+resident memory (``ru_maxrss``: interpreter and libraries included) and its
+seconds are its own.  Tables, one run:
+
+* **targets** (issue 34): NaSch vmax 1 ``site1``/``sink`` L = 24 (alpha 0.3, beta
+  0.5, p 0.25) and vmax 2 ``reservoir``/``wall`` L = 18 (alpha = beta = 0.5, p
+  0.25), each at most 5 minutes and 8 GB; vmax 2 L = 20 measured once.
+* **previous**: the same roads at L = 16 (vmax 1) and L = 14 (vmax 2), solved by
+  this version and by ``--previous`` (a ``git worktree``: no lumping, the
+  matrix), in the same run: the ratio of seconds and of peak memory, the flux
+  difference.
+* **per_state**: seconds per state of the vmax 2 road L = 16 against the ring
+  L = 22, N = 11 (p 0.25), this version, same run.
+* **phase**: ``phase_grid`` 21 x 21 at L = 12, vmax 2 (p 0.25), this version and the
+  previous, same run.
+
+Results go to ``benchmarks/results/roads_large.csv`` and ``roads_large.md``,
+rewritten after every case.
+
+Usage::
+
+    python benchmarks/roads_large.py                   # every table (about 30 min)
+    python benchmarks/roads_large.py --only previous per_state
+"""
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import csv  # noqa: E402
+import datetime as dt  # noqa: E402
+import io  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import resource  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+TABLES = ("targets", "previous", "per_state", "phase")
+COLUMNS = ["table", "tool", "case", "states", "size", "operator", "method", "products",
+           "search_s", "solve_s", "total_s", "peak_MB", "residual", "flux", "note"]
+PREVIOUS = "0f4cf9a"        # the commit before velocity lumping, the sweep, the prediction
+LIMIT_S = 1200
+
+
+def _road(vmax: int, L: int):
+    from markov import Road, load_model
+
+    if vmax == 1:
+        return Road(L, load_model("nasch", {"vmax": 1, "p": 0.25}), "parallel", 0.3, 0.5,
+                    "site1", "sink")
+    return Road(L, load_model("nasch", {"vmax": vmax, "p": 0.25}), "parallel", 0.5, 0.5,
+                "reservoir", "wall")
+
+
+def _warm(vmax: int) -> None:
+    """Load the compiled kernels on a tiny road, outside the timings."""
+    from markov.solvers.road_chain import RoadChain
+
+    RoadChain(_road(vmax, vmax + 2)).solution().to_dict()
+
+
+def work_road(vmax: int, L: int, operator: str = "auto") -> dict:
+    from markov.solvers.road_chain import RoadChain
+
+    _warm(vmax)
+    t0 = time.perf_counter()
+    chain = RoadChain(_road(vmax, L), max_memory=20 * 2**30, operator=operator)
+    chain.keys
+    search = time.perf_counter() - t0
+    sol = chain.solution(tol=1e-10)
+    d = sol.to_dict()
+    return {"states": sol.n_states, "size": sol.links if sol.links else sol.nonzeros,
+            "operator": sol.operator, "method": sol.result.method,
+            "products": sol.result.iterations, "search_s": search,
+            "solve_s": sol.result.seconds, "total_s": time.perf_counter() - t0,
+            "residual": sol.residual, "flux": sol.flux,
+            "note": d.get("velocities")}
+
+
+def work_previous_road(vmax: int, L: int) -> dict:
+    from markov.solvers.road_chain import RoadChain
+
+    assert "markov" in sys.modules and PREVIOUS_TREE_MARK in sys.modules["markov"].__file__
+    RoadChain(_road(vmax, vmax + 2)).solution().to_dict()
+    t0 = time.perf_counter()
+    chain = RoadChain(_road(vmax, L), max_memory=20 * 2**30)
+    chain.keys
+    search = time.perf_counter() - t0
+    sol = chain.solution(tol=1e-10)
+    sol.to_dict()
+    return {"states": sol.n_states, "size": sol.nonzeros, "operator": sol.operator,
+            "method": sol.result.method, "products": sol.result.iterations,
+            "search_s": search, "solve_s": sol.result.seconds,
+            "total_s": time.perf_counter() - t0, "residual": sol.residual, "flux": sol.flux}
+
+
+def work_ring(L: int, N: int) -> dict:
+    from markov import Ring, RingChain
+
+    RingChain(Ring(8, 4, 2, 0.25)).solution()
+    t0 = time.perf_counter()
+    chain = RingChain(Ring(L, N, 2, 0.25), max_memory=20 * 2**30)
+    chain.keys
+    search = time.perf_counter() - t0
+    sol = chain.solution(tol=1e-10)
+    return {"states": sol.n_states, "size": sol.nonzeros, "operator": sol.operator,
+            "method": sol.result.method, "products": sol.result.iterations,
+            "search_s": search, "solve_s": sol.result.seconds,
+            "total_s": time.perf_counter() - t0, "residual": sol.residual, "flux": sol.flux}
+
+
+def work_phase(L: int) -> dict:
+    import numpy as np
+
+    from markov.solvers.road_grid import phase_grid
+
+    road = _road(2, L)
+    g = np.linspace(0.05, 1.0, 21)
+    _warm(2)
+    t0 = time.perf_counter()
+    grid = phase_grid(road, g, g, progress=False)
+    return {"states": grid.states, "size": grid.nonzeros, "operator": "phase grid",
+            "total_s": time.perf_counter() - t0,
+            "flux": float(np.nanmax(grid.flux)), "note": json.dumps(
+                {k: round(v, 1) for k, v in grid.seconds.items()})}
+
+
+PREVIOUS_TREE_MARK = "roads-previous"
+
+
+def _child(fn: str, args: list, tree: Path | None = None) -> dict:
+    """Run ``fn(*args)`` of this file in a fresh interpreter; its row and peak memory."""
+    path = [str(tree)] if tree is not None else [str(ROOT)]
+    code = (f"import sys, json, resource; sys.path[:0] = {path!r};"
+            f" sys.argv = ['x']; import importlib.util as u;"
+            f" s = u.spec_from_file_location('b', {str(Path(__file__))!r});"
+            f" m = u.module_from_spec(s); s.loader.exec_module(m);"
+            f" row = m.{fn}(*{args!r});"
+            f" row['peak_MB'] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024;"
+            f" print('ROW' + json.dumps(row))")
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(path))
+    try:
+        proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                              timeout=LIMIT_S, env=env, cwd=path[0])
+    except subprocess.TimeoutExpired:
+        return {"note": f"stopped after {LIMIT_S} s"}
+    for line in proc.stdout.splitlines():
+        if line.startswith("ROW"):
+            return json.loads(line[3:])
+    return {"note": "failed: " + (proc.stderr.strip().splitlines() or ["?"])[-1][:200]}
+
+
+def _tree() -> Path:
+    tree = ROOT.parent / f"{ROOT.name}-{PREVIOUS_TREE_MARK}"
+    if not tree.exists():
+        subprocess.run(["git", "worktree", "add", "--detach", "--force", str(tree), PREVIOUS],
+                       cwd=ROOT, check=True, capture_output=True)
+    return tree
+
+
+def _write(rows: list, meta: dict) -> None:
+    from markov.files import write_bytes_atomic
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, COLUMNS)
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: r.get(k) for k in COLUMNS})
+    write_bytes_atomic(RESULTS / "roads_large.csv", buf.getvalue().encode())
+
+    def fmt(v):
+        if isinstance(v, float):
+            return f"{v:.4g}" if abs(v) < 1e5 else f"{v:,.0f}"
+        if isinstance(v, int):
+            return f"{v:,}"
+        return "" if v is None else str(v)
+
+    md = [f"# Roads at scale ({meta['date']}, {meta['machine']}, commit {meta['commit']})", "",
+          "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    md += ["| " + " | ".join(fmt(r.get(k)) for k in COLUMNS) + " |" for r in rows]
+    md += ["", "size: links of the factored sweep, or nonzeros of the matrix (previous:"
+           " matrix); peak_MB: the subprocess's ru_maxrss, interpreter and libraries included."]
+    for line in meta.get("ratios", []):
+        md.append(f"- {line}")
+    write_bytes_atomic(RESULTS / "roads_large.md", ("\n".join(md) + "\n").encode())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", nargs="*", choices=TABLES, default=list(TABLES))
+    args = ap.parse_args()
+    meta = {"date": dt.date.today().isoformat(),
+            "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+            "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
+                                     capture_output=True, text=True).stdout.strip(),
+            "ratios": []}
+    rows: list = []
+
+    def run(table, tool, case, fn, fargs, tree=None):
+        t = time.perf_counter()
+        row = {"table": table, "tool": tool, "case": case, **_child(fn, fargs, tree)}
+        print(f"{table:9} {tool:9} {case:34} {row.get('states')} states"
+              f" {row.get('total_s', float('nan')):.1f} s {row.get('peak_MB', 0):.0f} MB"
+              f" ({time.perf_counter() - t:.0f} s wall) {row.get('note') or ''}", flush=True)
+        rows.append(row)
+        _write(rows, meta)
+        return row
+
+    if "previous" in args.only:
+        tree = _tree()
+        for vmax, L in ((1, 16), (2, 14)):
+            case = f"vmax {vmax} road L = {L}"
+            new = run("previous", "this", case, "work_road", [vmax, L])
+            old = run("previous", "previous", case, "work_previous_road", [vmax, L], tree)
+            if new.get("total_s") and old.get("total_s"):
+                meta["ratios"].append(
+                    f"{case}: previous / this = {old['total_s'] / new['total_s']:.1f}x seconds,"
+                    f" {old['peak_MB'] / new['peak_MB']:.1f}x peak memory, states"
+                    f" {old['states']:,} -> {new['states']:,}, flux difference"
+                    f" {abs(old['flux'] - new['flux']):.1e}")
+    if "per_state" in args.only:
+        road = run("per_state", "this", "vmax 2 road L = 16", "work_road", [2, 16])
+        ring = run("per_state", "this", "vmax 2 ring L = 22, N = 11", "work_ring", [22, 11])
+        if road.get("total_s") and ring.get("total_s"):
+            a = road["total_s"] / road["states"]
+            b = ring["total_s"] / ring["states"]
+            meta["ratios"].append(f"road / ring seconds per state: {a / b:.2f}"
+                                  f" ({a * 1e6:.1f} us against {b * 1e6:.1f} us)")
+    if "phase" in args.only:
+        tree = _tree()
+        new = run("phase", "this", "phase grid 21 x 21, L = 12, vmax 2", "work_phase", [12])
+        old = run("phase", "previous", "phase grid 21 x 21, L = 12, vmax 2", "work_phase", [12],
+                  tree)
+        if new.get("total_s") and old.get("total_s"):
+            meta["ratios"].append(f"phase grid: previous / this = "
+                                  f"{old['total_s'] / new['total_s']:.1f}x"
+                                  f" ({old['total_s']:.0f} s -> {new['total_s']:.0f} s)")
+    if "targets" in args.only:
+        for vmax, L in ((2, 18), (1, 24), (2, 20)):
+            run("targets", "this", f"vmax {vmax} road L = {L}", "work_road", [vmax, L])
+    _write(rows, meta)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,950 @@
+"""The parallel step of an open road factored car by car: ``x -> x P`` without rows.
+
+Under parallel update a road state with ``k`` cars free to move has about
+``2^k`` successors, and the CSR matrix of :mod:`markov.solvers.road_chain`
+stores every one (its size limits roads to ``L ~ 18``).  But every car's law
+reads only the *old* configuration ahead of it (its own velocity, the gap to
+the next car and that car's velocity, its zone, the exit), so the cars' draws
+can be applied one at a time, from the entry towards the exit, with the state
+half old and half new in between: a *transfer-matrix* sweep.
+
+Words
+-----
+A word is one int64 over the ``L`` cells in base ``1 + 2K`` (``K`` velocity
+classes: every velocity when not lumped): digit 0 an empty cell, ``1 + k`` an
+*old* car of class ``k`` (not yet moved), ``1 + K + k`` a *new* car of class
+``k`` (moved, with a new velocity of class ``k``).  Cars are processed from the
+lowest cell up, and a car never passes the old position of the car ahead, so a
+word is the new configuration below its lowest old car and the old one from
+there on.  Its *stage* is the cell of its lowest old car (``L``: none left,
+the word is the new configuration).  Processing the car on stage ``f`` removes
+its old digit and writes its new one at its destination (nothing if it
+leaves); the child's stage is the cell of the next old car, always higher, so
+the stages are a topological order.  Two partial sweeps that reach the same
+word have the same future (the old cars ahead draw from the old suffix, the
+exit coin shows only to the last car, the new prefix only enters the final
+key and the coins after the move), so the words of a stage are merged: their
+number is bounded by (new prefixes) x (old suffixes) whatever the number of
+branches.
+
+* Pre-stage, from the states: the entry that acts before the move.  The
+  reservoir's virtual car (a car on cell 0 with the vmax of cell 1, absent
+  with ``1 - alpha``; new velocity 0: no car enters) draws from the first old
+  car, or on an empty road the mixture ``beta`` open + ``1 - beta`` shut of the
+  wall; its car is written as new.  ``site1`` needs the old cell 1 empty:
+  its coin is tossed here (cell 1 of the new configuration is empty then) and
+  the car put as new.  ``insert``: nothing yet.
+* Stage ``f`` (``f = 0..L-1``): the car on cell ``f + 1`` draws its outcome:
+  the rule's row at ``(v, min(gap, H), v_ahead)``; the last car under ``wall``
+  the mixture of the open and shut exits (merged as the row generator
+  merges); a car on cell ``L`` under ``sink`` leaves with ``beta``, else stays
+  with velocity 0.
+* Final: each new configuration takes the coins after the move (``insert`` on
+  the new road, then the on-ramps from the entry down, each where its cell is
+  still empty) and maps onto the index of the successor's key (written with
+  the lumping's digits).
+
+Every link carries a *code*: a row of one small table with its weight and its
+counts (cars leaving, entering, cells advanced, ramps, bond crossings, the
+velocity it leaves on its cell), so :meth:`RoadFactoredOperator.counts` is the
+expected counts of a step from ``x`` in the same sweep, and a link costs an
+int32 parent and a uint16 code.  A product is one segmented sum per stage
+(each word pulls from its parents; parallel over the words of a stage) and
+one into the states.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.sparse.linalg as spla
+
+from markov._jit import njit, prange
+from markov.chain.lattice import _DIGIT, ENTRY_CODES, EXIT_CODES, Lattice, lattice_of
+from markov.errors import InvalidParameterError
+from markov.model.ring import PARALLEL
+
+__all__ = ["RoadFactoredOperator", "factored_successor_set"]
+
+_INT64_MAX = np.iinfo(np.int64).max
+_INT32_MAX = np.iinfo(np.int32).max
+
+
+# ------------------------------------------------------------------ kernels
+
+@njit(cache=True, parallel=True)
+def _state_words(keys, B, L, W, digit_of, out):
+    """The word of every state key: each car an old digit ``1 + class``."""
+    for i in prange(keys.shape[0]):
+        k = keys[i]
+        w = np.int64(0)
+        p = np.int64(1)
+        for y in range(L):
+            w += digit_of[k % B] * p
+            k //= B
+            p *= W
+        out[i] = w
+
+
+@njit(cache=True)
+def _fold(w, y1, L, W, H, pw, off_ahead, cnt_ahead, off_last, cnt_last, row_nd, transparent):
+    """Apply the cars from stage ``y1`` up whose only move is a transparent one (stay
+    with velocity 0, weight 1, no counts): ``(delta to the word, the stage reached)``."""
+    delta = np.int64(0)
+    while y1 < L:
+        od = (w // pw[y1]) % W
+        rest = w // pw[y1 + 1] if y1 + 1 < L else np.int64(0)
+        y2 = L
+        ka = 0
+        for y in range(y1 + 1, L):
+            d = rest % W
+            if d > 0:
+                y2 = y
+                ka = d - 1
+                break
+            rest //= W
+        if y2 < L:
+            g = min(y2 - y1 - 1, H)
+            off = off_ahead[y1 + 1, od - 1, g, ka]
+            n = cnt_ahead[y1 + 1, od - 1, g, ka]
+        else:
+            off = off_last[y1 + 1, od - 1]
+            n = cnt_last[y1 + 1, od - 1]
+        if n != 1 or not transparent[off]:
+            break
+        delta += (row_nd[off] - od) * pw[y1]
+        y1 = y2
+    return delta, y1
+
+
+@njit(cache=True, parallel=True)
+def _expand_pre(words, entry, L, W, K, H, pw, pre_off, pre_cnt, row_d, row_nd,
+                off_ahead, cnt_ahead, off_last, cnt_last, transparent, fold,
+                out_child, out_code, out_stage):
+    """Children of the states through the entry's pre-stage (see the module docstring)."""
+    for i in prange(words.shape[0]):
+        w = words[i]
+        rest = w
+        y0 = L
+        ka = 0
+        for y in range(L):
+            d = rest % W
+            if d > 0:
+                y0 = y
+                ka = d - 1
+                break
+            rest //= W
+        if entry == 1:        # reservoir: context of the virtual car
+            ctx = 0 if y0 == L else 1 + min(y0, H) * K + ka
+        elif entry == 0:      # site1: old cell 1 empty (0) or not (1)
+            ctx = 0 if w % W == 0 else 1
+        else:
+            ctx = 0
+        off = pre_off[ctx]
+        delta = np.int64(0)
+        if fold:
+            delta, y0 = _fold(w, y0, L, W, H, pw, off_ahead, cnt_ahead, off_last, cnt_last,
+                              row_nd, transparent)
+        for j in range(pre_cnt[ctx]):
+            r = off + j
+            c = w + delta
+            dd = row_d[r]
+            if dd >= 1 and dd <= L:
+                c += row_nd[r] * pw[dd - 1]
+            out_child[i, j] = c
+            out_code[i, j] = r
+            out_stage[i, j] = y0
+        for j in range(pre_cnt[ctx], out_code.shape[1]):
+            out_code[i, j] = -1
+
+
+@njit(cache=True, parallel=True)
+def _expand_stage(words, f, L, W, K, H, pw, off_ahead, cnt_ahead, off_last, cnt_last,
+                  row_d, row_nd, transparent, fold, out_child, out_code, out_stage):
+    """Children of the words of stage ``f``: the car on cell ``f + 1`` draws its outcome."""
+    x = f + 1
+    for i in prange(words.shape[0]):
+        w = words[i]
+        od = (w // pw[f]) % W           # its old digit, 1 + class
+        k = od - 1
+        base = w - od * pw[f]
+        rest = w // pw[f + 1] if f + 1 < L else np.int64(0)
+        y1 = L
+        ka = 0
+        for y in range(f + 1, L):
+            d = rest % W
+            if d > 0:
+                y1 = y
+                ka = d - 1
+                break
+            rest //= W
+        if y1 < L:
+            g = min(y1 - f - 1, H)
+            off = off_ahead[x, k, g, ka]
+            n = cnt_ahead[x, k, g, ka]
+        else:
+            off = off_last[x, k]
+            n = cnt_last[x, k]
+        if fold:
+            delta, y1 = _fold(w, y1, L, W, H, pw, off_ahead, cnt_ahead, off_last, cnt_last,
+                              row_nd, transparent)
+            base += delta
+        for j in range(n):
+            r = off + j
+            c = base
+            dd = row_d[r]
+            if dd <= L:
+                c += row_nd[r] * pw[dd - 1]
+            out_child[i, j] = c
+            out_code[i, j] = r
+            out_stage[i, j] = y1
+        for j in range(n, out_code.shape[1]):
+            out_code[i, j] = -1
+
+
+@njit(cache=True)
+def _first_insert_cell(work, L, vbulk):
+    for y in range(L):
+        if work[y]:
+            c = min(y + 1 - vbulk, vbulk)
+            return c if c >= 1 else -1
+    return vbulk if vbulk >= 1 else -1
+
+
+@njit(cache=True, parallel=True)
+def _post(words, L, W, K, keydig_of, pw_key, insert, alpha, vbulk, keydig_vbulk, order,
+          ramp_cell, ramp_a, ramp_keydig, out_key, out_raw):
+    """Each new configuration's successors through the coins after the move: the
+    key (lumped digits) and a raw code ``placed | applicable << C | cell << 2C``."""
+    C = order.shape[0]
+    for i in prange(words.shape[0]):
+        occ = np.zeros(L, np.bool_)
+        work = np.zeros(L, np.bool_)
+        w = words[i]
+        key = np.int64(0)
+        for y in range(L):
+            d = w % W
+            w //= W
+            if d > 0:
+                occ[y] = True
+                key += keydig_of[d] * pw_key[y]
+        for mask in range(1 << C):
+            for y in range(L):
+                work[y] = occ[y]
+            k2 = key
+            w2 = 1.0
+            appl = 0
+            ins = 0
+            ok = True
+            for j in range(C):
+                bit = (mask >> j) & 1
+                c = order[j]
+                if c == -1:
+                    cell = _first_insert_cell(work, L, vbulk) if insert else -1
+                    a = alpha
+                    kd = keydig_vbulk
+                else:
+                    cell = ramp_cell[c] if not work[ramp_cell[c] - 1] else -1
+                    a = ramp_a[c]
+                    kd = ramp_keydig[c]
+                if cell < 0:
+                    if bit == 1:
+                        ok = False
+                        break
+                    continue
+                appl |= 1 << j
+                if bit == 1:
+                    w2 *= a
+                    work[cell - 1] = True
+                    k2 += kd * pw_key[cell - 1]
+                    if c == -1:
+                        ins = cell
+                else:
+                    w2 *= 1.0 - a
+                if w2 == 0.0:
+                    ok = False
+                    break
+            if ok:
+                out_key[i, mask] = k2
+                out_raw[i, mask] = mask | (appl << C) | (ins << (2 * C))
+            else:
+                out_raw[i, mask] = -1
+
+
+@njit(cache=True, parallel=True)
+def _sweep(x, out, mass, n, stage_lo, indptr, parent, code, wtab, findptr, fparent, fcode):
+    """``out = x P``: the stages in order, each word the sum over its parents."""
+    for i in prange(n):
+        mass[i] = x[i]
+    for s in range(stage_lo.shape[0] - 1):
+        for j in prange(stage_lo[s], stage_lo[s + 1]):
+            acc = 0.0
+            for q in range(indptr[j - n], indptr[j - n + 1]):
+                acc += wtab[code[q]] * mass[parent[q]]
+            mass[j] = acc
+    for i in prange(n):
+        acc = 0.0
+        for q in range(findptr[i], findptr[i + 1]):
+            acc += wtab[fcode[q]] * mass[fparent[q]]
+        out[i] = acc
+
+
+@njit(cache=True, parallel=True)
+def _flows(mass, parent, code, ncodes, nchunks):
+    """``F[code] = sum of mass[parent]`` over the links of each code (per chunk)."""
+    m = parent.shape[0]
+    F = np.zeros((nchunks, ncodes), np.float64)
+    step = (m + nchunks - 1) // nchunks
+    for c in prange(nchunks):
+        lo = c * step
+        hi = min(m, lo + step)
+        for q in range(lo, hi):
+            F[c, code[q]] += mass[parent[q]]
+    return F
+
+
+# ------------------------------------------------------------------ tables
+
+def _add(rows: list, outs, factor: float) -> None:
+    """Append ``factor`` times the moves ``outs`` (``(d, u, w)``), adding to a move
+    already there, as :func:`markov.chain.lattice._add_outcomes` does."""
+    if factor == 0.0:
+        return
+    for d, u, tw in outs:
+        w = factor * tw
+        if w == 0.0:
+            continue
+        for r in rows:
+            if r[0] == d and r[1] == u:
+                r[2] += w
+                break
+        else:
+            rows.append([d, u, w])
+
+
+class _Tables:
+    """The rows (moves with weights and counts) the links point at."""
+
+    def __init__(self, lat: Lattice):
+        self.lat = lat
+        L = lat.length
+        self.L = L
+        ints = lat.ints
+        top = lat.top_vmax
+        B = top + 2
+        digit_map = np.asarray(ints[_DIGIT:_DIGIT + B], dtype=np.int64)
+        class_digits = sorted(set(int(d) for d in digit_map[1:]))
+        self.K = K = len(class_digits)
+        self.W = 1 + 2 * K
+        self.cls = np.array([class_digits.index(int(digit_map[v + 1])) for v in range(top + 1)],
+                            dtype=np.int64)
+        self.rep = np.array([d - 1 for d in class_digits], dtype=np.int64)
+        self.digit_map = digit_map
+        self.H = H = lat.horizon
+        self.entry = int(ints[6])
+        self.exit = int(ints[7])
+        self.alpha, self.beta = float(lat.floats[0]), float(lat.floats[1])
+        self.v_in = int(ints[8])
+        self.vbulk = int(ints[10])
+        R = lat.n_ramps
+        layout = lat.layout
+        self.size = layout["size"]
+        self.bond0 = layout["bonds"].start
+        self.vel0 = layout["velocity"].start
+        self.ramp0 = layout["ramps"].start
+        self.rows_d: list = []
+        self.rows_u: list = []
+        self.rows_w: list = []
+        self.rows_inc: list = []
+        zone_of, zone_vmax = lat.zone_of, lat.zone_vmax
+        count, newv, wt = lat.count, lat.new_velocity, lat.weight
+
+        def outs(z, v, g, a, x):
+            res = []
+            for j in range(int(count[z, v, g, a])):
+                u = int(newv[z, v, g, a, j])
+                res.append((min(x + u, L + 1), u, float(wt[z, v, g, a, j])))
+            return res
+
+        def emit_car(x, rows):
+            first = len(self.rows_d)
+            for d, u, w in rows:
+                self._row(d, u, w, self._car_inc(x, d, u))
+            return first, len(self.rows_d) - first
+
+        # cars on cells 1..L (index x), class k, gap g, class of the car ahead ka
+        self.off_ahead = np.zeros((L + 1, K, H + 1, K), np.int64)
+        self.cnt_ahead = np.zeros((L + 1, K, H + 1, K), np.int64)
+        self.off_last = np.zeros((L + 1, K), np.int64)
+        self.cnt_last = np.zeros((L + 1, K), np.int64)
+        wall = self.exit == EXIT_CODES["wall"]
+        beta = self.beta
+        for x in range(1, L + 1):
+            z = int(zone_of[x - 1])
+            for k in range(K):
+                v = int(self.rep[k])
+                if x < L:
+                    for g in range(H + 1):
+                        for ka in range(K):
+                            rows = [[d, u, w] for d, u, w in outs(z, v, g, int(self.rep[ka]), x)
+                                    if w != 0.0]
+                            self.off_ahead[x, k, g, ka], self.cnt_ahead[x, k, g, ka] = \
+                                emit_car(x, rows)
+                if not wall and x == L:          # sink: no rule on the last cell
+                    rows = []
+                    if beta > 0:
+                        rows.append([L + 1, 0, beta])
+                    if beta < 1:
+                        rows.append([L, 0, 1.0 - beta])
+                elif wall:                       # the exit coin, seen by the last car
+                    rows = []
+                    if beta > 0.0:
+                        _add(rows, outs(z, v, H, int(zone_vmax[z]), x), beta)
+                    if beta < 1.0:
+                        _add(rows, outs(z, v, min(L - x, H), 0, x), 1.0 - beta)
+                else:
+                    rows = [[d, u, w] for d, u, w in outs(z, v, min(L - x, H), 0, x) if w != 0.0]
+                self.off_last[x, k], self.cnt_last[x, k] = emit_car(x, rows)
+        # the pre-stage
+        alpha = self.alpha
+        self.pre_off: list = []
+        self.pre_cnt: list = []
+
+        def emit_pre(rows, inc_of):
+            first = len(self.rows_d)
+            for d, u, w in rows:
+                self._row(d, u, w, inc_of(d, u))
+            self.pre_off.append(first)
+            self.pre_cnt.append(len(self.rows_d) - first)
+
+        if self.entry == ENTRY_CODES["reservoir"]:
+            z = int(zone_of[0])
+            v = int(zone_vmax[z])
+
+            def virtual(g, a):
+                return [((-1 if u == 0 else d), u, w) for d, u, w in outs(z, v, g, a, 0)]
+
+            def start():
+                return [[-1, 0, 1.0 - alpha]] if alpha < 1.0 else []
+
+            def entered(d, u):
+                return self._enter_inc(d, u) if d > 0 else np.zeros(self.size)
+
+            rows = start()                       # context 0: the empty road
+            if alpha > 0.0:
+                if wall:
+                    if beta > 0.0:
+                        _add(rows, virtual(H, int(zone_vmax[z])), alpha * beta)
+                    if beta < 1.0:
+                        _add(rows, virtual(min(L, H), 0), alpha * (1.0 - beta))
+                else:
+                    _add(rows, virtual(min(L, H), 0), alpha)
+            emit_pre(rows, entered)
+            for g in range(H + 1):               # context 1 + g K + ka
+                for ka in range(K):
+                    rows = start()
+                    _add(rows, virtual(g, int(self.rep[ka])), alpha)
+                    emit_pre(rows, entered)
+        elif self.entry == ENTRY_CODES["site1"]:
+            rows = []                            # context 0: old cell 1 empty
+            if alpha > 0.0:
+                rows.append([1, self.v_in, alpha])
+            if alpha < 1.0:
+                rows.append([-1, 0, 1.0 - alpha])
+            emit_pre(rows, lambda d, u: self._enter_inc(d, u) if d > 0 else np.zeros(self.size))
+            emit_pre([[-1, 0, 1.0]], lambda d, u: np.zeros(self.size))
+        else:
+            emit_pre([[-1, 0, 1.0]], lambda d, u: np.zeros(self.size))
+        self.pre_off = np.array(self.pre_off, np.int64)
+        self.pre_cnt = np.array(self.pre_cnt, np.int64)
+        self.n_moves = len(self.rows_d)
+        self.M = int(max(self.cnt_ahead.max(initial=0), self.cnt_last.max(initial=0),
+                         self.pre_cnt.max(initial=0), 1))
+        self.row_d = np.array(self.rows_d, np.int64)
+        self.row_nd = np.array([0 if d < 1 or d > L else 1 + K + int(self.cls[u])
+                                for d, u in zip(self.rows_d, self.rows_u)], np.int64)
+        # the moves a car makes for sure and that count nothing: folded into the link before
+        self.transparent = np.zeros(self.n_moves, np.bool_)
+        for x in range(1, L + 1):
+            for table_off, table_cnt in ((self.off_ahead[x], self.cnt_ahead[x]),
+                                         (self.off_last[x], self.cnt_last[x])):
+                for r in table_off[table_cnt == 1].ravel():
+                    self.transparent[r] = (self.rows_w[r] == 1.0 and self.rows_d[r] == x
+                                           and self.rows_u[r] == 0
+                                           and not np.any(self.rows_inc[r]))
+        # the coins after the move: insert first, then the ramps from the entry down
+        order = ([-1] if self.entry == ENTRY_CODES["insert"] else []) + \
+            [int(c) for c in lat.ramp_down]
+        self.order = np.array(order, np.int64)
+        self.C = len(order)
+
+    def _row(self, d, u, w, inc):
+        self.rows_d.append(int(d))
+        self.rows_u.append(int(u))
+        self.rows_w.append(float(w))
+        self.rows_inc.append(inc)
+
+    def _car_inc(self, x, d, u):
+        inc = np.zeros(self.size)
+        L = self.L
+        inc[2] += d - x                       # advance
+        for b in range(x, min(d, L + 1)):
+            inc[self.bond0 + b] += 1.0
+        if d > L:
+            inc[0] += 1.0                     # left
+        else:
+            inc[self.vel0 + d - 1] += u
+        return inc
+
+    def _enter_inc(self, cell, u):
+        inc = np.zeros(self.size)
+        inc[1] += 1.0                         # entered
+        for b in range(0, min(cell, self.L + 1)):
+            inc[self.bond0 + b] += 1.0
+        if cell <= self.L:
+            inc[self.vel0 + cell - 1] += u
+        return inc
+
+    def post_codes(self, raw: np.ndarray):
+        """Weights and counts of the distinct raw codes of :func:`_post`."""
+        lat = self.lat
+        C = self.C
+        ws = np.empty(len(raw))
+        incs = np.zeros((len(raw), self.size))
+        for i, r in enumerate(raw.tolist()):
+            placed = r & ((1 << C) - 1)
+            appl = (r >> C) & ((1 << C) - 1)
+            cell = r >> (2 * C)
+            w = 1.0
+            for j in range(C):
+                if not (appl >> j) & 1:
+                    continue
+                c = int(self.order[j])
+                a = self.alpha if c == -1 else float(lat.ramp_alpha[c])
+                bit = (placed >> j) & 1
+                w *= a if bit else 1.0 - a
+                if bit and c >= 0:
+                    incs[i, self.ramp0 + c] += 1.0
+                    incs[i, self.vel0 + int(lat.ramp_cell[c]) - 1] += int(lat.ramp_velocity[c])
+            if cell > 0:
+                incs[i] += self._enter_inc(cell, self.vbulk)
+            ws[i] = w
+        return ws, incs
+
+
+# ------------------------------------------------------------------ the operator
+
+class RoadFactoredOperator(spla.LinearOperator):
+    """``x -> x P`` of an open road under parallel update, swept car by car.
+
+    A ``LinearOperator`` ``A = P^T`` (scipy's column convention: ``A @ x`` is
+    ``x P`` as a column), so :func:`markov.solvers.stationary.stationary`
+    takes it as it is.  The result equals ``RoadChain(road).matrix.T @ x``
+    (the rows of :func:`markov.chain.lattice.successors`) to rounding.
+
+    Parameters
+    ----------
+    road : Road
+        An open road with ``update="parallel"``.
+    keys : (n,) int64 array, sorted
+        A closed set of state keys, lumped as ``lump`` says, e.g.
+        ``RoadChain(road, lump=lump).keys``.
+    lump : bool
+        Whether the keys write each velocity as its class's
+        (:func:`markov.chain.lattice.lattice_of`).
+    lattice : Lattice, optional
+        The road's lattice, built with the same ``lump`` (saves rebuilding it).
+    fold : bool
+        Fold a car's sure, countless move (a blocked car staying at velocity 0
+        with weight 1) into the link before it, instead of storing a word and
+        a link for it (default; False only for comparison).
+
+    Attributes
+    ----------
+    n : int
+        States.
+    words : int
+        Words over all stages (the sweep's intermediate vectors).
+    stage_sizes : list of int
+        Words per stage ``0..L``.
+    links : int
+        Links stored (stage links and final links).
+    nbytes : int
+        Bytes held: the links, the tables and the sweep's work vector.
+    build_seconds : float
+    products, seconds
+        Products applied so far and the time spent in them.
+
+    Raises
+    ------
+    InvalidParameterError
+        For a periodic lattice, another update, or a road whose words do not
+        fit in int64.
+    RuntimeError
+        If a successor is not among ``keys`` (the set is not closed).
+
+    Examples
+    --------
+    >>> from markov import load_model, Road
+    >>> from markov.solvers.road_chain import RoadChain
+    >>> road = Road(1, load_model("nasch", {"vmax": 1}), alpha=0.3, beta=0.6)
+    >>> chain = RoadChain(road)
+    >>> op = RoadFactoredOperator.from_chain(chain)
+    >>> op.apply(np.array([1.0, 0.0])).round(12).tolist()   # empty: fills with alpha
+    [0.7, 0.3]
+    """
+
+    def __init__(self, road, keys: np.ndarray, lump: bool = True, lattice: Lattice | None = None,
+                 fold: bool = True):
+        if getattr(road, "periodic", False):
+            raise InvalidParameterError(
+                "the factored road operator is for open roads; a periodic lattice (a ring"
+                " with stretches) is not supported")
+        if getattr(road, "update", None) != PARALLEL:
+            raise InvalidParameterError(
+                f"the factored road operator is for parallel update, got"
+                f" {getattr(road, 'update', None)!r}")
+        t0 = time.perf_counter()
+        self.road = road
+        self.lump = bool(lump)
+        self.fold = bool(fold)
+        self.lattice = lattice if lattice is not None else lattice_of(road, lump=lump)
+        self.keys = np.ascontiguousarray(keys, dtype=np.int64)
+        self.n = n = self.keys.shape[0]
+        super().__init__(np.float64, (n, n))
+        self.products = 0
+        self.seconds = 0.0
+        tab = _Tables(self.lattice)
+        self._tab = tab
+        L, W = tab.L, tab.W
+        if W ** L > _INT64_MAX:
+            raise InvalidParameterError(
+                f"the factored road operator writes a word in base {W} over L = {L} cells,"
+                f" which overflows int64 (at most L = {_max_cells(W)} for this model)")
+        pw = np.array([W ** y for y in range(L + 1)] if W ** (L + 1) <= _INT64_MAX
+                      else [W ** y for y in range(L)] + [0], dtype=np.int64)
+        self._build(tab, pw)
+        self.build_seconds = time.perf_counter() - t0
+
+    @classmethod
+    def from_chain(cls, chain) -> "RoadFactoredOperator":
+        """The operator of a :class:`markov.solvers.road_chain.RoadChain` on its keys.
+
+        Parameters
+        ----------
+        chain : RoadChain
+
+        Returns
+        -------
+        RoadFactoredOperator
+        """
+        return cls(chain.system, chain.keys, chain.lump, chain.lattice)
+
+    # -------------------------------------------------------------- building
+    def _build(self, tab: _Tables, pw: np.ndarray) -> None:
+        lat = self.lattice
+        L, W, K, H, M = tab.L, tab.W, tab.K, tab.H, tab.M
+        B = lat.top_vmax + 2
+        n = self.n
+        digit_of = np.zeros(B, np.int64)          # key digit -> old word digit
+        for dgt in range(1, B):
+            digit_of[dgt] = 1 + tab.cls[dgt - 1]
+        words0 = np.empty(n, np.int64)
+        _state_words(self.keys, B, L, W, digit_of, words0)
+        pending: list[list] = [[] for _ in range(L + 1)]
+
+        def scatter(child, code, stage, parents):
+            keep = code.ravel() >= 0
+            child = child.ravel()[keep]
+            code = code.ravel()[keep]
+            stage = stage.ravel()[keep]
+            par = np.repeat(parents, M)[keep]
+            order = np.argsort(stage, kind="stable")
+            stage = stage[order]
+            cut = np.searchsorted(stage, np.arange(L + 2))
+            for s in range(L + 1):
+                lo, hi = cut[s], cut[s + 1]
+                if hi > lo:
+                    sel = order[lo:hi]
+                    pending[s].append((child[sel], par[sel], code[sel]))
+
+        child = np.empty((n, M), np.int64)
+        code = np.empty((n, M), np.int64)
+        stage = np.empty((n, M), np.int64)
+        _expand_pre(words0, tab.entry, L, W, K, H, pw, tab.pre_off, tab.pre_cnt, tab.row_d,
+                    tab.row_nd, tab.off_ahead, tab.cnt_ahead, tab.off_last, tab.cnt_last,
+                    tab.transparent, self.fold, child, code, stage)
+        scatter(child, code, stage, np.arange(n, dtype=np.int64))
+        del words0, child, code, stage
+        stage_lo = [n]
+        indptr_parts, parent_parts, code_parts = [], [], []
+        nlinks = 0
+        final_words = np.empty(0, np.int64)
+        for f in range(L + 1):
+            parts = pending[f]
+            pending[f] = []
+            if parts:
+                c = np.concatenate([p[0] for p in parts])
+                par = np.concatenate([p[1] for p in parts])
+                cd = np.concatenate([p[2] for p in parts])
+                del parts
+                order = np.argsort(c, kind="stable")
+                c = c[order]
+                new = np.empty(len(c), np.bool_)
+                new[0] = True
+                np.not_equal(c[1:], c[:-1], out=new[1:])
+                starts = np.flatnonzero(new)
+                words = c[starts]
+                del c, new
+                indptr_parts.append(starts + nlinks)
+                parent_parts.append(par[order])
+                code_parts.append(cd[order])
+                nlinks += len(order)
+                del order, par, cd
+            else:
+                words = np.empty(0, np.int64)
+            first = stage_lo[-1]
+            stage_lo.append(first + len(words))
+            if f == L:
+                final_words = words
+            elif len(words):
+                child = np.empty((len(words), M), np.int64)
+                code = np.empty((len(words), M), np.int64)
+                stage = np.empty((len(words), M), np.int64)
+                _expand_stage(words, f, L, W, K, H, pw, tab.off_ahead, tab.cnt_ahead,
+                              tab.off_last, tab.cnt_last, tab.row_d, tab.row_nd,
+                              tab.transparent, self.fold, child, code, stage)
+                scatter(child, code, stage, np.arange(first, first + len(words), dtype=np.int64))
+                del child, code, stage
+        n_words = stage_lo[-1] - n
+        self.words = int(n_words)
+        self.stage_sizes = [int(b - a) for a, b in zip(stage_lo[:-1], stage_lo[1:])]
+        indptr = np.concatenate(indptr_parts + [np.array([nlinks], np.int64)]) \
+            if indptr_parts else np.zeros(1, np.int64)
+        parent = np.concatenate(parent_parts) if parent_parts else np.empty(0, np.int64)
+        codes = np.concatenate(code_parts) if code_parts else np.empty(0, np.int64)
+        del indptr_parts, parent_parts, code_parts
+        # the coins after the move, and the successors' indices
+        C = tab.C
+        keydig_of = np.zeros(W, np.int64)                # new word digit -> key digit
+        for k in range(K):
+            keydig_of[1 + K + k] = tab.rep[k] + 1
+        pw_key = lat.pw
+        fk = np.empty((len(final_words), 1 << C), np.int64)
+        fraw = np.empty((len(final_words), 1 << C), np.int64)
+        ramp_keydig = np.array([tab.digit_map[v + 1] for v in lat.ramp_velocity], np.int64) \
+            if lat.n_ramps else np.zeros(0, np.int64)
+        _post(final_words, L, W, K, keydig_of, pw_key, tab.entry == ENTRY_CODES["insert"],
+              tab.alpha, tab.vbulk, int(tab.digit_map[tab.vbulk + 1]), tab.order,
+              lat.ramp_cell, lat.ramp_alpha, ramp_keydig, fk, fraw)
+        keep = fraw.ravel() >= 0
+        fparent = np.repeat(np.arange(stage_lo[-2], stage_lo[-1], dtype=np.int64), 1 << C)[keep]
+        fk = fk.ravel()[keep]
+        fraw = fraw.ravel()[keep]
+        col = np.searchsorted(self.keys, fk)
+        col[col == n] = 0
+        if n == 0 or not np.array_equal(self.keys[col], fk):
+            raise RuntimeError("the set of states is not closed: a successor lies outside it")
+        del fk
+        raws, fcode = np.unique(fraw, return_inverse=True)
+        post_w, post_inc = tab.post_codes(raws)
+        fcode = fcode.ravel() + tab.n_moves
+        order = np.argsort(col, kind="stable")
+        findptr = np.zeros(n + 1, np.int64)
+        np.cumsum(np.bincount(col, minlength=n), out=findptr[1:])
+        fparent = fparent[order]
+        fcode = fcode[order]
+        del order, col, fraw
+        # the code table: weights and counts
+        self._wtab = np.concatenate([np.array(tab.rows_w, np.float64), post_w])
+        self._inc = np.vstack([np.array(tab.rows_inc, np.float64).reshape(-1, tab.size),
+                               post_inc])
+        ncodes = len(self._wtab)
+        cdt = np.uint16 if ncodes <= np.iinfo(np.uint16).max else np.int32
+        nodes = stage_lo[-1]
+        idt = np.int32 if nodes <= _INT32_MAX else np.int64
+        pdt = np.int32 if max(nlinks, len(fparent)) <= _INT32_MAX else np.int64
+        self._stage_lo = np.array(stage_lo, np.int64)
+        self._indptr = indptr.astype(pdt)
+        self._parent = parent.astype(idt)
+        self._code = codes.astype(cdt)
+        self._findptr = findptr.astype(pdt)
+        self._fparent = fparent.astype(idt)
+        self._fcode = fcode.astype(cdt)
+        self._mass = np.empty(nodes)
+        self.links = int(len(self._parent) + len(self._fparent))
+        self.nbytes = int(sum(a.nbytes for a in (
+            self._stage_lo, self._indptr, self._parent, self._code, self._findptr,
+            self._fparent, self._fcode, self._wtab, self._inc, self._mass)))
+
+    # -------------------------------------------------------------- products
+    def _run(self, x: np.ndarray, out: np.ndarray) -> None:
+        _sweep(x, out, self._mass, self.n, self._stage_lo, self._indptr, self._parent,
+               self._code, self._wtab, self._findptr, self._fparent, self._fcode)
+
+    def _vector(self, x) -> np.ndarray:
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        if x.ndim == 2 and x.shape[1] == 1:
+            x = np.ascontiguousarray(x[:, 0])
+        if x.shape != (self.n,):
+            raise InvalidParameterError(f"x must have shape ({self.n},), got {x.shape}")
+        return x
+
+    def apply(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``x P`` (a row vector times the transition matrix).
+
+        Parameters
+        ----------
+        x : (n,) float64 array
+        out : (n,) float64 array, optional
+            Where to write the result.
+
+        Returns
+        -------
+        (n,) float64 array
+
+        Raises
+        ------
+        InvalidParameterError
+            For ``x`` of another shape.
+        """
+        x = self._vector(x)
+        out = np.empty(self.n) if out is None else out
+        start = time.perf_counter()
+        self._run(x, out)
+        self.products += 1
+        self.seconds += time.perf_counter() - start
+        return out
+
+    _matvec = apply
+
+    def residual(self, pi: np.ndarray) -> float:
+        """``||pi P - pi||_1``.
+
+        Parameters
+        ----------
+        pi : (n,) float64 array
+
+        Returns
+        -------
+        float
+        """
+        diff = self.apply(pi)
+        diff -= pi
+        return float(np.abs(diff, out=diff).sum())
+
+    def counts(self, x: np.ndarray) -> np.ndarray:
+        """``sum_i x_i E[counts of a step | state i]`` in the layout of
+        :func:`markov.chain.lattice.count_layout`.
+
+        Equals ``increments(lattice, keys, x).sum(axis=0)``: cars leaving,
+        entering, cells advanced, put on by each ramp, crossings of each bond,
+        and the velocity on each cell after the step.
+
+        Parameters
+        ----------
+        x : (n,) float64 array
+
+        Returns
+        -------
+        (size,) float64 array
+        """
+        x = self._vector(x)
+        out = np.empty(self.n)
+        self._run(x, out)
+        ncodes = len(self._wtab)
+        chunks = 8
+        F = _flows(self._mass, self._parent, self._code, ncodes, chunks).sum(axis=0)
+        F += _flows(self._mass, self._fparent, self._fcode, ncodes, chunks).sum(axis=0)
+        return (F * self._wtab) @ self._inc
+
+
+def factored_successor_set(lattice: Lattice, keys: np.ndarray) -> np.ndarray:
+    """Sorted distinct successors of ``keys`` (the support of ``x P``), swept car by car.
+
+    The same sweep as :class:`RoadFactoredOperator` without links: the words of
+    each stage are merged before the next car draws, so the cost grows with the
+    words, not with the ``2^k`` branches of a state.  Equal to
+    :func:`markov.chain.lattice.successor_set` (tested); what the search of a
+    large road's states calls.
+
+    Parameters
+    ----------
+    lattice : Lattice
+        An open road under parallel update (lumped or not).
+    keys : (n,) int64 array
+
+    Returns
+    -------
+    (m,) int64 array
+    """
+    from markov.chain.encoding import unique_keys
+
+    road = lattice.system
+    if lattice.periodic or road.update != PARALLEL:
+        raise InvalidParameterError("the factored sweep is for open roads under parallel update")
+    tab = _Tables(lattice)
+    L, W, K, H, M = tab.L, tab.W, tab.K, tab.H, tab.M
+    if W ** L > _INT64_MAX:
+        raise InvalidParameterError(
+            f"the factored sweep writes a word in base {W} over L = {L} cells, which overflows"
+            f" int64 (at most L = {_max_cells(W)} for this model)")
+    pw = np.array([W ** y for y in range(L + 1)] if W ** (L + 1) <= _INT64_MAX
+                  else [W ** y for y in range(L)] + [0], dtype=np.int64)
+    B = lattice.top_vmax + 2
+    digit_of = np.zeros(B, np.int64)
+    for dgt in range(1, B):
+        digit_of[dgt] = 1 + tab.cls[dgt - 1]
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    words = np.empty(len(keys), np.int64)
+    _state_words(keys, B, L, W, digit_of, words)
+    pending: list[list] = [[] for _ in range(L + 1)]
+
+    def expand(words, f):
+        child = np.empty((len(words), M), np.int64)
+        code = np.empty((len(words), M), np.int64)
+        stage = np.empty((len(words), M), np.int64)
+        if f < 0:
+            _expand_pre(words, tab.entry, L, W, K, H, pw, tab.pre_off, tab.pre_cnt, tab.row_d,
+                        tab.row_nd, tab.off_ahead, tab.cnt_ahead, tab.off_last, tab.cnt_last,
+                        tab.transparent, True, child, code, stage)
+        else:
+            _expand_stage(words, f, L, W, K, H, pw, tab.off_ahead, tab.cnt_ahead,
+                          tab.off_last, tab.cnt_last, tab.row_d, tab.row_nd,
+                          tab.transparent, True, child, code, stage)
+        keep = code.ravel() >= 0
+        child, stage = child.ravel()[keep], stage.ravel()[keep]
+        order = np.argsort(stage, kind="stable")
+        cut = np.searchsorted(stage[order], np.arange(L + 2))
+        for s_ in range(L + 1):
+            if cut[s_ + 1] > cut[s_]:
+                pending[s_].append(unique_keys(child[order[cut[s_]:cut[s_ + 1]]]))
+
+    expand(words, -1)
+    final = np.empty(0, np.int64)
+    for f in range(L + 1):
+        parts, pending[f] = pending[f], []
+        words = unique_keys(np.concatenate(parts)) if parts else np.empty(0, np.int64)
+        if f == L:
+            final = words
+        elif len(words):
+            expand(words, f)
+    C = tab.C
+    keydig_of = np.zeros(W, np.int64)
+    for k in range(K):
+        keydig_of[1 + K + k] = tab.rep[k] + 1
+    fk = np.empty((len(final), 1 << C), np.int64)
+    fraw = np.empty((len(final), 1 << C), np.int64)
+    ramp_keydig = np.array([tab.digit_map[v + 1] for v in lattice.ramp_velocity], np.int64) \
+        if lattice.n_ramps else np.zeros(0, np.int64)
+    _post(final, L, W, K, keydig_of, lattice.pw, tab.entry == ENTRY_CODES["insert"],
+          tab.alpha, tab.vbulk, int(tab.digit_map[tab.vbulk + 1]), tab.order,
+          lattice.ramp_cell, lattice.ramp_alpha, ramp_keydig, fk, fraw)
+    return unique_keys(fk.ravel()[fraw.ravel() >= 0])
+
+
+def _max_cells(W: int) -> int:
+    L = 0
+    while W ** (L + 1) <= _INT64_MAX:
+        L += 1
+    return L
