@@ -278,8 +278,8 @@ class RingChain:
         state stands for at most that many rotation classes).
     start : str, optional
         A start configuration in text notation: the classes it reaches.
-    lump_velocities : bool, default True
-        Merge the velocities the rule cannot tell apart
+    lump_velocities : bool, optional
+        Default ``lump``.  Merge the velocities the rule cannot tell apart
         (:func:`velocity_lumping`; exact under parallel and ordered-sequential
         update, :mod:`markov.model.lumping`): a state is then a class of
         configurations with the same positions and velocity classes, and
@@ -303,7 +303,7 @@ class RingChain:
     def __init__(self, ring: Ring, lump: bool = True, max_memory: float | None = None,
                  operator: str = "auto",
                  state_bound: Callable[[Ring, bool], int | None] | None = None,
-                 start: str | None = None, lump_velocities: bool = True):
+                 start: str | None = None, lump_velocities: bool | None = None):
         ensure_chain_arguments(_ensure_ring(ring), max_memory=max_memory)
         if not ring.homogeneous:
             raise InvalidParameterError(
@@ -311,6 +311,8 @@ class RingChain:
                 " markov.solvers.road_chain.RoadChain (markov.solve takes it)")
         self.ring = ring
         #: The velocity classes merged (:func:`velocity_lumping`), or None
+        if lump_velocities is None:
+            lump_velocities = lump
         self.lumping = velocity_lumping(ring) if lump_velocities else None
         #: Their digit map, as the chain's kernels take it, or None
         self.velocities = None if self.lumping is None else self.lumping.digit_map()
@@ -332,7 +334,7 @@ class RingChain:
     def on_class(cls, ring: Ring, keys: np.ndarray, lump: bool = True,
                  max_memory: float | None = None, operator: str = "matrix",
                  census: ClassCensus | None = None,
-                 lump_velocities: bool = True) -> "RingChain":
+                 lump_velocities: bool | None = None) -> "RingChain":
         """The chain on a closed class given by its keys, without the search.
 
         Parameters
@@ -347,8 +349,9 @@ class RingChain:
         operator : {"auto", "matrix", "matrix-free"}
         census : ClassCensus, optional
             How the class was found (its solution reports it).
-        lump_velocities : bool
-            Whether the keys have their velocities merged (:class:`RingChain`).
+        lump_velocities : bool, optional
+            Whether the keys have their velocities merged (:class:`RingChain`;
+            default ``lump``).
 
         Returns
         -------
@@ -401,6 +404,21 @@ class RingChain:
         if "transition_operator" in self.__dict__ and shared:
             other.__dict__["transition_operator"] = self.transition_operator.with_p(p)
         return other
+
+    def with_every_velocity(self) -> "RingChain":
+        """This chain with every velocity kept: ``self`` where nothing is lumped.
+
+        What reads stored velocities along time (:mod:`markov.analysis`) needs
+        it: a state of the lumped chain says only each velocity's class.
+
+        Returns
+        -------
+        RingChain
+        """
+        if self.lumping is None:
+            return self
+        return RingChain(self.ring, self.lump, self.max_memory, self.operator, self.state_bound,
+                         start=self._start_text, lump_velocities=False)
 
     def _matrix_free_bytes_per_state(self, method: str) -> float:
         if self.ring.update == PARALLEL:
@@ -729,6 +747,10 @@ class RingChain:
         """Position configurations of the states (:func:`markov.solvers.aggregates.position_aggregates`)."""
         from markov.solvers.aggregates import position_aggregates
 
+        if self.lumping is not None:
+            raise InvalidParameterError(
+                "the position aggregates need every velocity (their source map reads how far"
+                " each car moved); build the chain with lump_velocities=False")
         return position_aggregates(self.ring, self.keys, self.lump)
 
     def solution(self, method: str = "auto", tol: float = DEFAULT_TOL,
@@ -771,10 +793,21 @@ class RingChain:
                 " their positions only there); use iterative, gmres, bicgstab or power")
         if method == "aggregation" and self.lumping is not None and not self.ring.trivial:
             # the aggregates' source map reads how far each car moved from its
-            # stored velocity, which a merged velocity no longer says
-            full = RingChain(self.ring, self.lump, self.max_memory, self.operator,
-                             self.state_bound, start=self._start_text, lump_velocities=False)
-            return full.solution(method, tol)
+            # stored velocity, which a merged velocity no longer says: solve with
+            # every velocity and sum the classes (exact; the residual can only shrink)
+            from markov.chain.statespace import lump_velocity_keys
+            from markov.chain.transition import state_indices
+
+            full = self.with_every_velocity().solution(method, tol)
+            self.build_seconds += full.build_seconds
+            col = state_indices(self.keys, lump_velocity_keys(self.ring, full.keys, self.lump,
+                                                              self.velocities))
+            r = full.result
+            pi = np.bincount(col, weights=r.pi, minlength=self.n_states)
+            result = StationaryResult(pi, r.method, r.residual, r.iterations, r.seconds)
+            return Solution(self.ring, self.keys, result, full.nonzeros, self.build_seconds,
+                            self.lump, full.operator, full.level_sizes, census=self.census,
+                            lumping=self.lumping)
         matrix = self.ring.trivial or self.operator_kind == "matrix"
         if not matrix and method in ("direct", "eigs") and self.operator == "auto" \
                 and self.matrix_bytes(method) <= self.limit:
@@ -887,8 +920,10 @@ class Solution:
             On rotation classes (configurations when not ``lumped``), with
             ``lumping`` None.
         """
-        if self.lumping is None:
-            return self
+        return self if self.lumping is None else self._expanded
+
+    @cached_property
+    def _expanded(self) -> "Solution":
         from markov.chain.encoding import unique_keys
 
         parts_k, parts_w = [], []
@@ -1082,7 +1117,7 @@ class Solution:
 def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFAULT_TOL,
           max_memory: float | None = None, operator: str = "auto",
           state_bound: Callable[[Ring, bool], int | None] | None = None,
-          lump_velocities: bool = True) -> Solution:
+          lump_velocities: bool | None = None) -> Solution:
     """Exact stationary state of a ring (any model and update).
 
     Parameters
@@ -1094,7 +1129,8 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     method : {"auto", "direct", "eigs", "iterative", "gmres", "bicgstab", "power", "aggregation"}
         Stationary solver (:func:`markov.solvers.stationary.stationary`).
     lump : bool
-        Lump rotations of the ring (default; exact for all reported observables).
+        Lump rotations of the ring (default; exact for all reported observables);
+        False keeps every configuration (and, by default, every velocity).
     tol : float
         Residual target of iterative solvers.
     max_memory : float, optional
@@ -1107,10 +1143,10 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
         A lower bound of the number of states before enumerating them
         (see :class:`RingChain`), e.g.
         :func:`markov.goe.census.recurrent_class_bound`.
-    lump_velocities : bool
-        Merge the velocities the rule cannot tell apart (default; exact under
-        parallel and ordered-sequential update, see :class:`RingChain`);
-        False keeps every velocity.
+    lump_velocities : bool, optional
+        Merge the velocities the rule cannot tell apart (default ``lump``;
+        exact under parallel and ordered-sequential update, see
+        :class:`RingChain`); False keeps every velocity.
 
     Returns
     -------
@@ -1152,7 +1188,7 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
 def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
                   lump: bool = True, tol: float = DEFAULT_TOL,
                   max_memory: float | None = None,
-                  lump_velocities: bool = True) -> ClassSolutions:
+                  lump_velocities: bool | None = None) -> ClassSolutions:
     """The stationary state of each closed class: a reducible chain answered in full.
 
     Parameters
@@ -1171,8 +1207,9 @@ def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
     tol : float
     max_memory : float, optional
         Bytes allowed.
-    lump_velocities : bool
-        Merge the velocities the rule cannot tell apart (:class:`RingChain`).
+    lump_velocities : bool, optional
+        Merge the velocities the rule cannot tell apart (:class:`RingChain`;
+        default ``lump``).
 
     Returns
     -------
