@@ -184,7 +184,8 @@ def test_refused_before_enumerating_when_the_count_predicts_too_many_states(monk
     # velocities lumped: a lumped state merges at most 2**N rotation classes
     with pytest.raises(StateSpaceTooLargeError,
                        match=f"at least {-(-lower // 2**12):,} states.*velocities lumped"):
-        RingChain(ring, max_memory=1e4, state_bound=recurrent_class_bound).keys
+        RingChain(ring, max_memory=1e4, state_bound=recurrent_class_bound,
+                  lump_velocities=True).keys
     # the command line passes the bound (--no-lump: every state, every velocity)
     total = recurrent_class_count(24, 12, 2)
     out = CliRunner().invoke(main, ["solve", "-L", "24", "-N", "12", "--p", "0.5",
