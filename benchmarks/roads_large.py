@@ -15,6 +15,9 @@ seconds are its own.  Tables, one run:
   L = 22, N = 11 (p 0.25), this version, same run.
 * **phase**: ``phase_grid`` 21 x 21 at L = 12, vmax 2 (p 0.25), this version and the
   previous, same run.
+* **rings**: NaSch rings (p 0.5) with every velocity and with velocities lumped
+  (``lump_velocities``): vmax 2 L = 22, 24 and vmax 1 L = 28, 32 (lumped only:
+  9.3e9 states with every velocity).
 
 Results go to ``benchmarks/results/roads_large.csv`` and ``roads_large.md``,
 rewritten after every case.
@@ -44,7 +47,7 @@ from pathlib import Path  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
-TABLES = ("targets", "previous", "per_state", "phase")
+TABLES = ("targets", "previous", "per_state", "phase", "rings")
 COLUMNS = ["table", "tool", "case", "states", "size", "operator", "method", "products",
            "search_s", "solve_s", "total_s", "peak_MB", "residual", "flux", "note"]
 PREVIOUS = "0f4cf9a"        # the commit before velocity lumping, the sweep, the prediction
@@ -116,6 +119,23 @@ def work_ring(L: int, N: int) -> dict:
             "method": sol.result.method, "products": sol.result.iterations,
             "search_s": search, "solve_s": sol.result.seconds,
             "total_s": time.perf_counter() - t0, "residual": sol.residual, "flux": sol.flux}
+
+
+def work_ring_lumped(L: int, N: int, vmax: int, lump_velocities: bool) -> dict:
+    from markov import Ring, RingChain
+
+    RingChain(Ring(8, 4, vmax, 0.5), lump_velocities=lump_velocities).solution()
+    t0 = time.perf_counter()
+    chain = RingChain(Ring(L, N, vmax, 0.5), max_memory=20 * 2**30,
+                      lump_velocities=lump_velocities)
+    chain.keys
+    search = time.perf_counter() - t0
+    sol = chain.solution(tol=1e-10)
+    return {"states": sol.n_states, "size": sol.nonzeros, "operator": sol.operator,
+            "method": sol.result.method, "products": sol.result.iterations,
+            "search_s": search, "solve_s": sol.result.seconds,
+            "total_s": time.perf_counter() - t0, "residual": sol.residual, "flux": sol.flux,
+            "note": "velocities lumped" if lump_velocities else "every velocity"}
 
 
 def work_phase(L: int) -> dict:
@@ -244,6 +264,19 @@ def main() -> None:
             meta["ratios"].append(f"phase grid: previous / this = "
                                   f"{old['total_s'] / new['total_s']:.1f}x"
                                   f" ({old['total_s']:.0f} s -> {new['total_s']:.0f} s)")
+    if "rings" in args.only:
+        for L, N, vmax in ((22, 11, 2), (24, 12, 2), (28, 14, 1), (32, 16, 1)):
+            case = f"vmax {vmax} ring L = {L}, N = {N}"
+            kept = None
+            if (L, vmax) != (32, 1):          # every velocity: 9.3e9 states at L = 32
+                kept = run("rings", "kept", case, "work_ring_lumped", [L, N, vmax, False])
+            lumped = run("rings", "lumped", case, "work_ring_lumped", [L, N, vmax, True])
+            if kept and kept.get("total_s") and lumped.get("total_s"):
+                meta["ratios"].append(
+                    f"{case}: every velocity / lumped = {kept['total_s'] / lumped['total_s']:.2f}x"
+                    f" seconds, {kept['peak_MB'] / lumped['peak_MB']:.2f}x peak memory, states"
+                    f" {kept['states']:,} -> {lumped['states']:,}, flux difference"
+                    f" {abs(kept['flux'] - lumped['flux']):.1e}")
     if "targets" in args.only:
         for vmax, L in ((2, 18), (1, 24), (2, 20)):
             run("targets", "this", f"vmax {vmax} road L = {L}", "work_road", [vmax, L])

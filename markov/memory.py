@@ -208,26 +208,34 @@ def matrix_bytes(states: int, transitions: int, method: str = "auto") -> float:
 
 
 #: Bytes per link of the factored road sweep: an int32 parent, a uint16 code, and the
-#: words' row pointers and work vector (measured 12.9 at 720,896 links, L = 16 vmax 1).
+#: words' row pointers and work vector (measured 12.6-12.9: 720,896 links at L = 16 and
+#: 251,658,240 at L = 24, vmax 1).
 _ROAD_LINK_BYTES = 13
+#: Peak of building the sweep over what it keeps (the stage's sorted children beside
+#: the kept links): 1.8 measured at L = 24 vmax 1 (5.7 GB against 3.17 GB kept).
+_ROAD_BUILD_PEAK = 1.8
 
 
-def road_factored_bytes(states: int, links: int, method: str = "iterative") -> float:
+def road_factored_bytes(states: int, links: int, method: str = "bicgstab") -> float:
     """Peak bytes of a road solved with the factored sweep
-    (:class:`markov.chain.road_factored.RoadFactoredOperator`).
+    (:class:`markov.chain.road_factored.RoadFactoredOperator`): the larger of its
+    build and of its solve (the links, the keys, the solver's vectors).
 
     Parameters
     ----------
     states, links : int
     method : str
-        The product method (the solver's vectors).
+        The product method (the solver's vectors): ``bicgstab``, which the road's
+        ``iterative`` solve runs first and converged with on every road measured
+        (its GMRES(60) fallback would need 69 vectors).
 
     Returns
     -------
     float
     """
-    return links * _ROAD_LINK_BYTES + states * (
-        search_bytes_per_state() + _KEY + 8 * solver_vectors(method))
+    kept = links * _ROAD_LINK_BYTES
+    return max(_ROAD_BUILD_PEAK * kept + states * search_bytes_per_state(),
+               kept + states * (_KEY + 8 * solver_vectors(method)))
 
 
 def check_fits(what: str, need: float, limit: float, hint: str = "") -> None:

@@ -37,6 +37,14 @@ def warm() -> None:
             solution.top_configurations(3)
         simulate(Ring(64, 16, 2, 0.5, update), steps=200, seed=1)
     RingChain(Ring(8, 4, 2, 0.5), lump=False, operator="matrix").solution().to_dict()
+    for update, operators in (("parallel", ("matrix", "matrix-free")),
+                              (ORDERED_SEQUENTIAL, ("matrix",))):
+        for operator in operators:           # velocities lumped: the step's observables
+            solution = RingChain(Ring(8, 4, 2, 0.5, update), operator=operator,
+                                 lump_velocities=True).solution()
+            solution.to_dict()
+            solution.top_configurations(3)
+            solution.cluster_probabilities(2)
     warm_roads()
 
 

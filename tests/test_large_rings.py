@@ -30,7 +30,7 @@ def test_operator_solvers_reach_tolerance_and_the_direct_answer(method, L, N, vm
     keys = recurrent_keys(ring)
     parallel = update == "parallel"
     op = (FactoredOperator if parallel else SequentialOperator)(ring, keys, lump=True)
-    chain = RingChain(ring)
+    chain = RingChain(ring, lump_velocities=False)   # the aggregates need every velocity
     aggregates = chain.aggregates if method == "aggregation" else None
     res = stationary(op, method, tol=1e-11, aggregates=aggregates)
     assert res.residual <= 1e-11 and res.method.split(":")[0] == method
@@ -112,7 +112,8 @@ def test_memory_guard_refuses_with_the_number():
     # with room: aggregation at small p, the BiCGSTAB ladder at large p
     for p, method in ((0.1, "aggregation"), (0.3, "aggregation"), (0.5, "iterative"),
                       (0.9, "iterative")):
-        roomy = RingChain(Ring(14, 7, 2, p), operator="matrix-free")
+        # aggregation needs every velocity (the lumped chain never takes it)
+        roomy = RingChain(Ring(14, 7, 2, p), operator="matrix-free", lump_velocities=False)
         assert roomy.solution(tol=1e-10).result.method.split(":")[0] == method
     for bad in (-1.0, 0, float("nan"), float("inf"), "1"):
         with pytest.raises(InvalidParameterError, match="max_memory"):
@@ -178,11 +179,18 @@ def test_refused_before_enumerating_when_the_count_predicts_too_many_states(monk
     lower = -(-recurrent_class_count(24, 12, 2) // 24)  # orbits have at most L members
     ring = Ring(24, 12, 2, 0.5)
     with pytest.raises(StateSpaceTooLargeError, match=f"at least {lower:,} states"):
-        RingChain(ring, max_memory=1e9, state_bound=recurrent_class_bound).keys
-    # the command line passes the bound
+        RingChain(ring, max_memory=1e9, state_bound=recurrent_class_bound,
+                  lump_velocities=False).keys
+    # velocities lumped: a lumped state merges at most 2**N rotation classes
+    with pytest.raises(StateSpaceTooLargeError,
+                       match=f"at least {-(-lower // 2**12):,} states.*velocities lumped"):
+        RingChain(ring, max_memory=1e4, state_bound=recurrent_class_bound,
+                  lump_velocities=True).keys
+    # the command line passes the bound (--no-lump: every state, every velocity)
+    total = recurrent_class_count(24, 12, 2)
     out = CliRunner().invoke(main, ["solve", "-L", "24", "-N", "12", "--p", "0.5",
-                                    "--max-memory", "0.9"])
-    assert out.exit_code == 2 and f"at least {lower:,} states" in out.output
+                                    "--max-memory", "0.9", "--no-lump"])
+    assert out.exit_code == 2 and f"at least {total:,} states" in out.output
 
 
 def test_the_solver_takes_its_size_bound_from_the_caller(monkeypatch):
@@ -197,5 +205,5 @@ def test_the_solver_takes_its_size_bound_from_the_caller(monkeypatch):
     ring = Ring(14, 7, 2, 0.5)
     assert solve(ring).n_states > 0
     with pytest.raises(StateSpaceTooLargeError, match=r"at least 1\.00e\+12 states"):
-        RingChain(ring, max_memory=1e6, state_bound=bound).keys
+        RingChain(ring, max_memory=1e6, state_bound=bound, lump_velocities=False).keys
     assert calls == [(14, True)]

@@ -91,7 +91,7 @@ def test_vdr_dflux_dp0_equals_the_derivative_of_the_exact_rational_flux():
     from symbolic.exact import transition_polynomials
 
     ring = _ring("vdr", "parallel", 6, 3, vmax=2, p=0.25, p0=0.5)
-    keys = RingChain(ring).keys
+    keys = RingChain(ring, lump_velocities=False).keys   # the exact solver keeps them
     n = len(keys)
     p0 = sympy.Symbol("p0")
     dom = sympy.QQ.frac_field(p0)
@@ -122,20 +122,20 @@ def test_vdr_dflux_dp0_equals_the_derivative_of_the_exact_rational_flux():
 
 def test_dpi_solves_the_differentiated_balance_and_matches_the_change_of_pi():
     ring = Ring(8, 3, 2, 0.35)
-    chain = RingChain(ring, operator="matrix")
+    chain = RingChain(ring, operator="matrix", lump_velocities=False)   # dpi on its states
     s = sensitivity(chain, "p")
     P = chain.matrix.toarray()
     pi = chain.solution().pi
     # dP by central differences of the matrices on the same states
-    dP = (RingChain(ring.with_p(0.35 + H)).matrix.toarray()
-          - RingChain(ring.with_p(0.35 - H)).matrix.toarray()) / (2 * H)
+    dP = (RingChain(ring.with_p(0.35 + H), lump_velocities=False).matrix.toarray()
+          - RingChain(ring.with_p(0.35 - H), lump_velocities=False).matrix.toarray()) / (2 * H)
     assert np.abs(dP.sum(axis=1)).max() < 1e-9                       # rows of dP sum to 0
     h = derivative_product(chain, pi, weight_derivatives(ring.model, "p"))
     assert np.abs(h - pi @ dP).max() < 1e-8
     assert np.abs(s.dpi @ (np.eye(len(pi)) - P) - pi @ dP).max() < 1e-8
     assert abs(s.dpi @ np.ones(len(pi))) < 1e-14                     # orthogonal to 1
-    dpi = (RingChain(ring.with_p(0.35 + H)).solution().pi
-           - RingChain(ring.with_p(0.35 - H)).solution().pi) / (2 * H)
+    dpi = (RingChain(ring.with_p(0.35 + H), lump_velocities=False).solution().pi
+           - RingChain(ring.with_p(0.35 - H), lump_velocities=False).solution().pi) / (2 * H)
     assert np.abs(s.dpi - dpi).max() < 1e-8
     # the projection: pi_+ = pi + h dpi to first order
     assert np.abs(s.dc_v - (solve(ring.with_p(0.35 + H)).c_v

@@ -119,10 +119,13 @@ def prepare(ring_or_chain, pi: np.ndarray | None = None) -> StationaryChain:
     >>> len(sc.pi), bool(np.allclose(sc.step(sc.pi), sc.pi))
     (2, True)
     """
+    # the dynamics read each state's velocities: every velocity kept
     if isinstance(ring_or_chain, Ring):
-        chain = RingChain(ring_or_chain)
+        chain = RingChain(ring_or_chain, lump_velocities=False)
     elif isinstance(ring_or_chain, RingChain):
-        chain = ring_or_chain
+        chain = ring_or_chain.with_every_velocity()
+        if chain is not ring_or_chain:
+            pi = None   # a vector over the lumped states: solved again
     else:
         raise InvalidParameterError(
             "expected a markov.Ring or markov.RingChain, got"

@@ -307,7 +307,7 @@ def _derivative_table(table: RuleTable, dweight: np.ndarray) -> tuple[RuleTable,
 
 
 def _rows_product(ring: Ring, keys: np.ndarray, lump: bool, x: np.ndarray,
-                  dweight: np.ndarray) -> np.ndarray:
+                  dweight: np.ndarray, velocities: np.ndarray | None = None) -> np.ndarray:
     """``x dP`` from the row generator, in chunks of about :data:`_ENTRIES_PER_CHUNK` entries."""
     table, ratio = _derivative_table(ring.table(), dweight)
     n = len(keys)
@@ -319,7 +319,7 @@ def _rows_product(ring: Ring, keys: np.ndarray, lump: bool, x: np.ndarray,
         # at least one state per chunk, else as many as the entry budget allows
         stop = max(start + 1, int(np.searchsorted(ends, (ends[start - 1] if start else 0)
                                                   + _ENTRIES_PER_CHUNK, side="right")))
-        rows = successors(ring, keys[start:stop], lump, table=table)
+        rows = successors(ring, keys[start:stop], lump, table=table, velocities=velocities)
         col = state_indices(keys, rows.keys)
         dprob = rows.probabilities() * (rows.ids @ ratio)
         # every row of dP sums to zero (the rows of P sum to one at every value)
@@ -375,21 +375,22 @@ def derivative_product(chain: RingChain, x: np.ndarray, derivatives: WeightDeriv
             raise InvalidParameterError(
                 "the factored route needs parallel update and 0 < N < L; use route='rows'")
         return chain.transition_operator.derivative_apply(x, derivatives.dweight)
-    return _rows_product(ring, chain.keys, chain.lump, x, derivatives.dweight)
+    return _rows_product(ring, chain.keys, chain.lump, x, derivatives.dweight, chain.velocities)
 
 
 # --------------------------------------------------------------- the solve
 
 
 def _chain_of(system, solution: Solution | None) -> RingChain:
+    # dc_v reads the states' velocities: every velocity kept
     if isinstance(system, RingChain):
-        chain = system
+        chain = system.with_every_velocity()
     elif isinstance(system, Ring):
         if solution is not None:   # its keys, without searching again
             chain = RingChain.on_class(system, solution.keys, solution.lumped,
-                                       operator=solution.operator)
+                                       operator=solution.operator, lump_velocities=False)
         else:
-            chain = RingChain(system)
+            chain = RingChain(system, lump_velocities=False)
     else:
         raise InvalidParameterError(
             f"sensitivity needs a RingChain or a Ring, got {type(system).__name__}")
@@ -414,7 +415,9 @@ def sensitivity(system, parameter: str, solution: Solution | None = None,
     parameter : str
         A probability parameter of the model (``p``; ``p0`` for VDR, ...).
     solution : Solution, optional
-        The stationary state of ``system`` (default: ``chain.solution()``).
+        The stationary state of ``system`` (default: ``chain.solution()``);
+        one with velocities lumped is solved again with every velocity (the
+        derivative reads the states' velocities).
     route : {"auto", "rows", "factored"}
         How ``pi dP`` is formed (:data:`ROUTES`).
     tol : float
@@ -449,6 +452,8 @@ def sensitivity(system, parameter: str, solution: Solution | None = None,
     if route == "factored" and ring.update != PARALLEL:
         raise InvalidParameterError(
             f"the factored route is for parallel update, not {ring.update}; use route='rows'")
+    if solution is not None and solution.lumping is not None:
+        solution = None   # over velocity classes: solved again with every velocity
     chain = _chain_of(system, solution)
     if solution is None:
         solving = time.perf_counter()

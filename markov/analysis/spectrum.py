@@ -492,7 +492,8 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
 
     limit = memory_limit(max_memory)
     if keys is None:
-        chain = RingChain(ring, max_memory=max_memory)
+        # the sectors are taken with every velocity kept
+        chain = RingChain(ring, max_memory=max_memory, lump_velocities=False)
         keys = chain.keys
         if chain.unverified:
             # a large chain of a model not proven irreducible: the stationary solve

@@ -185,7 +185,8 @@ def support_graph_bytes(ring: Ring, n_states: int) -> float:
 
 
 def closed_classes(ring: Ring, keys: np.ndarray, lump: bool,
-                   max_memory: float | None = None) -> list[np.ndarray]:
+                   max_memory: float | None = None,
+                   velocities: np.ndarray | None = None) -> list[np.ndarray]:
     """The closed classes inside a closed set of states.
 
     Parameters
@@ -196,6 +197,10 @@ def closed_classes(ring: Ring, keys: np.ndarray, lump: bool,
     lump : bool
     max_memory : float, optional
         Bytes allowed (default 75 % of physical memory).
+    velocities : int64 array, optional
+        Digit map of merged velocities the keys are written with
+        (:meth:`markov.model.lumping.VelocityClasses.digit_map`); ``None``
+        keeps every velocity.
 
     Returns
     -------
@@ -230,7 +235,7 @@ def closed_classes(ring: Ring, keys: np.ndarray, lump: bool,
             f" support graph, over the limit of {gib(limit)}")
     if n == 1:
         return [keys]
-    indptr, succ = successor_keys(ring, keys, lump)
+    indptr, succ = successor_keys(ring, keys, lump, velocities)
     return closed_classes_of_graph(keys, indptr, succ)
 
 
@@ -271,7 +276,8 @@ def closed_classes_of_graph(keys: np.ndarray, indptr: np.ndarray,
 
 
 def all_configurations_classes(ring: Ring, lump: bool = True,
-                               max_memory: float | None = None) -> list[np.ndarray]:
+                               max_memory: float | None = None,
+                               velocities: np.ndarray | None = None) -> list[np.ndarray]:
     """Every closed class of the ring's chain, over all configurations.
 
     Parameters
@@ -279,6 +285,8 @@ def all_configurations_classes(ring: Ring, lump: bool = True,
     ring : Ring
     lump : bool
     max_memory : float, optional
+    velocities : int64 array, optional
+        Digit map of merged velocities; ``None`` keeps every velocity.
 
     Returns
     -------
@@ -309,7 +317,8 @@ def all_configurations_classes(ring: Ring, lump: bool = True,
             f"{count_all(ring):,} configurations (L={ring.length}, N={ring.cars},"
             f" vmax={ring.vmax}) and their support graph need about {gib(need)}, over the"
             f" limit of {gib(limit)}")
-    return closed_classes(ring, all_keys(ring, lump, max_memory), lump, max_memory)
+    return closed_classes(ring, all_keys(ring, lump, max_memory, velocities), lump, max_memory,
+                          velocities)
 
 
 def lattice_irreducible(lattice) -> bool:

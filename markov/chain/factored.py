@@ -73,6 +73,7 @@ from markov._jit import njit, prange
 from markov.chain.encoding import powers, unique_keys
 from markov.chain.kernels import (
     ahead_velocity,
+    as_digit_map,
     canonical,
     canonical_shift,
     cars_of,
@@ -516,8 +517,14 @@ def _step(words, j, w, rule: LevelRule, links: bool):
 # ------------------------------------------------------------------------ the move
 
 @njit(cache=True)
-def _moved_key(word, length, ncars, w, pw, bits, lump):
-    """State key after R4 of a last-level word (canonical rotation if ``lump``)."""
+def _moved_key(word, length, ncars, w, pw, bits, lump, digit_map):
+    """State key after R4 of a last-level word (canonical rotation if ``lump``).
+
+    A car that moved ``v`` cells is written with the digit ``digit_map[v + 1]``
+    (its velocity class) when ``digit_map`` is not empty: the position takes
+    the exact velocity, the key the merged one.
+    """
+    merge = digit_map.shape[0] > 0
     mask = word >> (ncars * w)
     vmask = (np.int64(1) << w) - 1
     key = np.int64(0)
@@ -525,22 +532,25 @@ def _moved_key(word, length, ncars, w, pw, bits, lump):
     for x in range(length):
         if (mask >> x) & 1:
             v = (word >> (t * w)) & vmask
-            key += term(x, v, length, pw)
+            if merge:
+                key += digit_map[v + 1] * pw[(x + v) % length]
+            else:
+                key += term(x, v, length, pw)
             t += 1
     return canonical(key, length, pw, bits) if lump else key
 
 
 @njit(cache=True, parallel=True)
-def _moved_keys(words, length, ncars, w, pw, bits, lump, out):
+def _moved_keys(words, length, ncars, w, pw, bits, lump, digit_map, out):
     for i in prange(words.shape[0]):
-        out[i] = _moved_key(words[i], length, ncars, w, pw, bits, lump)
+        out[i] = _moved_key(words[i], length, ncars, w, pw, bits, lump, digit_map)
 
 
 @njit(cache=True, parallel=True)
-def _moved_shifts(words, length, ncars, w, pw, bits, out):
+def _moved_shifts(words, length, ncars, w, pw, bits, digit_map, out):
     """For each last-level word: the shift ``r`` of its moved key from the canonical one."""
     for i in prange(words.shape[0]):
-        key = _moved_key(words[i], length, ncars, w, pw, bits, False)
+        key = _moved_key(words[i], length, ncars, w, pw, bits, False, digit_map)
         out[i] = canonical_shift(key, length, pw, bits)[1]
 
 
@@ -564,7 +574,8 @@ def _segments(sorted_values, targets, offsets):
     return missing + (m - k)
 
 
-def frontier_successors(ring: Ring, keys: np.ndarray, lump: bool) -> np.ndarray:
+def frontier_successors(ring: Ring, keys: np.ndarray, lump: bool,
+                        velocities: np.ndarray | None = None) -> np.ndarray:
     """Sorted distinct successor states of a set of states (parallel update, any model).
 
     The support of ``x P`` for ``x`` supported on ``keys``, found through the
@@ -577,6 +588,11 @@ def frontier_successors(ring: Ring, keys: np.ndarray, lump: bool) -> np.ndarray:
     keys : (n,) int64 array
         States (canonical keys if ``lump``).
     lump : bool
+    velocities : int64 array, optional
+        Digit map of merged velocities
+        (:meth:`markov.model.lumping.VelocityClasses.digit_map`): the keys
+        (level 0 reads their rows, the same for merged velocities) and the
+        successors are written with it; ``None`` keeps every velocity.
 
     Returns
     -------
@@ -590,7 +606,7 @@ def frontier_successors(ring: Ring, keys: np.ndarray, lump: bool) -> np.ndarray:
         words = _step(words, j, w, rule, False)[0]
     out = np.empty_like(words)
     _moved_keys(words, ring.length, ring.cars, w, powers(ring.length, ring.vmax),
-                shift_bits(ring.vmax), bool(lump), out)
+                shift_bits(ring.vmax), bool(lump), as_digit_map(velocities), out)
     return unique_keys(out)
 
 
@@ -750,6 +766,10 @@ class FactoredOperator(ChainOperator):
         recurrent class (:func:`markov.chain.statespace.recurrent_keys`).
     lump : bool
         Whether ``keys`` are rotation classes.
+    velocities : int64 array, optional
+        Digit map of merged velocities
+        (:meth:`markov.model.lumping.VelocityClasses.digit_map`) the keys and
+        successors are written with; ``None`` keeps every velocity.
 
     Attributes
     ----------
@@ -781,12 +801,13 @@ class FactoredOperator(ChainOperator):
     """
 
     def __init__(self, ring: Ring, keys: np.ndarray, lump: bool, _levels=None,
-                 shifts: bool = False):
+                 shifts: bool = False, velocities: np.ndarray | None = None):
         if ring.update != PARALLEL:
             raise InvalidParameterError("the factored operator is for parallel update")
         if ring.cars < 1:
             raise InvalidParameterError("the factored operator needs at least one car")
         super().__init__(ring, keys, lump)
+        self.velocities = None if velocities is None else as_digit_map(velocities)
         if _levels is None:
             _levels = self._build(_model_rule(ring.model), shifts and lump)
         (self.rule, self._perm, self._offsets0, self._links, self._offsets_last,
@@ -823,11 +844,12 @@ class FactoredOperator(ChainOperator):
             sizes.append(len(words))
         targets = np.empty_like(words)
         pw, bits = powers(ring.length, ring.vmax), shift_bits(ring.vmax)
-        _moved_keys(words, ring.length, ring.cars, w, pw, bits, self.lump, targets)
+        digit_map = as_digit_map(self.velocities)
+        _moved_keys(words, ring.length, ring.cars, w, pw, bits, self.lump, digit_map, targets)
         word_shift = None
         if shifts:
             word_shift = np.empty(len(words), np.int16)
-            _moved_shifts(words, ring.length, ring.cars, w, pw, bits, word_shift)
+            _moved_shifts(words, ring.length, ring.cars, w, pw, bits, digit_map, word_shift)
         del words
         order = np.argsort(targets, kind="stable")
         offsets_last = np.empty(n + 1, dtype=np.int64)
@@ -890,10 +912,12 @@ class FactoredOperator(ChainOperator):
     def _with_ring(self, ring: Ring) -> "FactoredOperator":
         rule = _reweigh(self.rule, ring.table())
         if rule is None:
-            return FactoredOperator(ring, self.keys, self.lump, shifts=self._shifts is not None)
+            return FactoredOperator(ring, self.keys, self.lump, shifts=self._shifts is not None,
+                                    velocities=self.velocities)
         levels = (rule, self._perm, self._offsets0, self._links, self._offsets_last,
                   self.level_sizes, self._shifts)
-        return FactoredOperator(ring, self.keys, self.lump, _levels=levels)
+        return FactoredOperator(ring, self.keys, self.lump, _levels=levels,
+                                velocities=self.velocities)
 
     def derivative_apply(self, x: np.ndarray, dweight: np.ndarray,
                          out: np.ndarray | None = None) -> np.ndarray:
@@ -944,7 +968,7 @@ class FactoredOperator(ChainOperator):
             if cached is None or not np.array_equal(cached[0], dweight):
                 rule = level_rule(table, dweight)
                 split = FactoredOperator(self.ring, self.keys, self.lump,
-                                         _levels=self._build(rule))
+                                         _levels=self._build(rule), velocities=self.velocities)
                 cached = (dweight.copy(), split)
                 self._split = cached
             op = cached[1]

@@ -29,7 +29,8 @@ import numpy as np
 from markov._jit import DISABLE_JIT, intrinsic, njit
 
 __all__ = ["digits_of", "cars_of", "gap", "term", "rotate", "shift_bits",
-           "canonical", "canonical_shift", "orbit_size", "rotate_mask", "smallest_rotation", "ahead_velocity",
+           "canonical", "canonical_shift", "merge_velocities", "merge_velocity_keys",
+           "as_digit_map", "orbit_size", "rotate_mask", "smallest_rotation", "ahead_velocity",
            "row_length", "successor_row", "PARALLEL_CODE", "RANDOM_SEQUENTIAL_CODE",
            "ORDERED_SEQUENTIAL_CODE"]
 
@@ -73,6 +74,53 @@ def gap(pos, n, i, length):
 def term(x, w, length, pw):
     """Key term of a car that was at ``x`` and moved ``w`` cells (its velocity is ``w``)."""
     return (w + 1) * pw[(x + w) % length]
+
+
+# ------------------------------------------------------------------ velocity classes
+
+def as_digit_map(velocities) -> np.ndarray:
+    """The kernels' form of a velocity digit map: int64, empty for none.
+
+    Parameters
+    ----------
+    velocities : array-like or None
+        :meth:`markov.model.lumping.VelocityClasses.digit_map`, or ``None``
+        (every velocity kept).
+
+    Returns
+    -------
+    int64 array
+    """
+    if velocities is None:
+        return np.empty(0, np.int64)
+    return np.ascontiguousarray(velocities, dtype=np.int64)
+
+
+@njit(cache=True)
+def merge_velocities(key, length, b, digit_map):
+    """``key`` with every digit ``d`` written as ``digit_map[d]``.
+
+    ``digit_map`` is :meth:`markov.model.lumping.VelocityClasses.digit_map`
+    (each velocity to its class's smallest); an empty map leaves the key as it
+    is (every velocity kept).  The map commutes with rotations, so a canonical
+    rotation may be taken before or after.
+    """
+    if digit_map.shape[0] == 0:
+        return key
+    out = np.int64(0)
+    pw = np.int64(1)
+    for _ in range(length):
+        out += digit_map[key % b] * pw
+        key //= b
+        pw *= b
+    return out
+
+
+@njit(cache=True)
+def merge_velocity_keys(keys, length, b, digit_map, out):
+    """:func:`merge_velocities` of every key into ``out``."""
+    for i in range(keys.shape[0]):
+        out[i] = merge_velocities(keys[i], length, b, digit_map)
 
 
 # ------------------------------------------------------------------ rotations

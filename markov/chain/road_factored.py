@@ -653,12 +653,17 @@ class RoadFactoredOperator(spla.LinearOperator):
         _state_words(self.keys, B, L, W, digit_of, words0)
         pending: list[list] = [[] for _ in range(L + 1)]
 
+        # links held compact while they wait for their stage (int32 parent, small code)
+        small_code = np.uint16 if tab.n_moves < np.iinfo(np.uint16).max else np.int32
+
         def scatter(child, code, stage, parents):
             keep = code.ravel() >= 0
             child = child.ravel()[keep]
-            code = code.ravel()[keep]
+            code = code.ravel()[keep].astype(small_code)
             stage = stage.ravel()[keep]
             par = np.repeat(parents, M)[keep]
+            if len(par) and par[-1] <= _INT32_MAX:     # parents ascend: the last is largest
+                par = par.astype(np.int32)
             order = np.argsort(stage, kind="stable")
             stage = stage[order]
             cut = np.searchsorted(stage, np.arange(L + 2))

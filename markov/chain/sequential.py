@@ -24,7 +24,14 @@ import numpy as np
 
 from markov._jit import njit, prange
 from markov.chain.encoding import powers
-from markov.chain.kernels import canonical, canonical_shift, shift_bits, successor_row
+from markov.chain.kernels import (
+    as_digit_map,
+    canonical,
+    canonical_shift,
+    merge_velocities,
+    shift_bits,
+    successor_row,
+)
 from markov.chain.operator import ChainOperator
 from markov.errors import InvalidParameterError
 from markov.model.ring import RANDOM_SEQUENTIAL, Ring
@@ -181,9 +188,10 @@ def _apply_rows(keys, tkeys, tvals, hbits, x, acc, length, vmax, pw, bits, lump,
 
 
 @njit(cache=True, parallel=True)
-def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, update, cap, count,
+def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, digit_map, update, cap, count,
                     new_velocity, weight, weight_id, horizon, out):
-    """Successors of ``keys[i]`` into ``out[indptr[i]:indptr[i+1]]`` (rows of at most ``cap``)."""
+    """Successors of ``keys[i]`` into ``out[indptr[i]:indptr[i+1]]`` (rows of at most ``cap``;
+    velocities merged through ``digit_map`` unless it is empty)."""
     n = keys.shape[0]
     nblocks = (n + _BLOCK - 1) // _BLOCK
     for blk in prange(nblocks):
@@ -194,12 +202,16 @@ def _successor_keys(keys, indptr, length, vmax, pw, bits, lump, update, cap, cou
             lo, hi = indptr[i], indptr[i + 1]
             successor_row(keys[i], length, vmax, pw, update, count, new_velocity, weight,
                           weight_id, horizon, pos, vel, rows, digit, out[lo:hi], w, ids, mult)
+            if digit_map.shape[0] > 0:
+                for j in range(lo, hi):
+                    out[j] = merge_velocities(out[j], length, vmax + 2, digit_map)
             if lump:
                 for j in range(lo, hi):
                     out[j] = canonical(out[j], length, pw, bits)
 
 
-def successor_keys(ring: Ring, keys: np.ndarray, lump: bool) -> tuple[np.ndarray, np.ndarray]:
+def successor_keys(ring: Ring, keys: np.ndarray, lump: bool,
+                   velocities: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Successor keys of every state, threaded, from the row generator.
 
     Parameters
@@ -210,6 +222,10 @@ def successor_keys(ring: Ring, keys: np.ndarray, lump: bool) -> tuple[np.ndarray
     keys : (n,) int64 array
     lump : bool
         Canonical rotations of the successors.
+    velocities : int64 array, optional
+        Digit map of merged velocities
+        (:meth:`markov.model.lumping.VelocityClasses.digit_map`); ``None``
+        keeps every velocity.
 
     Returns
     -------
@@ -226,7 +242,7 @@ def successor_keys(ring: Ring, keys: np.ndarray, lump: bool) -> tuple[np.ndarray
     np.cumsum(counts, out=indptr[1:])
     out = np.empty(int(indptr[-1]), dtype=np.int64)
     _successor_keys(keys, indptr, ring.length, ring.vmax, powers(ring.length, ring.vmax),
-                    shift_bits(ring.vmax), bool(lump), ring.update_code,
+                    shift_bits(ring.vmax), bool(lump), as_digit_map(velocities), ring.update_code,
                     int(counts.max(initial=1)), *ring.kernel_rule(), out)
     return indptr, out
 

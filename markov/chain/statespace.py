@@ -24,12 +24,13 @@ from markov.chain.encoding import (
     powers,
     unique_keys,
 )
+from markov.chain.kernels import as_digit_map, merge_velocity_keys
 from markov.errors import StateSpaceTooLargeError
 from markov.memory import gib, memory_limit, search_bytes_per_state
 from markov.model.ring import PARALLEL, Ring
 from markov.progress import progress_bar
 
-__all__ = ["recurrent_keys", "all_keys", "count_all", "contains_nasch_support"]
+__all__ = ["recurrent_keys", "all_keys", "lump_velocity_keys", "count_all", "contains_nasch_support"]
 
 # States per call of the successor kernels: bounds the frontier's transient
 # arrays (words of every level, successor keys) to a few hundred MB.
@@ -99,20 +100,51 @@ def _not_in(sorted_set: np.ndarray, candidates: np.ndarray) -> np.ndarray:
     return candidates[sorted_set[idx] != candidates]
 
 
-def _successor_set(ring: Ring, frontier: np.ndarray, lump: bool) -> np.ndarray:
+def _successor_set(ring: Ring, frontier: np.ndarray, lump: bool,
+                   velocities: np.ndarray | None = None) -> np.ndarray:
     """Sorted distinct successors of the frontier states (the support of ``x P``)."""
     if ring.update == PARALLEL:
         from markov.chain.factored import factored_fits, frontier_successors
 
         if factored_fits(ring):
-            return frontier_successors(ring, frontier, lump)
-        return _row_successors(ring, frontier, lump)
+            return frontier_successors(ring, frontier, lump, velocities)
+        return _row_successors(ring, frontier, lump, velocities)
     from markov.chain.sequential import successor_keys
 
-    return unique_keys(successor_keys(ring, frontier, lump)[1])
+    return unique_keys(successor_keys(ring, frontier, lump, velocities)[1])
 
 
-def _row_successors(ring: Ring, frontier: np.ndarray, lump: bool) -> np.ndarray:
+def lump_velocity_keys(ring: Ring, keys: np.ndarray, lump: bool,
+                       velocities: np.ndarray | None) -> np.ndarray:
+    """Keys with their velocities merged (and rotated to the canonical one if ``lump``).
+
+    Parameters
+    ----------
+    ring : Ring
+    keys : int64 array
+    lump : bool
+        Canonical rotations.
+    velocities : int64 array or None
+        Digit map (:meth:`markov.model.lumping.VelocityClasses.digit_map`);
+        ``None`` keeps every velocity.
+
+    Returns
+    -------
+    int64 array
+        Same shape, not sorted.
+    """
+    keys = np.ascontiguousarray(keys, dtype=np.int64)
+    if velocities is not None:
+        out = np.empty_like(keys)
+        merge_velocity_keys(keys, ring.length, ring.vmax + 2, as_digit_map(velocities), out)
+        keys = out
+    if lump:
+        keys = canonical_keys(keys, ring.length, ring.vmax)
+    return keys
+
+
+def _row_successors(ring: Ring, frontier: np.ndarray, lump: bool,
+                    velocities: np.ndarray | None = None) -> np.ndarray:
     """:func:`_successor_set` from the row generator, ``2**k`` keys per state.
 
     For parallel rings whose factored word does not fit 62 bits (e.g. L = 24,
@@ -127,13 +159,15 @@ def _row_successors(ring: Ring, frontier: np.ndarray, lump: bool) -> np.ndarray:
     while lo < frontier.size:
         before = ends[lo - 1] if lo else 0
         hi = max(lo + 1, int(np.searchsorted(ends, before + _CHUNK, side="right")))
-        found.append(unique_keys(successors(ring, frontier[lo:hi], lump).keys))
+        found.append(unique_keys(successors(ring, frontier[lo:hi], lump,
+                                            velocities=velocities).keys))
         lo = hi
     return found[0] if len(found) == 1 else unique_keys(np.concatenate(found))
 
 
 def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = None,
-                   per_state: float | None = None, start: int | None = None) -> np.ndarray:
+                   per_state: float | None = None, start: int | None = None,
+                   velocities: np.ndarray | None = None) -> np.ndarray:
     """Sorted keys of everything reachable from the compact jam (or from ``start``).
 
     For NaSch with ``0 < p < 1`` that is the recurrent class of the chain; for
@@ -153,6 +187,11 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
         and at least the search's own :func:`markov.memory.search_bytes_per_state`.
     start : int, optional
         Key of the configuration to start from (default the compact jam).
+    velocities : int64 array, optional
+        Digit map of merged velocities
+        (:meth:`markov.model.lumping.VelocityClasses.digit_map`): the start
+        and every successor are written with it.  ``None`` (default) keeps
+        every velocity.
 
     Returns
     -------
@@ -191,13 +230,11 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
         # everywhere too, so w lies in its one closed class.
         top = min(ring.vmax, ring.length - 1)
         start = encode([top] + [-1] * (ring.length - 1), ring.vmax)
-    visited = np.array([start], dtype=np.int64)
-    if lump:
-        visited = canonical_keys(visited, ring.length, ring.vmax)
+    visited = lump_velocity_keys(ring, np.array([start], dtype=np.int64), lump, velocities)
     frontier = visited
     with progress_bar(None, "recurrent class", "state") as bar:
         while frontier.size:
-            found = [_successor_set(ring, frontier[lo:lo + _CHUNK], lump)
+            found = [_successor_set(ring, frontier[lo:lo + _CHUNK], lump, velocities)
                      for lo in range(0, frontier.size, _CHUNK)]
             new = _not_in(visited, found[0] if len(found) == 1
                           else unique_keys(np.concatenate(found)))
@@ -207,13 +244,15 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
             if visited.size * per_state > limit:
                 raise StateSpaceTooLargeError(
                     f"the recurrent class has more than {visited.size:,} states"
-                    f" (L={ring.length}, N={ring.cars}, vmax={ring.vmax}, lump={lump});"
+                    f" (L={ring.length}, N={ring.cars}, vmax={ring.vmax}, lump={lump}"
+                    f"{', velocities lumped' if velocities is not None else ''});"
                     f" at about {per_state:.0f} bytes per state that exceeds the memory"
                     f" limit of {gib(limit)}")
     return visited
 
 
-def all_keys(ring: Ring, lump: bool = False, max_memory: float | None = None) -> np.ndarray:
+def all_keys(ring: Ring, lump: bool = False, max_memory: float | None = None,
+             velocities: np.ndarray | None = None) -> np.ndarray:
     """Sorted keys of every configuration with ``N`` cars (canonical if ``lump``).
 
     Refuses (:class:`StateSpaceTooLargeError`) when ``count_all(ring)`` keys
@@ -224,6 +263,9 @@ def all_keys(ring: Ring, lump: bool = False, max_memory: float | None = None) ->
     ring : Ring
     lump : bool
     max_memory : float, optional
+    velocities : int64 array, optional
+        Digit map of merged velocities: one key per class; ``None`` keeps
+        every velocity.
 
     Returns
     -------
@@ -245,6 +287,4 @@ def all_keys(ring: Ring, lump: bool = False, max_memory: float | None = None) ->
                       dtype=np.int64)                         # (V, N) v + 1
     keys = np.concatenate([place_pw @ row for row in digits]) if len(places) < len(digits) \
         else (place_pw[:, None, :] * digits[None, :, :]).sum(axis=2).ravel()
-    if lump:
-        keys = canonical_keys(keys, ring.length, ring.vmax)
-    return unique_keys(keys)
+    return unique_keys(lump_velocity_keys(ring, keys, lump, velocities))

@@ -30,7 +30,14 @@ import scipy.sparse as sp
 
 from markov._jit import njit
 from markov.chain.encoding import powers
-from markov.chain.kernels import canonical, row_length, shift_bits, successor_row
+from markov.chain.kernels import (
+    as_digit_map,
+    canonical,
+    merge_velocities,
+    row_length,
+    shift_bits,
+    successor_row,
+)
 from markov.model.ring import PARALLEL, RANDOM_SEQUENTIAL, Ring
 from markov.progress import progress_bar
 
@@ -88,9 +95,10 @@ def _row_lengths(keys, length, vmax, update, count, new_velocity, horizon, out):
 
 
 @njit(cache=True)
-def _fill_rows(keys, indptr, length, vmax, pw, bits, lump, update, count, new_velocity,
-               weight, weight_id, horizon, out_keys, out_weight, out_ids, out_mult):
-    """Row ``i`` of :func:`successors` at ``indptr[i]:indptr[i+1]``."""
+def _fill_rows(keys, indptr, length, vmax, pw, bits, lump, digit_map, update, count,
+               new_velocity, weight, weight_id, horizon, out_keys, out_weight, out_ids, out_mult):
+    """Row ``i`` of :func:`successors` at ``indptr[i]:indptr[i+1]`` (velocities merged
+    through ``digit_map`` when it is not empty, then rotated if ``lump``)."""
     pos = np.empty(length, np.int64)
     vel = np.empty(length, np.int64)
     rows = np.empty((length, 3), np.int64)
@@ -101,6 +109,9 @@ def _fill_rows(keys, indptr, length, vmax, pw, bits, lump, update, count, new_ve
         successor_row(keys[i], length, vmax, pw, update, count, new_velocity, weight,
                       weight_id, horizon, pos, vel, rows, digit, out_keys[lo:hi],
                       out_weight[lo:hi], out_ids[lo:hi] if ids else out_ids, out_mult[lo:hi])
+        if digit_map.shape[0] > 0:
+            for j in range(lo, hi):
+                out_keys[j] = merge_velocities(out_keys[j], length, vmax + 2, digit_map)
         if lump:
             for j in range(lo, hi):
                 out_keys[j] = canonical(out_keys[j], length, pw, bits)
@@ -126,7 +137,8 @@ def successor_counts(ring: Ring, keys: np.ndarray) -> np.ndarray:
     return counts
 
 
-def successors(ring: Ring, keys: np.ndarray, lump: bool, table=None) -> SuccessorRows:
+def successors(ring: Ring, keys: np.ndarray, lump: bool, table=None,
+               velocities: np.ndarray | None = None) -> SuccessorRows:
     """All successors of the given states, with what each entry's probability is made of.
 
     Parameters
@@ -141,6 +153,10 @@ def successors(ring: Ring, keys: np.ndarray, lump: bool, table=None) -> Successo
         The rule table to read (default ``ring.table()``); with one, the
         entries also count the cars per weight of the table
         (:attr:`SuccessorRows.ids`), as the exact rational solver needs.
+    velocities : int64 array, optional
+        Digit map (:meth:`markov.model.lumping.VelocityClasses.digit_map`)
+        the successor keys are written through: the chain with velocities
+        lumped.  ``None`` keeps every velocity.
 
     Returns
     -------
@@ -165,7 +181,8 @@ def successors(ring: Ring, keys: np.ndarray, lump: bool, table=None) -> Successo
     out = (np.empty(m, np.int64), np.empty(m, np.float64),
            np.zeros((m if nids else 0, nids), np.int8), np.empty(m, np.int32))
     _fill_rows(keys, indptr, ring.length, ring.vmax, powers(ring.length, ring.vmax),
-               shift_bits(ring.vmax), bool(lump), ring.update_code, t.count, t.new_velocity,
+               shift_bits(ring.vmax), bool(lump), as_digit_map(velocities), ring.update_code,
+               t.count, t.new_velocity,
                t.weight, t.weight_id, t.horizon, *out)
     norm = {PARALLEL: 1, RANDOM_SEQUENTIAL: ring.length}.get(ring.update, max(ring.cars, 1))
     return SuccessorRows(indptr, *out, norm)
@@ -201,7 +218,8 @@ def state_indices(keys: np.ndarray, successors: np.ndarray) -> np.ndarray:
     return col
 
 
-def transition_matrix(ring: Ring, keys: np.ndarray, lump: bool) -> sp.csr_array:
+def transition_matrix(ring: Ring, keys: np.ndarray, lump: bool,
+                      velocities: np.ndarray | None = None) -> sp.csr_array:
     """Row-stochastic transition matrix on the sorted state keys ``keys``.
 
     Parameters
@@ -212,6 +230,9 @@ def transition_matrix(ring: Ring, keys: np.ndarray, lump: bool) -> sp.csr_array:
         A closed set of (canonical, if ``lump``) configuration keys.
     lump : bool
         Whether ``keys`` are rotation classes.
+    velocities : int64 array, optional
+        Digit map of merged velocities (:func:`successors`); ``None`` keeps
+        every velocity.
 
     Returns
     -------
@@ -230,7 +251,7 @@ def transition_matrix(ring: Ring, keys: np.ndarray, lump: bool) -> sp.csr_array:
     indptrs, cols, vals = [], [], []
     with progress_bar(n, "transition matrix", "state") as bar:
         for start in range(0, n, _CHUNK):
-            rows = successors(ring, keys[start:start + _CHUNK], lump)
+            rows = successors(ring, keys[start:start + _CHUNK], lump, velocities=velocities)
             col = state_indices(keys, rows.keys)
             indptrs.append(rows.indptr[1:] + (indptrs[-1][-1] if indptrs else 0))
             cols.append(col)

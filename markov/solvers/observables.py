@@ -27,7 +27,7 @@ from markov.model.ring import Ring
 from markov.validate import ensure_int
 
 __all__ = ["cluster_probabilities", "velocity_densities", "gap_distribution", "expected_move",
-           "velocity_counts"]
+           "velocity_counts", "stepped_velocity_densities"]
 
 
 @njit(cache=True)
@@ -226,3 +226,55 @@ def expected_move(ring: Ring, keys: np.ndarray, pi: np.ndarray,
                            np.ascontiguousarray(pi, np.float64), ring.length, ring.vmax,
                            count, new_velocity, weight, horizon)
     return total / ring.length
+
+
+@njit(cache=True)
+def _stepped_velocity_counts(keys, weights, length, vmax, count, new_velocity, weight, horizon,
+                             out):
+    pos = np.empty(length, np.int64)
+    vel = np.empty(length, np.int64)
+    for i in range(keys.shape[0]):
+        n = cars_of(keys[i], length, vmax + 2, pos, vel)
+        for j in range(n):
+            v, g, a = vel[j], min(gap(pos, n, j, length), horizon), ahead_velocity(vel, n, j)
+            for k in range(count[v, g, a]):
+                out[new_velocity[v, g, a, k]] += weights[i] * weight[v, g, a, k]
+
+
+def stepped_velocity_densities(ring: Ring, keys: np.ndarray, pi: np.ndarray) -> np.ndarray:
+    """``c_v`` one parallel step after ``pi``: every car's velocity law given its row.
+
+    Under parallel update each car draws its new velocity from its own row of
+    the table, so the expected number of cars of velocity ``v`` after the
+    step is a sum of per-car marginals; no successor is enumerated.  For a
+    stationary ``pi`` of the chain with velocities lumped
+    (:mod:`markov.model.lumping`) this is the exact ``c_v``: the full vector is
+    one step from the lumped one.
+
+    Parameters
+    ----------
+    ring : Ring
+        Parallel update.
+    keys : (m,) int64 array
+        States (the velocities of a merged class all give the same rows).
+    pi : (m,) float array
+
+    Returns
+    -------
+    (vmax + 1,) float array
+
+    Examples
+    --------
+    One car on three cells at v = 1 keeps v = 1 with ``q = 0.75``:
+
+    >>> from markov.chain.encoding import encode
+    >>> keys = np.array([encode([1, -1, -1], 1)])
+    >>> (stepped_velocity_densities(Ring(3, 1, 1, 0.25), keys, np.array([1.0])) * 3).tolist()
+    [0.25, 0.75]
+    """
+    count, new_velocity, weight, _, horizon = ring.kernel_rule()
+    out = np.zeros(ring.vmax + 1)
+    _stepped_velocity_counts(np.ascontiguousarray(keys, np.int64),
+                             np.ascontiguousarray(pi, np.float64), ring.length, ring.vmax,
+                             count, new_velocity, weight, horizon, out)
+    return out / ring.length

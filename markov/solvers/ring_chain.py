@@ -32,13 +32,14 @@ from markov.chain.statespace import count_all, recurrent_keys
 from markov.chain.transition import successor_counts, transition_matrix
 from markov.choices import METHODS, OPERATORS, PRODUCT_METHODS
 from markov.errors import InvalidParameterError, NoUniqueStationaryStateError
+from markov.model.lumping import VelocityClasses, velocity_classes
 from markov.model.ring import ORDERED_SEQUENTIAL, PARALLEL, Ring
 from markov.solvers import observables
 from markov.solvers.stationary import DEFAULT_TOL, StationaryResult, stationary
 from markov.validate import ensure_max_memory, ensure_tol, format_count
 
 __all__ = ["RingChain", "Solution", "ClassSolution", "solve", "solve_classes", "load_solution",
-           "ClassSolutions", "to_frame", "representable", "min_p", "MIN_P"]
+           "ClassSolutions", "to_frame", "representable", "min_p", "MIN_P", "velocity_lumping"]
 
 # OPERATORS (markov.choices): how ``x -> x P`` is applied (see
 # RingChain.operator_kind for ``auto``): ``matrix`` the assembled CSR matrix
@@ -81,7 +82,10 @@ SPLIT_MAX_STATES = 200_000
 #: ``p = 1`` themselves are exact (the outcome of weight 0 is no transition).
 MIN_P = 1e-15
 
-_TINY = float(np.finfo(float).tiny)   # the smallest normal double, 2.2e-308
+_TINY = float(np.finfo(float).tiny)
+
+# successor entries per chunk of Solution._stepped (about 20 MB of arrays)
+_STEP_CHUNK = 1 << 20   # the smallest normal double, 2.2e-308
 
 
 def min_p(ring: Ring) -> float:
@@ -158,8 +162,41 @@ def _ensure_representable(ring: Ring) -> None:
                 f" 1 - {smallest:.2g}")
 
 
-def _start_key(ring: Ring, start, lump: bool) -> int | None:
-    """The key of a start configuration given as text (``"2..1.0"``), or ``None``."""
+def velocity_lumping(ring: Ring) -> VelocityClasses | None:
+    """The velocity classes a ring's chain merges, or ``None`` (every velocity kept).
+
+    :func:`markov.model.lumping.velocity_classes` of the ring's table, under
+    parallel and ordered-sequential update (every car moves in a step, so the
+    full vector is one step from the lumped one); ``None`` for
+    random-sequential update (a sub-step keeps the other cars' merged
+    velocities, which could not be recovered), for a trivial ring and where
+    nothing merges.
+
+    Parameters
+    ----------
+    ring : Ring
+
+    Returns
+    -------
+    VelocityClasses or None
+
+    Examples
+    --------
+    >>> velocity_lumping(Ring(8, 4, 2, 0.5)).describe()
+    'v1 = v2'
+    >>> velocity_lumping(Ring(8, 4, 2, 0.5, "random-sequential")) is None
+    True
+    """
+    if ring.update not in (PARALLEL, ORDERED_SEQUENTIAL) or ring.trivial:
+        return None
+    t = ring.table()
+    classes = velocity_classes(t.count[None], t.new_velocity[None], t.weight[None])
+    return None if classes.trivial else classes
+
+
+def _start_key(ring: Ring, start, lump: bool, velocities=None) -> int | None:
+    """The key of a start configuration given as text (``"2..1.0"``), or ``None``;
+    its velocities merged through the digit map ``velocities`` when given."""
     if start is None:
         return None
     from markov.chain.encoding import canonical_keys, encode, from_text
@@ -174,6 +211,11 @@ def _start_key(ring: Ring, start, lump: bool) -> int | None:
             f"the start configuration {start!r} has {len(cells)} cells and {cars} cars;"
             f" the ring has L = {ring.length}, N = {ring.cars}")
     key = encode(cells, ring.vmax)
+    if velocities is not None:
+        from markov.chain.statespace import lump_velocity_keys
+
+        key = int(lump_velocity_keys(ring, np.array([key], dtype=np.int64), False,
+                                     velocities)[0])
     if lump:
         key = int(canonical_keys(np.array([key], dtype=np.int64), ring.length, ring.vmax)[0])
     return key
@@ -230,7 +272,20 @@ class RingChain:
         :func:`markov.goe.census.recurrent_class_bound` (the ``nasch``
         commands pass it).  A chain the bound already puts over the memory
         limit is refused at once; without it the state-space search refuses
-        as soon as the states it has found do not fit.
+        as soon as the states it has found do not fit.  The bound counts
+        states with every velocity; with velocities lumped the refusal uses
+        it divided by ``m**N`` (``m`` the largest velocity class: a lumped
+        state stands for at most that many rotation classes).
+    start : str, optional
+        A start configuration in text notation: the classes it reaches.
+    lump_velocities : bool, optional
+        Default False for now (``nasch solve`` lumps unless ``--no-lump``).  Merge the velocities the rule cannot tell apart
+        (:func:`velocity_lumping`; exact under parallel and ordered-sequential
+        update, :mod:`markov.model.lumping`): a state is then a class of
+        configurations with the same positions and velocity classes, and
+        :class:`Solution` recovers every observable, and the full vector, by
+        one step of the full chain.  False keeps every velocity (the analyses
+        of :mod:`markov.analysis` read stored velocities along time and do).
 
     Examples
     --------
@@ -248,14 +303,23 @@ class RingChain:
     def __init__(self, ring: Ring, lump: bool = True, max_memory: float | None = None,
                  operator: str = "auto",
                  state_bound: Callable[[Ring, bool], int | None] | None = None,
-                 start: str | None = None):
+                 start: str | None = None, lump_velocities: bool | None = None):
         ensure_chain_arguments(_ensure_ring(ring), max_memory=max_memory)
         if not ring.homogeneous:
             raise InvalidParameterError(
                 "a ring with a stretch has no rotation symmetry: its chain is"
                 " markov.solvers.road_chain.RoadChain (markov.solve takes it)")
         self.ring = ring
-        self.start = _start_key(ring, start, lump)
+        #: The velocity classes merged (:func:`velocity_lumping`), or None
+        if lump_velocities is None:
+            # opt-in for the Python API until the tests written against the
+            # rotation-only states are moved over (the command line lumps)
+            lump_velocities = False
+        self.lumping = velocity_lumping(ring) if lump_velocities else None
+        #: Their digit map, as the chain's kernels take it, or None
+        self.velocities = None if self.lumping is None else self.lumping.digit_map()
+        self._start_text = start
+        self.start = _start_key(ring, start, lump, self.velocities)
         self.lump = lump
         self.max_memory = max_memory
         self.limit = memory.memory_limit(max_memory)
@@ -271,7 +335,8 @@ class RingChain:
     @classmethod
     def on_class(cls, ring: Ring, keys: np.ndarray, lump: bool = True,
                  max_memory: float | None = None, operator: str = "matrix",
-                 census: ClassCensus | None = None) -> "RingChain":
+                 census: ClassCensus | None = None,
+                 lump_velocities: bool | None = None) -> "RingChain":
         """The chain on a closed class given by its keys, without the search.
 
         Parameters
@@ -286,6 +351,9 @@ class RingChain:
         operator : {"auto", "matrix", "matrix-free"}
         census : ClassCensus, optional
             How the class was found (its solution reports it).
+        lump_velocities : bool, optional
+            Whether the keys have their velocities merged (:class:`RingChain`;
+            default False).
 
         Returns
         -------
@@ -297,7 +365,8 @@ class RingChain:
         >>> RingChain.on_class(chain.ring, chain.keys).n_states == chain.n_states
         True
         """
-        chain = cls(ring, lump=lump, max_memory=max_memory, operator=operator)
+        chain = cls(ring, lump=lump, max_memory=max_memory, operator=operator,
+                    lump_velocities=lump_velocities)
         keys = np.ascontiguousarray(keys, dtype=np.int64)
         chain.__dict__["reachable"] = keys
         chain.__dict__["classes"] = [keys]
@@ -319,18 +388,39 @@ class RingChain:
         RingChain
         """
         other = RingChain(self.ring.with_p(p), self.lump, self.max_memory, self.operator,
-                          self.state_bound)
+                          self.state_bound, lump_velocities=self.lumping is not None)
         other.start = self.start
         shared = ("keys", "transitions", "operator_kind", "aggregates", "reachable", "classes")
         if known_irreducible(other.ring) != known_irreducible(self.ring) or \
-                not known_irreducible(other.ring):
-            shared = ()   # the support may change with p (an outcome of weight 0)
+                not known_irreducible(other.ring) or other.lumping != self.lumping:
+            # the support may change with p (an outcome of weight 0), and the
+            # velocity classes with the weights
+            shared = ()
+        if other.lumping != self.lumping and self.start is not None:
+            raise InvalidParameterError(
+                "with_p changes the velocity classes of a chain with a start configuration;"
+                " build a new RingChain with start=...")
         for name in shared:
             if name in self.__dict__:
                 other.__dict__[name] = self.__dict__[name]
-        if "transition_operator" in self.__dict__:
+        if "transition_operator" in self.__dict__ and shared:
             other.__dict__["transition_operator"] = self.transition_operator.with_p(p)
         return other
+
+    def with_every_velocity(self) -> "RingChain":
+        """This chain with every velocity kept: ``self`` where nothing is lumped.
+
+        What reads stored velocities along time (:mod:`markov.analysis`) needs
+        it: a state of the lumped chain says only each velocity's class.
+
+        Returns
+        -------
+        RingChain
+        """
+        if self.lumping is None:
+            return self
+        return RingChain(self.ring, self.lump, self.max_memory, self.operator, self.state_bound,
+                         start=self._start_text, lump_velocities=False)
 
     def _matrix_free_bytes_per_state(self, method: str) -> float:
         if self.ring.update == PARALLEL:
@@ -358,10 +448,16 @@ class RingChain:
         if n is None:
             return
         r = self.ring
+        velocities = ""
+        if self.lumping is not None:
+            # a lumped state merges at most m**N rotation classes (m: the largest class)
+            m = max(len(c) for c in self.lumping.classes)
+            n = -(-n // m ** r.cars)
+            velocities = f", velocities lumped: {self.lumping.describe()}"
         memory.check_fits(
             f"the recurrent class has at least {format_count(n)} states (L={r.length},"
-            f" N={r.cars}, vmax={r.vmax}, lump={self.lump}); at about {per_state:.0f} bytes"
-            " per state it", n * per_state, self.limit)
+            f" N={r.cars}, vmax={r.vmax}, lump={self.lump}{velocities}); at about"
+            f" {per_state:.0f} bytes per state it", n * per_state, self.limit)
 
     @cached_property
     def reachable(self) -> np.ndarray:
@@ -373,7 +469,8 @@ class RingChain:
         else:
             self._precheck()
             keys = recurrent_keys(self.ring, self.lump, self.max_memory,
-                                  per_state=self._guard_bytes_per_state(), start=self.start)
+                                  per_state=self._guard_bytes_per_state(), start=self.start,
+                                  velocities=self.velocities)
         self.build_seconds += time.perf_counter() - start
         return keys
 
@@ -409,7 +506,8 @@ class RingChain:
             self.unverified = True
             self.census = ClassCensus(1, scope, configurations)
             return [self.reachable]
-        classes = closed_classes(self.ring, self.reachable, self.lump, self.max_memory)
+        classes = closed_classes(self.ring, self.reachable, self.lump, self.max_memory,
+                                 self.velocities)
         self.census = ClassCensus(len(classes), scope, configurations)
         self.build_seconds += time.perf_counter() - start
         return classes
@@ -424,7 +522,8 @@ class RingChain:
         start = time.perf_counter()
         top = int(self.keys[int(np.argmax(pi))])
         found = recurrent_keys(self.ring, self.lump, self.max_memory,
-                               per_state=self._guard_bytes_per_state(), start=top)
+                               per_state=self._guard_bytes_per_state(), start=top,
+                               velocities=self.velocities)
         self.build_seconds += time.perf_counter() - start
         if len(found) != len(self.keys):
             r = self.ring
@@ -470,7 +569,8 @@ class RingChain:
         from markov.chain.statespace import count_all
 
         start = time.perf_counter()
-        classes = all_configurations_classes(self.ring, self.lump, self.max_memory)
+        classes = all_configurations_classes(self.ring, self.lump, self.max_memory,
+                                             self.velocities)
         self.build_seconds += time.perf_counter() - start
         self.census = ClassCensus(len(classes), ALL_CONFIGURATIONS, count_all(self.ring))
         return classes
@@ -496,7 +596,8 @@ class RingChain:
         out = []
         for keys in classes:
             sol = RingChain.on_class(self.ring, keys, self.lump, self.max_memory,
-                                     self.operator, census=self.census).solution(tol=tol)
+                                     self.operator, census=self.census,
+                                     lump_velocities=self.lumping is not None).solution(tol=tol)
             out.append(ClassSolution(to_text(decode(int(keys[0]), self.ring.length,
                                                     self.ring.vmax)),
                                      int(keys[0]) in firsts, sol))
@@ -563,7 +664,8 @@ class RingChain:
                   if small_p
                   else ("iterative", "bicgstab", "aggregation", "power"))
         for method in prefer:
-            if method == "aggregation" and self.ring.update != PARALLEL:
+            if method == "aggregation" and (self.ring.update != PARALLEL
+                                            or self.lumping is not None):
                 continue
             if self.matrix_free_bytes(method) <= self.limit:
                 return method
@@ -625,7 +727,7 @@ class RingChain:
         if self.ring.update == PARALLEL:
             from markov.chain.factored import FactoredOperator
 
-            op = FactoredOperator(self.ring, keys, self.lump)
+            op = FactoredOperator(self.ring, keys, self.lump, velocities=self.velocities)
         else:
             from markov.chain.sequential import SequentialOperator
 
@@ -638,7 +740,7 @@ class RingChain:
         """Row-stochastic transition matrix on :attr:`keys`."""
         keys = self.keys
         start = time.perf_counter()
-        P = transition_matrix(self.ring, keys, self.lump)
+        P = transition_matrix(self.ring, keys, self.lump, self.velocities)
         self.build_seconds += time.perf_counter() - start
         return P
 
@@ -647,6 +749,10 @@ class RingChain:
         """Position configurations of the states (:func:`markov.solvers.aggregates.position_aggregates`)."""
         from markov.solvers.aggregates import position_aggregates
 
+        if self.lumping is not None:
+            raise InvalidParameterError(
+                "the position aggregates need every velocity (their source map reads how far"
+                " each car moved); build the chain with lump_velocities=False")
         return position_aggregates(self.ring, self.keys, self.lump)
 
     def solution(self, method: str = "auto", tol: float = DEFAULT_TOL,
@@ -687,6 +793,23 @@ class RingChain:
             raise InvalidParameterError(
                 "aggregation needs parallel update (the predecessors of a state share"
                 " their positions only there); use iterative, gmres, bicgstab or power")
+        if method == "aggregation" and self.lumping is not None and not self.ring.trivial:
+            # the aggregates' source map reads how far each car moved from its
+            # stored velocity, which a merged velocity no longer says: solve with
+            # every velocity and sum the classes (exact; the residual can only shrink)
+            from markov.chain.statespace import lump_velocity_keys
+            from markov.chain.transition import state_indices
+
+            full = self.with_every_velocity().solution(method, tol)
+            self.build_seconds += full.build_seconds
+            col = state_indices(self.keys, lump_velocity_keys(self.ring, full.keys, self.lump,
+                                                              self.velocities))
+            r = full.result
+            pi = np.bincount(col, weights=r.pi, minlength=self.n_states)
+            result = StationaryResult(pi, r.method, r.residual, r.iterations, r.seconds)
+            return Solution(self.ring, self.keys, result, full.nonzeros, self.build_seconds,
+                            self.lump, full.operator, full.level_sizes, census=self.census,
+                            lumping=self.lumping)
         matrix = self.ring.trivial or self.operator_kind == "matrix"
         if not matrix and method in ("direct", "eigs") and self.operator == "auto" \
                 and self.matrix_bytes(method) <= self.limit:
@@ -710,10 +833,10 @@ class RingChain:
             self._verify_one_class(result.pi)
         if matrix:
             return Solution(self.ring, self.keys, result, self.matrix.nnz, self.build_seconds,
-                            self.lump, "matrix", census=self.census)
+                            self.lump, "matrix", census=self.census, lumping=self.lumping)
         levels = tuple(P.level_sizes) if parallel_free else None
         return Solution(self.ring, self.keys, result, None, self.build_seconds, self.lump,
-                        "matrix-free", levels, census=self.census)
+                        "matrix-free", levels, census=self.census, lumping=self.lumping)
 
 
 @dataclass(frozen=True)
@@ -740,6 +863,12 @@ class Solution:
     census : ClassCensus or None
         How the uniqueness of this closed class is known
         (:class:`markov.chain.classes.ClassCensus`); ``None`` for a loaded file.
+    lumping : VelocityClasses or None
+        The velocity classes the states merge (:func:`velocity_lumping`), or
+        ``None``: every velocity kept.  With them, ``pi`` is the lumped chain's
+        and every observable that reads velocities is taken from one step of
+        the full chain (exact, :mod:`markov.model.lumping`); :meth:`expanded`
+        gives the full vector.
     """
 
     ring: Ring
@@ -751,6 +880,67 @@ class Solution:
     operator: str = "matrix"
     level_sizes: tuple | None = None
     census: ClassCensus | None = None
+    lumping: VelocityClasses | None = None
+
+    @property
+    def velocities(self) -> str:
+        """The velocity convention of the states, in words (echoed by every output)."""
+        if self.lumping is not None:
+            return f"lumped: {self.lumping.describe()}"
+        if self.ring.update not in (PARALLEL, ORDERED_SEQUENTIAL):
+            return "every velocity kept (random-sequential: a sub-step moves one car)"
+        return "every velocity kept"
+
+    def _stepped(self):
+        """One step of the full chain from ``pi``, in chunks: ``(keys, weights)`` pairs.
+
+        Successor keys keep every velocity (rotation classes when lumped);
+        duplicates are not summed, which the observables, linear in the
+        weights, do not need.  Exact for a lumped ``pi``: merged states have the
+        same row (:mod:`markov.model.lumping`).
+        """
+        from markov.chain.transition import successor_counts, successors
+
+        ends = np.cumsum(successor_counts(self.ring, self.keys))
+        lo = 0
+        while lo < len(self.keys):
+            before = int(ends[lo - 1]) if lo else 0
+            hi = max(lo + 1, int(np.searchsorted(ends, before + _STEP_CHUNK, side="right")))
+            rows = successors(self.ring, self.keys[lo:hi], self.lumped)
+            weights = rows.probabilities() * np.repeat(self.pi[lo:hi], np.diff(rows.indptr))
+            yield rows.keys, weights
+            lo = hi
+
+    def expanded(self) -> "Solution":
+        """The full stationary vector, every velocity kept: one step of the full chain
+        from the lumped vector (exact, :mod:`markov.model.lumping`); ``self`` where
+        nothing is lumped.
+
+        Returns
+        -------
+        Solution
+            On rotation classes (configurations when not ``lumped``), with
+            ``lumping`` None.
+        """
+        return self if self.lumping is None else self._expanded
+
+    @cached_property
+    def _expanded(self) -> "Solution":
+        from markov.chain.encoding import unique_keys
+
+        parts_k, parts_w = [], []
+        for succ, w in self._stepped():
+            keys = unique_keys(succ)
+            parts_k.append(keys)
+            parts_w.append(np.bincount(np.searchsorted(keys, succ), weights=w,
+                                       minlength=len(keys)))
+        succ, w = np.concatenate(parts_k), np.concatenate(parts_w)
+        keys = unique_keys(succ)
+        pi = np.bincount(np.searchsorted(keys, succ), weights=w, minlength=len(keys))
+        r = self.result
+        result = StationaryResult(pi, r.method, r.residual, r.iterations, r.seconds)
+        return Solution(self.ring, keys, result, None, self.build_seconds, self.lumped,
+                        self.operator, None, census=self.census)
 
     @property
     def pi(self) -> np.ndarray:
@@ -766,8 +956,16 @@ class Solution:
 
     @cached_property
     def c_v(self) -> np.ndarray:
-        """Velocity densities ``c_v``, ``v = 0..vmax``; they sum to ``N / L``."""
-        return observables.velocity_densities(self.ring, self.keys, self.pi)
+        """Velocity densities ``c_v``, ``v = 0..vmax``; they sum to ``N / L``.
+
+        With velocities lumped, the velocities after one step: per-car
+        marginals of each row (parallel), the step's successors (ordered-sequential).
+        """
+        if self.lumping is None:
+            return observables.velocity_densities(self.ring, self.keys, self.pi)
+        if self.ring.update == PARALLEL:
+            return observables.stepped_velocity_densities(self.ring, self.keys, self.pi)
+        return sum(observables.velocity_densities(self.ring, k, w) for k, w in self._stepped())
 
     @cached_property
     def flux(self) -> float:
@@ -803,7 +1001,11 @@ class Solution:
         -------
         ndarray of shape ``(vmax + 2,) * n``
         """
-        return observables.cluster_probabilities(self.ring, self.keys, self.pi, n)
+        if self.lumping is None:
+            return observables.cluster_probabilities(self.ring, self.keys, self.pi, n)
+        # linear in the weights: the step's chunks are summed as they come
+        return sum(observables.cluster_probabilities(self.ring, k, w, n)
+                   for k, w in self._stepped())
 
     def to_dict(self) -> dict:
         """JSON-ready summary (the fields of ``nasch solve --json``).
@@ -817,6 +1019,8 @@ class Solution:
             "length": r.length, "cars": r.cars, "vmax": r.vmax,
             "p": None if r.p is None else float(r.p), "model": r.model.describe(),
             "update": r.update, "density": r.density, "lumped": self.lumped,
+            "velocities": self.velocities,
+            "velocity_classes": None if self.lumping is None else self.lumping.to_dict(),
             "states": self.n_states, "nonzeros": self.nonzeros, "operator": self.operator,
             "level_sizes": list(self.level_sizes) if self.level_sizes else None,
             "method": self.result.method,
@@ -874,13 +1078,16 @@ class Solution:
         ----------
         path : str or os.PathLike
 
+        With velocities lumped the file holds the full vector, every velocity
+        (:meth:`expanded`).
+
         Returns
         -------
         pathlib.Path
             The file written.
         """
         from markov.solvers.storage import save_solution
-        return save_solution(self, path)
+        return save_solution(self.expanded(), path)
 
     def top_configurations(self, k: int) -> list[dict]:
         """The ``k`` most probable states in text notation
@@ -895,7 +1102,7 @@ class Solution:
         list of dict
         """
         from markov.solvers.storage import top_configurations
-        return top_configurations(self, k)
+        return top_configurations(self.expanded(), k)
 
     def unlumped(self) -> "Solution":
         """One state per configuration: a lumped solution's orbit sums spread over
@@ -906,12 +1113,13 @@ class Solution:
         Solution
         """
         from markov.solvers.storage import unlumped
-        return unlumped(self)
+        return unlumped(self.expanded())
 
 
 def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFAULT_TOL,
           max_memory: float | None = None, operator: str = "auto",
-          state_bound: Callable[[Ring, bool], int | None] | None = None) -> Solution:
+          state_bound: Callable[[Ring, bool], int | None] | None = None,
+          lump_velocities: bool | None = None) -> Solution:
     """Exact stationary state of a ring (any model and update).
 
     Parameters
@@ -923,7 +1131,8 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     method : {"auto", "direct", "eigs", "iterative", "gmres", "bicgstab", "power", "aggregation"}
         Stationary solver (:func:`markov.solvers.stationary.stationary`).
     lump : bool
-        Lump rotations of the ring (default; exact for all reported observables).
+        Lump rotations of the ring (default; exact for all reported observables);
+        False keeps every configuration.
     tol : float
         Residual target of iterative solvers.
     max_memory : float, optional
@@ -936,6 +1145,10 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
         A lower bound of the number of states before enumerating them
         (see :class:`RingChain`), e.g.
         :func:`markov.goe.census.recurrent_class_bound`.
+    lump_velocities : bool, optional
+        Merge the velocities the rule cannot tell apart (default False;
+        exact under parallel and ordered-sequential update, see
+        :class:`RingChain`); False keeps every velocity.
 
     Returns
     -------
@@ -970,12 +1183,14 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
     ensure_chain_arguments(_ensure_ring(ring), method=method, tol=tol, max_memory=max_memory)
     _ensure_representable(ring)
     return RingChain(ring, lump=lump, max_memory=max_memory, operator=operator,
-                     state_bound=state_bound).solution(method=method, tol=tol)
+                     state_bound=state_bound,
+                     lump_velocities=lump_velocities).solution(method=method, tol=tol)
 
 
 def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
                   lump: bool = True, tol: float = DEFAULT_TOL,
-                  max_memory: float | None = None) -> ClassSolutions:
+                  max_memory: float | None = None,
+                  lump_velocities: bool | None = None) -> ClassSolutions:
     """The stationary state of each closed class: a reducible chain answered in full.
 
     Parameters
@@ -994,6 +1209,9 @@ def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
     tol : float
     max_memory : float, optional
         Bytes allowed.
+    lump_velocities : bool, optional
+        Merge the velocities the rule cannot tell apart (:class:`RingChain`;
+        default False).
 
     Returns
     -------
@@ -1018,7 +1236,8 @@ def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
         return chain.class_solutions(tol)
     ensure_chain_arguments(_ensure_ring(ring), tol=tol, max_memory=max_memory)
     _ensure_representable(ring)
-    chain = RingChain(ring, lump=lump, max_memory=max_memory, operator="matrix", start=start)
+    chain = RingChain(ring, lump=lump, max_memory=max_memory, operator="matrix", start=start,
+                      lump_velocities=lump_velocities)
     if every:
         chain.search_all_configurations()
     return chain.class_solutions(tol)

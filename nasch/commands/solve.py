@@ -41,8 +41,8 @@ __all__ = ["solve"]
 @click.option("--tol", type=float, default=DEFAULT_TOL, show_default=True,
               help="Target ||pi P - pi||_1 of the iterative solvers, 1e-15..1e-3.")
 @click.option("--no-lump", is_flag=True,
-              help="Keep every state: a ring's rotations, a road's velocities that the rule"
-                   " cannot tell apart.")
+              help="Keep every state: a ring's rotations, and (ring and road) the velocities"
+                   " that the rule cannot tell apart.")
 @click.option("--max-memory", type=float, default=None,
               help="Refuse chains needing more than this many GiB (2**30 bytes; default"
                    " 75% of RAM). The Python API's max_memory is in bytes.")
@@ -132,6 +132,8 @@ def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, st
         save = check_output_path(save, suffixes=(".npz",))
     names = _sensitivity_names(ring, sensitivity, every_class)
     limit = None if max_memory is None else max_memory * 2**30
+    # the sensitivity and the dynamics read the chain's stored velocities: every one kept
+    dynamics = bool(names) or fluctuations or lags is not None
     one_state = [flag for flag, given in (("--top", top is not None), ("--save", save),
                                           ("--sensitivity", names), ("--fluctuations", fluctuations),
                                           ("--autocorrelation", lags is not None)) if given]
@@ -139,7 +141,7 @@ def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, st
         from markov.solvers.ring_chain import solve_classes
 
         classes = solve_classes(ring, every=every_class, start=start, lump=not no_lump, tol=tol,
-                                max_memory=limit)
+                                max_memory=limit, lump_velocities=False if (no_lump or dynamics) else None)
         if len(classes) > 1 or every_class:
             _echo_classes(ring, classes, as_json, start)
             return
@@ -148,7 +150,8 @@ def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, st
     else:
         # markov.solvers.ring_chain.solve, keeping the chain: a sensitivity reuses its operator
         chain = RingChain(ring, lump=not no_lump, max_memory=limit, operator=operator,
-                          state_bound=recurrent_class_bound)
+                          state_bound=recurrent_class_bound,
+                          lump_velocities=False if (no_lump or dynamics) else None)
         try:
             sol = chain.solution(method=method, tol=tol)
         except NoUniqueStationaryStateError as exc:
@@ -183,7 +186,9 @@ def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, st
         click.echo("  stretches " + " ".join(
             f"{x.first}-{x.last}:" + ",".join(f"{k}={v:g}" for k, v in x.values)
             for x in ring.stretches) + f" ({_BULK_STRETCHES})")
-    click.echo(f"  states {data['states']:,}{' (rotation classes)' if sol.lumped else ''},"
+    convention = ", ".join((["rotation classes"] if sol.lumped else [])
+                           + ([f"velocities {sol.velocities}"] if sol.lumping else []))
+    click.echo(f"  states {data['states']:,}{f' ({convention})' if convention else ''},"
                + (f" nonzeros {data['nonzeros']:,}," if data["nonzeros"] is not None
                   else " matrix-free,")
                + (f" level words {sum(sol.level_sizes):,}," if sol.level_sizes else "")
@@ -204,7 +209,7 @@ def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, st
     if fluctuations or lags is not None:
         _echo_dynamics(data)
     if rows is not None:
-        _echo_top(rows, sol.lumped, len(sol.keys))
+        _echo_top(rows, sol.lumped, sol.expanded().n_states)   # every velocity
     if save is not None:
         click.echo(f"wrote {save} ({data['states']:,} states)", err=True)
 
@@ -459,7 +464,7 @@ def _dynamics(sol, chain, start, limit, operator, fluctuations: bool, lags) -> d
 
     if chain is None:
         chain = RingChain(sol.ring, lump=sol.lumped, max_memory=limit, operator=operator,
-                          start=start)
+                          start=start, lump_velocities=False)
     pi = sol.pi if np.array_equal(chain.keys, sol.keys) else None
     out = {"time_unit": "sub-step" if sol.ring.update == "random-sequential" else "step"}
     if fluctuations:
