@@ -208,10 +208,12 @@ def test_cli_says_the_convention_and_no_lump_turns_both_off():
 
     from nasch.cli import main
 
-    # the command line follows the API's default (every velocity kept, for now)
+    # the command line lumps both (the API keeps every velocity unless asked, for now)
     out = CliRunner().invoke(main, ["solve", "-L", "10", "-N", "5", "--p", "0.5"])
     assert out.exit_code == 0, out.output
-    assert "(rotation classes)," in out.output
+    assert "(rotation classes, velocities lumped: v1 = v2)," in out.output
+    lumped = _solve(Ring(10, 5, 2, 0.5), lump_velocities=True)
+    assert f"states {lumped.n_states:,}" in out.output
     out = CliRunner().invoke(main, ["solve", "-L", "10", "-N", "5", "--p", "0.5", "--no-lump"])
     assert out.exit_code == 0 and "rotation classes" not in out.output
     assert f"states {_solve(Ring(10, 5, 2, 0.5), lump=False).n_states:,}," in out.output

@@ -141,7 +141,7 @@ def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, st
         from markov.solvers.ring_chain import solve_classes
 
         classes = solve_classes(ring, every=every_class, start=start, lump=not no_lump, tol=tol,
-                                max_memory=limit, lump_velocities=False if (no_lump or dynamics) else None)
+                                max_memory=limit, lump_velocities=not (no_lump or dynamics))
         if len(classes) > 1 or every_class:
             _echo_classes(ring, classes, as_json, start)
             return
@@ -151,7 +151,7 @@ def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, st
         # markov.solvers.ring_chain.solve, keeping the chain: a sensitivity reuses its operator
         chain = RingChain(ring, lump=not no_lump, max_memory=limit, operator=operator,
                           state_bound=recurrent_class_bound,
-                          lump_velocities=False if (no_lump or dynamics) else None)
+                          lump_velocities=not (no_lump or dynamics))
         try:
             sol = chain.solution(method=method, tol=tol)
         except NoUniqueStationaryStateError as exc:
