@@ -69,6 +69,7 @@ def _warm(vmax: int) -> None:
     from markov.solvers.road_chain import RoadChain
 
     RoadChain(_road(vmax, vmax + 2)).solution().to_dict()
+    RoadChain(_road(vmax, vmax + 2), operator="matrix-free").solution().to_dict()
 
 
 def work_road(vmax: int, L: int, operator: str = "auto") -> dict:

@@ -685,7 +685,11 @@ class RoadFactoredOperator(spla.LinearOperator):
         indptr_parts, parent_parts, code_parts = [], [], []
         nlinks = 0
         final_words = np.empty(0, np.int64)
+        from markov.progress import progress_bar
+
+        bar = progress_bar(L + 1, "factored sweep", "stage")
         for f in range(L + 1):
+            bar.update(1)
             parts = pending[f]
             pending[f] = []
             if parts:
@@ -721,6 +725,7 @@ class RoadFactoredOperator(spla.LinearOperator):
                               tab.transparent, self.fold, child, code, stage)
                 scatter(child, code, stage, np.arange(first, first + len(words), dtype=np.int64))
                 del child, code, stage
+        bar.close()
         n_words = stage_lo[-1] - n
         self.words = int(n_words)
         self.stage_sizes = [int(b - a) for a, b in zip(stage_lo[:-1], stage_lo[1:])]
