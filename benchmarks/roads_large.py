@@ -16,7 +16,7 @@ seconds are its own.  Tables, one run:
 * **phase**: ``phase_grid`` 21 x 21 at L = 12, vmax 2 (p 0.25), this version and the
   previous, same run.
 * **rings**: NaSch rings (p 0.5) with every velocity and with velocities lumped
-  (``lump_velocities``): vmax 2 L = 22, 24 and vmax 1 L = 28, 32 (lumped only:
+  (``lump_velocities``): vmax 2 L = 22, 24 and vmax 1 L = 24, 32 (lumped only:
   9.3e9 states with every velocity).
 
 Results go to ``benchmarks/results/roads_large.csv`` and ``roads_large.md``,
@@ -69,7 +69,10 @@ def _warm(vmax: int) -> None:
     from markov.solvers.road_chain import RoadChain
 
     RoadChain(_road(vmax, vmax + 2)).solution().to_dict()
-    RoadChain(_road(vmax, vmax + 2), operator="matrix-free").solution().to_dict()
+    try:
+        RoadChain(_road(vmax, vmax + 2), operator="matrix-free").solution().to_dict()
+    except Exception:       # the previous version has no factored road
+        pass
 
 
 def work_road(vmax: int, L: int, operator: str = "auto") -> dict:
@@ -266,7 +269,7 @@ def main() -> None:
                                   f"{old['total_s'] / new['total_s']:.1f}x"
                                   f" ({old['total_s']:.0f} s -> {new['total_s']:.0f} s)")
     if "rings" in args.only:
-        for L, N, vmax in ((22, 11, 2), (24, 12, 2), (28, 14, 1), (32, 16, 1)):
+        for L, N, vmax in ((22, 11, 2), (24, 12, 2), (24, 12, 1), (32, 16, 1)):
             case = f"vmax {vmax} ring L = {L}, N = {N}"
             kept = None
             if (L, vmax) != (32, 1):          # every velocity: 9.3e9 states at L = 32

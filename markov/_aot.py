@@ -50,6 +50,9 @@ KERNELS = (
     "markov.chain.transition._fill_rows",
     "markov.solvers.observables._cluster_histogram",
     "markov.solvers.observables._gap_histogram",
+    # a ring with velocities lumped (nasch solve's default): keys merged, c_v from the step
+    "markov.chain.kernels.merge_velocity_keys",
+    "markov.solvers.observables._stepped_velocity_counts",
 )
 
 #: Largest array (elements) a call may pass to a compiled copy: the serial

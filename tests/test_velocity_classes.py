@@ -166,3 +166,15 @@ def test_cli_says_what_is_lumped_and_no_lump_keeps_every_velocity():
     for obs in ("flux", "inflow", "mean_cars"):
         assert lumped[obs] == pytest.approx(full[obs], abs=1e-13)
     assert np.allclose(lumped["velocity_profile"], full["velocity_profile"], atol=1e-13)
+
+
+def test_the_full_vector_is_bounded_and_refused_before_it_is_built():
+    from markov.errors import StateSpaceTooLargeError
+
+    road = Road(8, load_model("nasch", {"vmax": 1, "p": 0.25}), "parallel", 0.3, 0.5,
+                "site1", "sink")
+    sol = RoadChain(road).solution()
+    # a lumped state of n cars stands for 2^n configurations: sum_n C(8, n) 2^n = 3^8
+    assert sol.full_states_bound() == 3 ** 8 >= sol.expanded().n_states
+    with pytest.raises(StateSpaceTooLargeError, match="full vector"):
+        sol.expanded(max_memory=1e5)

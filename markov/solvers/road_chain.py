@@ -432,6 +432,18 @@ def _occupation(keys, pi, length, b, density, cars):
         cars[n] += pi[i]
 
 
+@njit(cache=True)
+def _class_logs(keys, length, b, log_size, out):
+    """``out[i] = sum over the cars of key i of log(size of its velocity class)``."""
+    for i in range(keys.shape[0]):
+        k = keys[i]
+        t = 0.0
+        for _ in range(length):
+            t += log_size[k % b]
+            k //= b
+        out[i] = t
+
+
 #: States per call of the row generator when summing over a solved chain.
 _CHUNK = 1 << 16
 #: States per call when the rows are stored (a progress bar between calls).
@@ -559,26 +571,63 @@ class RoadSolution:
         _occupation(self.keys, self.pi, L, self.system.top_vmax + 2, density, cars)
         return density, self._step[self.lattice.layout["velocity"]], cars
 
-    def expanded(self) -> "RoadSolution":
+    def full_states_bound(self) -> int:
+        """At most this many states carry the full vector (:meth:`expanded`): each
+        lumped state stands for the product of its cars' class sizes.
+
+        Returns
+        -------
+        int
+        """
+        if self.lumping is None:
+            return self.n_states
+        sizes = np.array([0] + [len(c) for v in range(self.system.top_vmax + 1)
+                                for c in self.lumping.classes if v in c], dtype=np.float64)
+        logs = np.zeros(len(self.keys))
+        _class_logs(self.keys, self.system.length, self.system.top_vmax + 2,
+                    np.log(np.maximum(sizes, 1.0)), logs)
+        return int(np.exp(logs).sum() + 0.5)
+
+    def expanded(self, max_memory: float | None = None) -> "RoadSolution":
         """The full stationary vector, every velocity kept: one step of the full chain
         from the lumped vector (exact, :mod:`markov.model.lumping`); ``self`` where
         nothing is lumped.
 
+        Parameters
+        ----------
+        max_memory : float, optional
+            Bytes allowed (default 75 % of physical memory).
+
         Returns
         -------
         RoadSolution
+
+        Raises
+        ------
+        StateSpaceTooLargeError
+            When the full vector (:meth:`full_states_bound`) would not fit.
         """
         if self.lumping is None:
             return self
         from markov.chain.encoding import unique_keys
         from markov.chain.lattice import successors
 
+        bound = self.full_states_bound()
+        what = self.system.summary() if hasattr(self.system, "summary") else \
+            f"the ring L = {self.system.length}, N = {self.system.cars} with stretches"
+        memory.check_fits(f"the full vector of {what} (at most {bound:,}"
+                          " states, every velocity)", 48.0 * bound,
+                          memory.memory_limit(max_memory),
+                          ": --top and --save need it; the lumped solve answers the rest")
         full = self.lattice.unlumped()
         parts_k, parts_w = [], []
         for lo in range(0, len(self.keys), _CHUNK):
             indptr, succ, w = successors(full, self.keys[lo:lo + _CHUNK])
-            parts_k.append(succ)
-            parts_w.append(w * np.repeat(self.pi[lo:lo + _CHUNK], np.diff(indptr)))
+            w = w * np.repeat(self.pi[lo:lo + _CHUNK], np.diff(indptr))
+            keys = unique_keys(succ)              # summed per chunk: the parts stay small
+            parts_k.append(keys)
+            parts_w.append(np.bincount(np.searchsorted(keys, succ), weights=w,
+                                       minlength=len(keys)))
         succ = np.concatenate(parts_k)
         w = np.concatenate(parts_w)
         keys = unique_keys(succ)

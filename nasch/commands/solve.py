@@ -270,7 +270,7 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
     if dynamics:
         data.update(_road_dynamics(chain, sol, names, fluctuations, lags, tol))
     # --top and --save: the full vector, every velocity (one step from the lumped one)
-    full = sol.expanded() if top is not None or save is not None else sol
+    full = sol.expanded(limit) if top is not None or save is not None else sol
     rows = full.top_configurations(top) if top else None
     if save is not None:
         full.save(save)
