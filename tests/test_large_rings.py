@@ -181,11 +181,15 @@ def test_refused_before_enumerating_when_the_count_predicts_too_many_states(monk
     with pytest.raises(StateSpaceTooLargeError, match=f"at least {lower:,} states"):
         RingChain(ring, max_memory=1e9, state_bound=recurrent_class_bound,
                   lump_velocities=False).keys
-    # velocities lumped: a lumped state merges at most 2**N rotation classes
+    # velocities lumped: the same bound (the search and the levels grow with every velocity)
     with pytest.raises(StateSpaceTooLargeError,
-                       match=f"at least {-(-lower // 2**12):,} states.*velocities lumped"):
-        RingChain(ring, max_memory=1e4, state_bound=recurrent_class_bound,
+                       match=f"at least {lower:,} states.*velocities lumped"):
+        RingChain(ring, max_memory=1e9, state_bound=recurrent_class_bound,
                   lump_velocities=True).keys
+    # and the command line, lumping by default, refuses vmax 1 L = 32 as before (it had
+    # run out of memory when the bound was divided by the merge)
+    out = CliRunner().invoke(main, ["solve", "-L", "32", "-N", "16", "--vmax", "1"])
+    assert out.exit_code == 2 and "velocities lumped" in out.output
     # the command line passes the bound (--no-lump: every state, every velocity)
     total = recurrent_class_count(24, 12, 2)
     out = CliRunner().invoke(main, ["solve", "-L", "24", "-N", "12", "--p", "0.5",
