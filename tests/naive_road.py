@@ -217,6 +217,14 @@ def as_road(road) -> Road:
     return Road(**road)
 
 
+def from_markov(road) -> Road:
+    """The :class:`Road` of a ``markov.Road`` (its fields read, nothing of its code used)."""
+    return Road(road.length, road.model, update=road.update, entry=road.entry,
+                exit=road.exit, alpha=road.alpha, beta=road.beta, v_in=road.v_in,
+                stretches=[(s.first, s.last, dict(s.values)) for s in road.stretches],
+                ramps=[(r.cell, r.alpha, r.velocity) for r in road.ramps])
+
+
 # ------------------------------------------------------ what a car sees and does
 
 

@@ -34,11 +34,7 @@ def _nasch(vmax, p=0.5):
     return load_model("nasch", {"vmax": vmax, "p": p})
 
 
-def _naive(road: Road) -> nr.Road:
-    return nr.Road(road.length, road.model, update=road.update, entry=road.entry,
-                   exit=road.exit, alpha=road.alpha, beta=road.beta, v_in=road.v_in,
-                   stretches=[(s.first, s.last, dict(s.values)) for s in road.stretches],
-                   ramps=[(r.cell, r.alpha, r.velocity) for r in road.ramps])
+_naive = nr.from_markov
 
 
 def _key(cells, top):

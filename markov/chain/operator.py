@@ -18,20 +18,15 @@ from markov.chain.encoding import check_encodable
 from markov.errors import InvalidParameterError
 from markov.model.ring import Ring
 
-__all__ = ["ChainOperator"]
+__all__ = ["ProductOperator", "ChainOperator"]
 
 
-class ChainOperator(spla.LinearOperator):
-    """Base of the matrix-free operators on a closed, sorted set of state keys.
+class ProductOperator(spla.LinearOperator):
+    """``x -> x P`` on ``n`` states as a ``LinearOperator``, counted and timed.
 
-    Parameters
-    ----------
-    ring : Ring
-        The system; ``ring.p`` gives the weights.
-    keys : (n,) int64 array, sorted
-        A closed set of (canonical, if ``lump``) state keys.
-    lump : bool
-        Whether ``keys`` are rotation classes.
+    What every matrix-free operator shares, a ring's or a road's
+    (:class:`markov.chain.road_factored.RoadFactoredOperator`): a subclass
+    sets ``n`` and calls :meth:`_start`, and provides :meth:`_product`.
 
     Attributes
     ----------
@@ -43,12 +38,8 @@ class ChainOperator(spla.LinearOperator):
         Time spent in them.
     """
 
-    def __init__(self, ring: Ring, keys: np.ndarray, lump: bool):
-        check_encodable(ring.length, ring.vmax)
-        self.ring = ring
-        self.lump = bool(lump)
-        self.keys = np.ascontiguousarray(keys, dtype=np.int64)
-        self.n = self.keys.shape[0]
+    def _start(self, n: int) -> None:
+        self.n = int(n)
         super().__init__(np.float64, (self.n, self.n))
         self.products = 0
         self.seconds = 0.0
@@ -79,6 +70,8 @@ class ChainOperator(spla.LinearOperator):
             not bad input.
         """
         x = np.ascontiguousarray(x, dtype=np.float64)
+        if x.ndim == 2 and x.shape[1] == 1:       # scipy's column vector
+            x = np.ascontiguousarray(x[:, 0])
         if x.shape != (self.n,):
             raise InvalidParameterError(f"x must have shape ({self.n},), got {x.shape}")
         out = np.empty(self.n) if out is None else out
@@ -104,3 +97,34 @@ class ChainOperator(spla.LinearOperator):
         diff = self.apply(pi)
         diff -= pi
         return float(np.abs(diff, out=diff).sum())  # in place: one vector, not three
+
+
+class ChainOperator(ProductOperator):
+    """Base of the matrix-free operators on a closed, sorted set of state keys.
+
+    Parameters
+    ----------
+    ring : Ring
+        The system; ``ring.p`` gives the weights.
+    keys : (n,) int64 array, sorted
+        A closed set of (canonical, if ``lump``) state keys.
+    lump : bool
+        Whether ``keys`` are rotation classes.
+
+    Attributes
+    ----------
+    n : int
+        Number of states.
+    products : int
+        Products ``x P`` applied so far.
+    seconds : float
+        Time spent in them.
+    """
+
+    def __init__(self, ring: Ring, keys: np.ndarray, lump: bool):
+        check_encodable(ring.length, ring.vmax)
+        self.ring = ring
+        self.lump = bool(lump)
+        self.keys = np.ascontiguousarray(keys, dtype=np.int64)
+        self._start(self.keys.shape[0])
+

@@ -57,10 +57,10 @@ from __future__ import annotations
 import time
 
 import numpy as np
-import scipy.sparse.linalg as spla
 
 from markov._jit import njit, prange
 from markov.chain.lattice import _DIGIT, ENTRY_CODES, EXIT_CODES, Lattice, lattice_of
+from markov.chain.operator import ProductOperator
 from markov.errors import InvalidParameterError
 from markov.model.ring import PARALLEL
 
@@ -534,7 +534,7 @@ class _Tables:
 
 # ------------------------------------------------------------------ the operator
 
-class RoadFactoredOperator(spla.LinearOperator):
+class RoadFactoredOperator(ProductOperator):
     """``x -> x P`` of an open road under parallel update, swept car by car.
 
     A ``LinearOperator`` ``A = P^T`` (scipy's column convention: ``A @ x`` is
@@ -610,10 +610,7 @@ class RoadFactoredOperator(spla.LinearOperator):
         self.fold = bool(fold)
         self.lattice = lattice if lattice is not None else lattice_of(road, lump=lump)
         self.keys = np.ascontiguousarray(keys, dtype=np.int64)
-        self.n = n = self.keys.shape[0]
-        super().__init__(np.float64, (n, n))
-        self.products = 0
-        self.seconds = 0.0
+        self._start(self.keys.shape[0])
         tab = _Tables(self.lattice)
         self._tab = tab
         L, W = tab.L, tab.W
@@ -788,60 +785,9 @@ class RoadFactoredOperator(spla.LinearOperator):
             self._fparent, self._fcode, self._wtab, self._inc, self._mass)))
 
     # -------------------------------------------------------------- products
-    def _run(self, x: np.ndarray, out: np.ndarray) -> None:
+    def _product(self, x: np.ndarray, out: np.ndarray) -> None:
         _sweep(x, out, self._mass, self.n, self._stage_lo, self._indptr, self._parent,
                self._code, self._wtab, self._findptr, self._fparent, self._fcode)
-
-    def _vector(self, x) -> np.ndarray:
-        x = np.ascontiguousarray(x, dtype=np.float64)
-        if x.ndim == 2 and x.shape[1] == 1:
-            x = np.ascontiguousarray(x[:, 0])
-        if x.shape != (self.n,):
-            raise InvalidParameterError(f"x must have shape ({self.n},), got {x.shape}")
-        return x
-
-    def apply(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """``x P`` (a row vector times the transition matrix).
-
-        Parameters
-        ----------
-        x : (n,) float64 array
-        out : (n,) float64 array, optional
-            Where to write the result.
-
-        Returns
-        -------
-        (n,) float64 array
-
-        Raises
-        ------
-        InvalidParameterError
-            For ``x`` of another shape.
-        """
-        x = self._vector(x)
-        out = np.empty(self.n) if out is None else out
-        start = time.perf_counter()
-        self._run(x, out)
-        self.products += 1
-        self.seconds += time.perf_counter() - start
-        return out
-
-    _matvec = apply
-
-    def residual(self, pi: np.ndarray) -> float:
-        """``||pi P - pi||_1``.
-
-        Parameters
-        ----------
-        pi : (n,) float64 array
-
-        Returns
-        -------
-        float
-        """
-        diff = self.apply(pi)
-        diff -= pi
-        return float(np.abs(diff, out=diff).sum())
 
     def counts(self, x: np.ndarray) -> np.ndarray:
         """``sum_i x_i E[counts of a step | state i]`` in the layout of
@@ -859,9 +805,7 @@ class RoadFactoredOperator(spla.LinearOperator):
         -------
         (size,) float64 array
         """
-        x = self._vector(x)
-        out = np.empty(self.n)
-        self._run(x, out)
+        self.apply(x)              # the sweep leaves every word's mass in self._mass
         ncodes = len(self._wtab)
         chunks = 8
         F = _flows(self._mass, self._parent, self._code, ncodes, chunks).sum(axis=0)
