@@ -24,11 +24,7 @@ from nasch.road_figures import parse_case, profile_cases, profile_data, tasep_bo
 UPDATES = ("parallel", "ordered-sequential", "random-sequential")
 
 
-def _naive(road: Road) -> nr.Road:
-    return nr.Road(road.length, road.model, update=road.update, entry=road.entry,
-                   exit=road.exit, alpha=road.alpha, beta=road.beta, v_in=road.v_in,
-                   stretches=[(s.first, s.last, dict(s.values)) for s in road.stretches],
-                   ramps=[(r.cell, r.alpha, r.velocity) for r in road.ramps])
+_naive = nr.from_markov
 
 
 def _bulk(density, length):
