@@ -173,14 +173,13 @@ class Lattice:
         keys = np.asarray(keys, dtype=np.int64)
         if self.lumping is None:
             return keys
-        digit = self.ints[_DIGIT:]
-        B = self.top_vmax + 2
-        out = np.zeros_like(keys)
-        rest = keys.copy()
-        for x in range(self.length):
-            out += digit[rest % B] * self.pw[x]
-            rest //= B
-        return out
+        from markov.chain.kernels import merge_velocity_keys
+
+        flat = np.ascontiguousarray(keys.ravel())
+        out = np.empty_like(flat)
+        merge_velocity_keys(flat, self.length, self.top_vmax + 2,
+                            np.ascontiguousarray(self.ints[_DIGIT:]), out)
+        return out.reshape(keys.shape)
 
     def kernel_args(self) -> tuple:
         """The arguments every kernel of this module takes, in order.

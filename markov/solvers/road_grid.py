@@ -290,12 +290,17 @@ def _solve_row(i: int):
         coef = _corner_coefficients(a, b)
         PT = sp.csr_array((coef @ g["data"], g["indices"], g["indptr"]), shape=(n, n))
         pi, res = _solve_point(PT, g["keys"], pi, g["tol"], a in (0.0, 1.0) or b in (0.0, 1.0))
-        row["flux"][j] = g["scale"] * float(pi @ (coef @ g["left"]))
-        row["inflow"][j] = g["scale"] * float(pi @ (coef @ g["entered"]))
-        row["bulk"][j] = float(pi @ g["bulk"])
-        row["mean"][j] = float(pi @ g["cars"]) / g["length"]
-        row["res"][j] = res
+        values = _readings(pi, res, coef @ g["left"], coef @ g["entered"], g["scale"],
+                           g["bulk"], g["cars"], g["length"])
+        for name, value in values.items():
+            row[name][j] = value
     return i, row
+
+
+def _readings(pi, res, left, entered, scale, bulk, cars, length) -> dict:
+    """A grid point's numbers from its ``pi``: flux, inflow, bulk and mean density, residual."""
+    return {"flux": scale * float(pi @ left), "inflow": scale * float(pi @ entered),
+            "bulk": float(pi @ bulk), "mean": float(pi @ cars) / length, "res": res}
 
 
 def phase_grid(road, alphas, betas, *, tol: float = DEFAULT_TOL,
@@ -432,11 +437,8 @@ def phase_grid(road, alphas, betas, *, tol: float = DEFAULT_TOL,
             r, c, w, lf, en = rows.at(a, b)
             PT = sp.csr_array((_on_pattern(lin, n, r, c, w), indices, indptr), shape=(n, n))
         pi, res = _solve_point(PT, keys, pi, tol, a in (0.0, 1.0) or b in (0.0, 1.0))
-        out["flux"][i, j] = scale * float(pi @ lf)
-        out["inflow"][i, j] = scale * float(pi @ en)
-        out["bulk"][i, j] = float(pi @ bulk)
-        out["mean"][i, j] = float(pi @ cars) / road.length
-        out["res"][i, j] = res
+        for name, value in _readings(pi, res, lf, en, scale, bulk, cars, road.length).items():
+            out[name][i, j] = value
         if progress and ((step + 1) % shape[1] == 0 or step + 1 == len(order)):
             done = step + 1
             spent = time.perf_counter() - t1
