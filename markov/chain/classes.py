@@ -30,7 +30,7 @@ from markov.memory import gib, memory_limit
 from markov.model.ring import Ring
 from markov.chain.statespace import contains_nasch_support
 
-__all__ = ["closed_classes", "closed_classes_of_graph", "all_configurations_classes", "support_graph_bytes",
+__all__ = ["closed_classes", "road_drains", "closed_classes_of_graph", "all_configurations_classes", "support_graph_bytes",
            "known_irreducible", "contains_nasch_support", "search_all_fits", "ClassCensus",
            "SEARCH_ALL_MAX_EDGES", "PROVEN", "ALL_CONFIGURATIONS", "FROM_COMPACT_JAM",
            "FROM_EMPTY_ROAD", "FROM_START", "lattice_irreducible"]
@@ -358,9 +358,31 @@ def lattice_irreducible(lattice) -> bool:
                         if not need <= set(new[z, v, g, a, :count[z, v, g, a]].tolist()):
                             return False
         return True
-    alpha, beta = float(lattice.floats[0]), float(lattice.floats[1])
-    sequential = int(lattice.ints[5]) == 1
-    if beta <= 0 or not sequential and (alpha >= 1 or (lattice.ramp_alpha >= 1).any()):
+    return road_drains(lattice.system, count, new)
+
+
+def road_drains(road, count, new) -> bool:
+    """Whether every configuration of ``road`` reaches the empty road (one closed class).
+
+    The road half of :func:`lattice_irreducible`, read from the road's values and its
+    zones' stacked tables alone, so that a road too long for a chain (a matrix product
+    state, :mod:`markov.solvers.road_mps`) has the same proof.
+
+    Parameters
+    ----------
+    road : Road
+    count, new : ndarray
+        The zones' tables ``[zone, v, min(gap, H), v_ahead(, k)]``
+        (:func:`markov.chain.lattice.lattice_of`'s ``count`` and ``new_velocity``).
+
+    Returns
+    -------
+    bool
+    """
+    zones, top, H = count.shape[0], count.shape[1] - 1, count.shape[2] - 1
+    random_sequential = road.update == "random-sequential"
+    if road.beta <= 0 or not random_sequential and (
+            road.alpha >= 1 or any(r.alpha >= 1 for r in road.ramps)):
         return False
     for z in range(zones):
         for v in range(top + 1):
