@@ -506,8 +506,28 @@ def _build(road, rule: _Rule):
                 C[k] = w
             counts[name] = (j - 1, C)
         prev = nxt
-    states = None  # noqa: F841  (the walk keeps only one bond at a time)
-    return tensors, counts
+    return _prune(tensors, counts)
+
+
+def _prune(tensors: list, counts: dict):
+    """Drop the bond states from which no branch reaches the exit with a weight.
+
+    Every raw weight is >= 0, so this is exact (a pattern of nonzeros, no
+    cancellation).  It matters for the compression: a dead state (an insert cell
+    or a new velocity guessed and later refuted) carries large weights that are
+    only zeroed further right, and would cost accuracy in the SVD sweeps.
+    """
+    L = len(tensors)
+    alive = [None] * (L + 1)
+    alive[L] = np.ones(1, bool)
+    for i in range(L - 1, -1, -1):
+        W = tensors[i][:, :, :, alive[i + 1]]
+        alive[i] = np.abs(W).reshape(W.shape[0], -1).max(axis=1, initial=0.0) > 0
+        if i == 0:
+            alive[0] = np.ones(1, bool)
+    out = [w[alive[i]][:, :, :, alive[i + 1]] for i, w in enumerate(tensors)]
+    cnt = {k: (i, t[alive[i]][:, :, :, alive[i + 1]]) for k, (i, t) in counts.items()}
+    return out, cnt
 
 
 def _kind_key(kind, j: int, L: int):
@@ -524,8 +544,8 @@ def _kind_key(kind, j: int, L: int):
 # ------------------------------------------------------------ MPO tools
 
 
-def compress(tensors: list, cutoff: float = 1e-14) -> list:
-    """Exact compression: a QR sweep to the right, then an SVD sweep back with a relative cutoff.
+def compress(tensors: list, cutoff: float = 1e-15) -> list:
+    """Exact compression: SVD sweeps to the right and back, each with a relative cutoff.
 
     Parameters
     ----------
@@ -545,11 +565,15 @@ def compress(tensors: list, cutoff: float = 1e-14) -> list:
     lognorm = 0.0
     for i in range(L - 1):
         Dl, do, di, Dr = T[i].shape
-        Q, R = np.linalg.qr(T[i].reshape(Dl * do * di, Dr))
-        n = np.linalg.norm(R)
-        if n == 0:
+        # an SVD, not a QR: the raw MPO's dead bond states give directions of norm
+        # ~1e-16 that a QR would carry on and shrink into denormal numbers (slow)
+        U, S, Vt = np.linalg.svd(T[i].reshape(Dl * do * di, Dr), full_matrices=False)
+        if S[0] == 0:
             return [np.zeros((1, w.shape[1], w.shape[2], 1)) for w in T]
-        T[i] = Q.reshape(Dl, do, di, Q.shape[1])
+        keep = S > cutoff * S[0]
+        R = S[keep, None] * Vt[keep]
+        n = np.linalg.norm(R)
+        T[i] = U[:, keep].reshape(Dl, do, di, int(keep.sum()))
         T[i + 1] = np.tensordot(R / n, T[i + 1], axes=(1, 0))
         lognorm += math.log(n)
     for i in range(L - 1, 0, -1):
@@ -736,7 +760,7 @@ class RoadMPO:
         return {site: tensor}
 
 
-def road_mpo(road, lump: bool = True, cutoff: float = 1e-14) -> RoadMPO:
+def road_mpo(road, lump: bool = True, cutoff: float = 1e-15) -> RoadMPO:
     """The one-step matrix of ``road`` as an exact MPO.
 
     Parameters
