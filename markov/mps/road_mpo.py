@@ -455,79 +455,119 @@ class _Transducer:
 # ------------------------------------------------------------ the builder
 
 
-def _build(road, rule: _Rule):
-    """Raw site tensors and count tensors by a breadth-first walk over the bond states."""
-    tr = _Transducer(road, rule)
-    L, d = road.length, len(rule.classes) + 1
-    left = tr.left()
-    states = {}
-    # bond 0: the entry's states, summed into site 1 (their weights and counts carried)
-    entry_states = left
-    tensors, counts = [], {}
-    prev = None
-    for j in range(1, L + 1):
-        nxt: dict = {}
-        entries: dict = {}
-        cnt_entries: dict = {}
-        sources = (((0, s, w, c) for s, w, c in entry_states) if j == 1 else
+class _Raw:
+    """The raw MPO, stored sparse: site tensors and count tensors made dense on demand.
+
+    A breadth-first walk from the entry finds the bond states reached with a
+    weight (``raw`` bond dimension before pruning); then the states from which
+    no branch reaches the exit with a weight are dropped.  Every raw weight is
+    >= 0, so the pruning is exact (a pattern of nonzeros, no cancellation).  It
+    matters for the compression: a dead state (an insert cell or a new velocity
+    guessed and refuted further right) carries large weights that would cost
+    accuracy in the SVD sweeps.  Count tensors are walked again, one site, when
+    asked for (the transitions are memoised), so that a long road keeps only
+    the sparse nonzeros.
+    """
+
+    def __init__(self, road, rule: _Rule) -> None:
+        self.road, self.rule = road, rule
+        self.tr = _Transducer(road, rule)
+        self.L, self.d = road.length, len(rule.classes) + 1
+        self.entry = self.tr.left()
+        L, d = self.L, self.d
+        bonds = [None] * (L + 1)                        # bonds[j]: {state: index} after cell j
+        sites = []
+        for j in range(1, L + 1):
+            nxt: dict = {}
+            keys, vals = [], []
+            for a, s, w0, c0, c_in, c_out, s2, w, cnt in self._walk(j, bonds[j - 1]):
+                b = 0 if j == L else nxt.setdefault(s2, len(nxt))
+                keys.append((a, c_out, c_in, b))
+                vals.append(w)
+            bonds[j] = nxt
+            sites.append((np.array(keys, np.int64).reshape(-1, 4), np.array(vals, float)))
+        self.raw_dims = [max(len(bonds[j]), 1) for j in range(1, L)]
+        # prune right to left: a state lives if a weighted branch leads to a living state
+        alive = [None] * (L + 1)
+        alive[L] = np.ones(1, bool)
+        for j in range(L, 0, -1):
+            k, w = sites[j - 1]
+            Dl = 1 if j == 1 else len(bonds[j - 1])
+            live = np.zeros(Dl, bool)
+            ok = (w != 0) & alive[j][k[:, 3]] if len(w) else np.zeros(0, bool)
+            live[k[ok, 0]] = True
+            alive[j - 1] = np.ones(1, bool) if j == 1 else live
+        self.alive = alive
+        self.new_index = [np.cumsum(m) - 1 for m in alive]
+        self.bonds = bonds
+        self.sites = []
+        for j in range(1, L + 1):
+            k, w = sites[j - 1]
+            ok = (w != 0) & alive[j - 1][k[:, 0]] & alive[j][k[:, 3]] if len(w) else np.zeros(0, bool)
+            k = k[ok].copy()
+            k[:, 0] = self.new_index[j - 1][k[:, 0]]
+            k[:, 3] = self.new_index[j][k[:, 3]]
+            self.sites.append((k, w[ok]))
+        self.dims = [int(m.sum()) for m in alive]
+
+    def _walk(self, j: int, prev):
+        """Every transition at cell ``j``: ``(a, s, w0, c0, c_in, c_out, s2, w, counts)``."""
+        tr, L = self.tr, self.L
+        sources = (((0, s, w, c) for s, w, c in self.entry) if j == 1 else
                    ((i, s, 1.0, {}) for s, i in prev.items()))
         for a, s, w0, c0 in sources:
-            for c_in in range(d):
+            for c_in in range(self.d):
                 for c_out, s2, w, cnt in tr.cell(j, s, c_in):
                     w = w0 * w
-                    cnt = {**c0, **cnt} if c0 else cnt
+                    if c0:
+                        cnt = {**c0, **cnt}
                     if j == L:
                         wr, cr = tr.right(s2)
                         w *= wr
                         if cr:
                             cnt = {**cnt, **cr}
-                        b = 0
-                    else:
-                        b = nxt.setdefault(s2, len(nxt))
-                    if w == 0:
-                        continue
-                    k = (a, c_out, c_in, b)
-                    entries[k] = entries.get(k, 0.0) + w
-                    for kind, value in cnt.items():
-                        name = _kind_key(kind, j, L)
-                        if name is None or value == 0:
-                            continue
-                        slot = cnt_entries.setdefault(name, {})
-                        slot[k] = slot.get(k, 0.0) + w * value
-        Dl = 1 if j == 1 else len(prev)
-        Dr = 1 if j == L else max(len(nxt), 1)
-        W = np.zeros((Dl, d, d, Dr))
-        for k, w in entries.items():
-            W[k] = w
-        tensors.append(W)
-        for name, slot in cnt_entries.items():
-            C = np.zeros((Dl, d, d, Dr))
-            for k, w in slot.items():
-                C[k] = w
-            counts[name] = (j - 1, C)
-        prev = nxt
-    return _prune(tensors, counts)
+                    if w != 0:
+                        yield a, s, w0, c0, c_in, c_out, s2, w, cnt
+
+    def shape(self, j: int) -> tuple:
+        return (self.dims[j - 1], self.d, self.d, self.dims[j])
+
+    def site(self, j: int) -> np.ndarray:
+        """The dense raw tensor of cell ``j``."""
+        W = np.zeros(self.shape(j))
+        k, w = self.sites[j - 1]
+        np.add.at(W, tuple(k.T), w)
+        return W
+
+    def count(self, j: int, key) -> np.ndarray:
+        """The tensor of cell ``j`` with each branch weighted by its count ``key``."""
+        C = np.zeros(self.shape(j))
+        right = self.bonds[j]
+        for a, s, w0, c0, c_in, c_out, s2, w, cnt in self._walk(j, self.bonds[j - 1]):
+            value = 0
+            for kind, v in cnt.items():
+                if _kind_key(kind, j, self.L) == key:
+                    value += v
+            if value == 0:
+                continue
+            b = 0 if j == self.L else right[s2]
+            if not (self.alive[j - 1][a] and self.alive[j][b]):
+                continue
+            C[self.new_index[j - 1][a], c_out, c_in, self.new_index[j][b]] += w * value
+        return C
 
 
-def _prune(tensors: list, counts: dict):
-    """Drop the bond states from which no branch reaches the exit with a weight.
+class _Sites:
+    """A list-like view of the raw site tensors, each made dense when read."""
 
-    Every raw weight is >= 0, so this is exact (a pattern of nonzeros, no
-    cancellation).  It matters for the compression: a dead state (an insert cell
-    or a new velocity guessed and later refuted) carries large weights that are
-    only zeroed further right, and would cost accuracy in the SVD sweeps.
-    """
-    L = len(tensors)
-    alive = [None] * (L + 1)
-    alive[L] = np.ones(1, bool)
-    for i in range(L - 1, -1, -1):
-        W = tensors[i][:, :, :, alive[i + 1]]
-        alive[i] = np.abs(W).reshape(W.shape[0], -1).max(axis=1, initial=0.0) > 0
-        if i == 0:
-            alive[0] = np.ones(1, bool)
-    out = [w[alive[i]][:, :, :, alive[i + 1]] for i, w in enumerate(tensors)]
-    cnt = {k: (i, t[alive[i]][:, :, :, alive[i + 1]]) for k, (i, t) in counts.items()}
-    return out, cnt
+    def __init__(self, raw: _Raw) -> None:
+        self.raw = raw
+
+    def __len__(self) -> int:
+        return self.raw.L
+
+    def __getitem__(self, i: int) -> np.ndarray:
+        return self.raw.site(i + 1)
 
 
 def _kind_key(kind, j: int, L: int):
@@ -544,15 +584,19 @@ def _kind_key(kind, j: int, L: int):
 # ------------------------------------------------------------ MPO tools
 
 
-def compress(tensors: list, cutoff: float = 1e-15) -> list:
+def compress(tensors, cutoff: float = 1e-14) -> list:
     """Exact compression: SVD sweeps to the right and back, each with a relative cutoff.
 
     Parameters
     ----------
-    tensors : list of ndarray
-        ``(Dl, d_out, d_in, Dr)`` each.
+    tensors : sequence of ndarray
+        ``(Dl, d_out, d_in, Dr)`` each; read one at a time, in order (a lazy
+        sequence keeps a long raw MPO from being dense all at once).
     cutoff : float
-        Singular values below ``cutoff`` times the largest at their bond are dropped.
+        Singular values below ``cutoff`` times the largest at their bond are
+        dropped.  Measured on NaSch roads: the operator's own singular values
+        end near 1e-3 .. 4e-2 of the largest, the rounding noise starts at about
+        2.5e-15, so 1e-14 separates them.
 
     Returns
     -------
@@ -560,21 +604,29 @@ def compress(tensors: list, cutoff: float = 1e-15) -> list:
         The same operator; the scale (which under- or overflows at L = 1000 if kept
         in one tensor) is spread evenly over the sites.
     """
-    T = [np.array(w, dtype=np.float64) for w in tensors]
-    L = len(T)
+    L = len(tensors)
+    T = [None] * L
     lognorm = 0.0
-    for i in range(L - 1):
-        Dl, do, di, Dr = T[i].shape
-        # an SVD, not a QR: the raw MPO's dead bond states give directions of norm
-        # ~1e-16 that a QR would carry on and shrink into denormal numbers (slow)
-        U, S, Vt = np.linalg.svd(T[i].reshape(Dl * do * di, Dr), full_matrices=False)
+    carry = None
+    for i in range(L):
+        W = np.asarray(tensors[i], dtype=np.float64)
+        if carry is not None:
+            W = np.tensordot(carry, W, axes=(1, 0))
+        if i == L - 1:
+            T[i] = W
+            break
+        Dl, do, di, Dr = W.shape
+        # an SVD, not a QR: directions of norm ~1e-16 (rounding) that a QR would
+        # carry on shrink into denormal numbers, which are slow
+        U, S, Vt = np.linalg.svd(W.reshape(Dl * do * di, Dr), full_matrices=False)
         if S[0] == 0:
-            return [np.zeros((1, w.shape[1], w.shape[2], 1)) for w in T]
+            return [np.zeros((1, w.shape[1], w.shape[2], 1)) for w in
+                    (np.asarray(tensors[k]) for k in range(L))]
         keep = S > cutoff * S[0]
         R = S[keep, None] * Vt[keep]
         n = np.linalg.norm(R)
         T[i] = U[:, keep].reshape(Dl, do, di, int(keep.sum()))
-        T[i + 1] = np.tensordot(R / n, T[i + 1], axes=(1, 0))
+        carry = R / n
         lognorm += math.log(n)
     for i in range(L - 1, 0, -1):
         Dl, do, di, Dr = T[i].shape
@@ -698,11 +750,13 @@ class RoadMPO:
     lumped : bool
         Whether the site basis merges velocities (False under random-sequential
         update whatever was asked).
-    raw_bond_dimensions, bond_dimensions : list of int
-        The ``L - 1`` inner bonds before and after compression.
-    count_base : list of ndarray
-        The raw (uncompressed) MPO, equal to ``T``; :meth:`count` replaces one
-        of its sites.
+    raw_bond_dimensions : list of int
+        The ``L - 1`` inner bonds of the uncompressed MPO (:attr:`count_base`):
+        the bond states of the walk that lead to the exit with a weight.
+    walked_bond_dimensions : list of int
+        The same before the dead states were pruned.
+    bond_dimensions : list of int
+        After the compression.
     """
 
     road: object
@@ -710,29 +764,48 @@ class RoadMPO:
     site_labels: list
     lumped: bool
     raw_bond_dimensions: list
+    walked_bond_dimensions: list
     bond_dimensions: list
-    count_base: list
-    _counts: dict = field(default_factory=dict, repr=False)
+    _raw: _Raw = field(repr=False)
+    _base: list | None = field(default=None, repr=False)
+
+    @property
+    def count_base(self) -> list:
+        """The uncompressed MPO (dense tensors, made on first use), equal to ``T``.
+
+        :meth:`count` replaces one of its sites.  Its bonds are
+        :attr:`raw_bond_dimensions` (NaSch vmax 2 parallel: 34 at most, 83 kB a
+        site; vmax 3 ordered-sequential about 160, 3.3 MB a site).
+        """
+        if self._base is None:
+            self._base = [self._raw.site(j) for j in range(1, self.road.length + 1)]
+        return self._base
 
     def count(self, kind: str, index: int | None = None) -> dict[int, np.ndarray]:
         """Sites of :attr:`count_base` that, replaced, give the MPO of ``T o C``.
+
+        ``C(s, s')`` is a count of the step ``s -> s'`` (of each branch of it, as
+        ``tests/naive_road.Counts``); ``T o C`` the entrywise product, so
+        ``1^T (T o C) p`` is the count's expectation in one step from ``p``.
 
         Parameters
         ----------
         kind : str
             ``"left"`` (cars leaving at the exit), ``"entered"`` (cars entering at
-            the entry), ``"bond"`` (cars crossing bond ``index`` = 1..L-1),
-            ``"ramp"`` (cars put by ramp ``index``, the road's ramp order from 0),
-            ``"velocity"`` (velocity of the car on cell ``index`` = 1..L after the
-            step, 0 if empty).
+            the entry), ``"bond"`` (cars crossing bond ``index`` = 1..L-1, from
+            cells ``<= index`` to cells ``> index``), ``"ramp"`` (cars put by ramp
+            ``index``, 0-based in the road's ramp order), ``"velocity"`` (velocity
+            of the car on cell ``index`` = 1..L after the step, 0 if empty).
         index : int, optional
 
         Returns
         -------
         dict
             ``{site: tensor}``, ``site`` the 0-based position in
-            :attr:`count_base` (cell ``site + 1``); one site each.  A count that
-            never occurs gives that site's tensor with zeros.
+            :attr:`count_base` (cell ``site + 1``): always exactly one site, the
+            one where the event is decided (``left``: the last, ``entered``: the
+            first, ``bond k``: cell ``k``, a ramp: its cell, ``velocity x``: cell
+            ``x``).
         """
         L = self.road.length
         if kind in ("left", "entered"):
@@ -752,15 +825,10 @@ class RoadMPO:
             key, site = ("ramp", index), self.road.ramps[index].cell - 1
         else:
             raise InvalidParameterError(f"count kind must be one of {COUNT_KINDS}, got {kind!r}")
-        got = self._counts.get(key)
-        if got is None:
-            return {site: np.zeros_like(self.count_base[site])}
-        at, tensor = got
-        assert at == site, (key, at, site)
-        return {site: tensor}
+        return {site: self._raw.count(site + 1, key)}
 
 
-def road_mpo(road, lump: bool = True, cutoff: float = 1e-15) -> RoadMPO:
+def road_mpo(road, lump: bool = True, cutoff: float = 1e-14) -> RoadMPO:
     """The one-step matrix of ``road`` as an exact MPO.
 
     Parameters
@@ -772,7 +840,7 @@ def road_mpo(road, lump: bool = True, cutoff: float = 1e-15) -> RoadMPO:
         ordered-sequential only; random-sequential keeps every velocity and
         says so in ``RoadMPO.lumped``).
     cutoff : float
-        Relative singular-value cutoff of the compression.
+        Relative singular-value cutoff of the compression (:func:`compress`).
 
     Returns
     -------
@@ -788,9 +856,8 @@ def road_mpo(road, lump: bool = True, cutoff: float = 1e-15) -> RoadMPO:
     from markov.chain.lattice import can_lump
 
     rule = _rule_of(road, lump)
-    raw, counts = _build(road, rule)
-    small = compress(raw, cutoff)
+    raw = _Raw(road, rule)
+    small = compress(_Sites(raw), cutoff)
     labels = [[None] + [tuple(c) for c in rule.classes] for _ in range(road.length)]
     return RoadMPO(road, small, labels, bool(lump and can_lump(road)),
-                   [w.shape[3] for w in raw[:-1]], [w.shape[3] for w in small[:-1]],
-                   raw, counts)
+                   raw.dims[1:-1], raw.raw_dims, [w.shape[3] for w in small[:-1]], raw)
