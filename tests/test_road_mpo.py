@@ -245,3 +245,37 @@ def test_stochastic_at_L100(update):
     assert max(m.bond_dimensions) <= 12
     assert all(w.shape[1] == w.shape[2] for w in m.tensors)
     assert m.tensors[0].shape[0] == 1 and m.tensors[-1].shape[3] == 1
+
+
+@pytest.mark.parametrize("update", UPDATES)
+def test_bulk_memo_changes_nothing(monkeypatch, update):
+    """The bulk cells share memoised transitions; the walk without that sharing gives the same tensors."""
+    import importlib
+
+    module = importlib.import_module("markov.mps.road_mpo")
+    road = Road(40, nasch(2), update, 0.35, 0.6, "insert", "wall", 0,
+                (Stretch(18, 21, (("vmax", 1), ("p", 0.5))),), (OnRamp(25, 0.2, 0), OnRamp(30, 0.1, 1)))
+    shared = road_mpo(road)
+    init = module._Transducer.__init__
+
+    def no_bulk(self, *args):
+        init(self, *args)
+        self._bulk = lambda j: False
+    monkeypatch.setattr(module._Transducer, "__init__", no_bulk)
+    alone = road_mpo(road)
+    assert shared.raw_bond_dimensions == alone.raw_bond_dimensions
+    for a, b in zip(shared.count_base, alone.count_base):
+        assert a.shape == b.shape and np.array_equal(a, b)
+    for kind, index in (("bond", 20), ("velocity", 22), ("ramp", 1), ("left", None)):
+        (sa, ta), = shared.count(kind, index).items()
+        (sb, tb), = alone.count(kind, index).items()
+        assert sa == sb and np.array_equal(ta, tb)
+
+
+@pytest.mark.parametrize("update", UPDATES)
+def test_one_and_two_cells(update):
+    for entry, exit_ in itertools.product(ENTRIES, EXITS):
+        check_entries(Road(1, nasch(1, 0.3), update, 0.45, 0.35, entry, exit_, 1,
+                           (), (OnRamp(1, 0.5, 0),) if entry != "site1" else ()), lump=False)
+        check_entries(Road(2, nasch(2, 0.3), update, 0.45, 0.35, entry, exit_, 2,
+                           (), (OnRamp(1, 0.5, 1),) if entry != "site1" else ()), lump=True)
