@@ -17,8 +17,10 @@ still open is carried on the bond to cell ``j + 1``:
 * ``ent``: what the entry still has to settle (the ``insert`` cell guessed at
   the entry and checked against the first car, the ordered update's virtual
   reservoir car that sees the finished road, ...);
-* the ``wall``'s exit coin (one per step, shared by every car that sees the
-  exit, so it is drawn at the entry and carried);
+* the ``wall``'s exit coin under ordered-sequential update (one per step,
+  shared by every car that sees the exit: one that leaves hands the exit to the
+  car behind), drawn at the entry and carried; under parallel and
+  random-sequential update only one car reads it, and it is drawn there;
 * random-sequential: whether the one position of the sub-step has been
   passed (a sum of local terms).
 
@@ -57,7 +59,7 @@ __all__ = ["RoadMPO", "road_mpo", "to_dense", "ones_invariance", "compress", "CO
 #: The counts of a step that :meth:`RoadMPO.count` gives.
 COUNT_KINDS = ("left", "entered", "bond", "ramp", "velocity")
 
-_SINK, _OPEN, _SHUT = 0, 1, 2
+_SINK, _OPEN, _SHUT, _EITHER = 0, 1, 2, 3
 
 
 # ------------------------------------------------------------------ the rule
@@ -136,6 +138,9 @@ class _Transducer:
 
     def view(self, zone: int, v: int, u: int, d_exit: int, coin: int) -> float:
         """Weight of ``u`` for a car seeing the exit ``d_exit`` cells ahead (``gap = L - x``)."""
+        if coin == _EITHER:                            # the wall's coin, drawn by its one reader
+            b = self.road.beta
+            return b * self.view(zone, v, u, d_exit, _OPEN) + (1 - b) * self.view(zone, v, u, d_exit, _SHUT)
         if coin == _OPEN:
             return self.P(zone, v, self.H, self.rule.zone_vmax[zone], u)
         return self.P(zone, v, d_exit, 0, u)
@@ -148,8 +153,17 @@ class _Transducer:
     def left(self) -> list:
         """``[(state, weight, counts)]`` of the entry (virtual cell 0)."""
         road, out = self.road, []
-        coins = [(_SINK, 1.0)] if road.exit == "sink" else \
-            [(c, w) for c, w in ((_OPEN, road.beta), (_SHUT, 1 - road.beta)) if w != 0]
+        if road.exit == "sink":
+            coins = [(_SINK, 1.0)]
+        elif self.update != "ordered-sequential":
+            # parallel: only the leading car (or the virtual car on an empty road) sees
+            # the exit; random-sequential: one car a sub-step.  One reader: the coin is
+            # drawn where it is read, and the bond need not carry it
+            coins = [(_EITHER, 1.0)]
+        else:
+            # ordered: every car that leaves hands the exit to the one behind, all
+            # seeing the same coin: it is drawn at the entry and carried
+            coins = [(c, w) for c, w in ((_OPEN, road.beta), (_SHUT, 1 - road.beta)) if w != 0]
         for coin, wc in coins:
             if self.update == "random-sequential":
                 out.append(((coin, 0, (), None, None), wc, {}))
