@@ -217,6 +217,8 @@ def test_counts(update, entry, exit_):
                 tensors[site] = t
             got = to_dense(tensors).sum(axis=0) @ p
             assert abs(got - expect) < 1e-13, (kind, index, lump, got, expect)
+            row = [w[:, None] for w in m.expected_count(kind, index)]      # (Dl, 1, d, Dr)
+            assert abs(to_dense(row)[0] @ p - expect) < 1e-13, (kind, index, lump)
 
 
 def test_count_refusals_and_random_sequential_keeps_velocities():
