@@ -64,7 +64,6 @@ of the same name as an attribute of the package: import from
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
