@@ -275,3 +275,33 @@ def test_one_and_two_cells(update):
                            (), (OnRamp(1, 0.5, 0),) if entry != "site1" else ()), lump=False)
         check_entries(Road(2, nasch(2, 0.3), update, 0.45, 0.35, entry, exit_, 2,
                            (), (OnRamp(1, 0.5, 1),) if entry != "site1" else ()), lump=True)
+
+
+def test_counts_at_L100_two_ways():
+    """At L = 100: <expected_count, p> against the raw MPO with the count's site replaced, p a product state."""
+    L = 100
+    road = Road(L, nasch(2), "parallel", 0.35, 0.6, "reservoir", "wall", 0, (), (OnRamp(60, 0.2, 0),))
+    m = road_mpo(road)
+    rng = np.random.default_rng(5)
+    p = [rng.random(len(m.site_labels[i])) for i in range(L)]
+    p = [q / q.sum() for q in p]
+
+    def through_mpo(tensors):
+        v = np.ones(1)
+        for w, q in zip(tensors, p):
+            v = np.einsum("a,aoib,i->b", v, w, q)
+        return v[0]
+
+    def through_row(row):
+        v = np.ones(1)
+        for w, q in zip(row, p):
+            v = np.einsum("a,aib,i->b", v, w, q)
+        return v[0]
+    assert abs(through_mpo(m.count_base) - 1) < 1e-13
+    for kind, index in (("left", None), ("entered", None), ("bond", 30), ("bond", 99),
+                        ("ramp", 0), ("velocity", 1), ("velocity", 61), ("velocity", 100)):
+        tensors = list(m.count_base)
+        for site, t in m.count(kind, index).items():
+            tensors[site] = t
+        a, b = through_mpo(tensors), through_row(m.expected_count(kind, index))
+        assert abs(a - b) < 1e-12 and a > 0, (kind, index, a, b)

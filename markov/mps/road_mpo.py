@@ -569,6 +569,18 @@ class _Raw:
         np.add.at(W, tuple(k.T), w)
         return W
 
+    def row(self, j: int) -> np.ndarray:
+        """The raw tensor of cell ``j`` summed over its outputs, ``(Dl, 1, d_in, Dr)`` (cached)."""
+        if not hasattr(self, "_rows"):
+            self._rows = {}
+        got = self._rows.get(j)
+        if got is None:
+            W = np.zeros((self.dims[j - 1], self.d, self.dims[j]))
+            k, w = self.sites[j - 1]
+            np.add.at(W, (k[:, 0], k[:, 2], k[:, 3]), w)
+            got = self._rows[j] = W[:, None]
+        return got
+
     def count(self, j: int, key) -> np.ndarray:
         """The tensor of cell ``j`` with each branch weighted by its count ``key``."""
         C = np.zeros(self.shape(j))
@@ -887,8 +899,7 @@ class RoadMPO:
                 return raw.L
 
             def __getitem__(self, i):
-                w = tensor if i == site else raw.site(i + 1)
-                return w.sum(axis=1)[:, None]          # (Dl, 1, d_in, Dr)
+                return tensor.sum(axis=1)[:, None] if i == site else raw.row(i + 1)
 
         return [w[:, 0] for w in compress(_Rows(), cutoff)]
 
