@@ -14,7 +14,7 @@ import pytest
 import naive_road
 from markov import OnRamp, Road, Stretch, load_model
 from markov.errors import InvalidParameterError
-from markov.mps import road_mpo, ones_invariance, to_dense
+from markov.mps.road_mpo import ones_invariance, road_mpo, to_dense
 
 UPDATES = ("parallel", "ordered-sequential", "random-sequential")
 ENTRIES = ("site1", "reservoir", "insert")

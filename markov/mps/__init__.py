@@ -1,4 +1,4 @@
-"""Matrix product forms of open roads (issue 35): the one-step matrix as an MPO."""
-from markov.mps.road_mpo import RoadMPO, compress, ones_invariance, road_mpo, to_dense
-
-__all__ = ["RoadMPO", "compress", "ones_invariance", "road_mpo", "to_dense"]
+"""Long open roads as matrix product states (MPS): the one-step matrix as an exact
+matrix product operator (:mod:`markov.mps.road_mpo`) and its stationary vector
+(:mod:`markov.mps.stationary`).  Nothing is imported here: numpy loads with a module,
+and ``markov.mps.road_mpo`` stays the module (its function has the same name)."""
