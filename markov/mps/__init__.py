@@ -1,0 +1,1 @@
+"""Matrix product states (MPS) and operators (MPO) for long open roads (issue 35)."""
