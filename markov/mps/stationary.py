@@ -377,7 +377,7 @@ def residual(mpo: Sequence[np.ndarray], p: MPS, bond_dimension: int) -> tuple[fl
     ``T p`` is compressed at ``bond_dimension`` (pass about twice the bond of ``p``) with
     cutoff 1e-15; the floor is the square root of that compression's discarded weight.
     """
-    tp, err = apply_mpo(mpo, p, bond_dimension, 1e-15)
+    tp, err = apply_mpo(mpo, p, bond_dimension, 1e-30)
     r = distance(tp, p) / math.exp(log_norm(p))
     return r, math.sqrt(err)
 
@@ -628,29 +628,54 @@ def _effective_two_site(le, w1, w2, re):
 
 
 def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter: int) -> np.ndarray:
-    """Eigenvector of the largest-real-part eigenvalue of the projected matrix."""
+    """Eigenvector of the largest-real-part eigenvalue of the projected matrix.
+
+    Explicitly restarted Arnoldi from the current two-site tensor (Krylov size ``ncv``, at
+    most ``maxiter`` restarts, stop when the Ritz residual is below ``tol``); unlike ARPACK
+    it always returns its best Ritz vector, so an unconverged local step still improves
+    the sweep. Blocks of at most 64 entries are solved densely.
+    """
     shape = theta.shape
     n = theta.size
-    v0 = theta.ravel()
-    if n <= 400:
+    v = theta.ravel() / np.linalg.norm(theta)
+    v0 = v
+    if n <= 64:
         m = np.empty((n, n))
         eye = np.eye(n)
         for j in range(n):
             m[:, j] = matvec(eye[j].reshape(shape)).ravel()
         vals, vecs = np.linalg.eig(m)
-        j = int(np.argmax(vals.real))
-        vec = vecs[:, j].real
+        vec = vecs[:, int(np.argmax(vals.real))].real
     else:
-        from scipy.sparse.linalg import ArpackNoConvergence, LinearOperator, eigs
-
-        op = LinearOperator((n, n), matvec=lambda x: matvec(x.reshape(shape)).ravel(), dtype=float)
-        try:
-            vals, vecs = eigs(op, k=1, which="LR", v0=v0, ncv=min(ncv, n - 1), tol=tol, maxiter=maxiter)
-            vec = vecs[:, 0].real
-        except ArpackNoConvergence as exc:  # keep the best Ritz vector
-            if exc.eigenvectors.shape[1] == 0:
-                return theta
-            vec = exc.eigenvectors[:, int(np.argmax(exc.eigenvalues.real))].real
+        k = min(ncv, n)
+        for _ in range(max(1, maxiter)):
+            basis = np.empty((k + 1, n))
+            h = np.zeros((k + 1, k))
+            basis[0] = v
+            m = k
+            for j in range(k):
+                w = matvec(basis[j].reshape(shape)).ravel()
+                for _pass in range(2):  # twice is enough (Kahan)
+                    c = basis[: j + 1] @ w
+                    w = w - c @ basis[: j + 1]
+                    h[: j + 1, j] += c
+                h[j + 1, j] = np.linalg.norm(w)
+                if h[j + 1, j] < 1e-14 * abs(h[: j + 1, j]).max():
+                    m = j + 1
+                    break
+                basis[j + 1] = w / h[j + 1, j]
+            vals, vecs = np.linalg.eig(h[:m, :m])
+            i = int(np.argmax(vals.real))
+            y = vecs[:, i]
+            if abs(vals[i].imag) > 1e-12 * max(1.0, abs(vals[i])):
+                y = y.real  # a complex pair on top: keep the real part and go on
+            y = y.real / np.linalg.norm(y.real)
+            v = y @ basis[:m]
+            v /= np.linalg.norm(v)
+            ritz_res = abs(h[m, m - 1] * y[-1]) if m < k + 1 else 0.0
+            if m < k or ritz_res <= tol:
+                break
+        vec = v
     if vec @ v0 < 0:  # the sign of the previous tensor
         vec = -vec
     return (vec / np.linalg.norm(vec)).reshape(shape)
@@ -732,12 +757,12 @@ def stationary_mps(
     tol: float = 1e-10,
     max_iterations: int = 50,
     start: MPS | None = None,
-    cutoff: float = 1e-14,
+    cutoff: float | None = None,
     method: str = "dmrg",
     check_every: int = 1,
-    local_tol: float = 0.0,
+    local_tol: float = 1e-12,
     ncv: int = 20,
-    local_maxiter: int = 300,
+    local_maxiter: int = 4,
     progress: Callable[[int, MPS, float], dict | None] | None = None,
 ) -> StationaryMPS:
     """Stationary vector ``T p = p`` of a stochastic MPO as a sum-normalised MPS.
@@ -755,8 +780,10 @@ def stationary_mps(
     start : MPS, optional
         Warm start (e.g. :func:`pad_mps` of a shorter chain's result); default the uniform
         product state.
-    cutoff : float
-        Relative discarded squared weight allowed per cut.
+    cutoff : float, optional
+        Relative discarded squared weight allowed per cut; default ``(tol / 10)**2 / L``,
+        so that the truncations alone cannot hold the residual above ``tol`` (a cutoff of
+        1e-20 held a random 3^6 chain at residual 9.7e-11).
     method : {"dmrg", "power"}
         Two-site non-Hermitian sweep, or power iteration with zip-up compression.
     check_every : int
@@ -772,6 +799,8 @@ def stationary_mps(
     StationaryMPS
     """
     t0 = time.perf_counter()
+    if cutoff is None:
+        cutoff = (0.1 * tol) ** 2 / len(mpo)
     if start is None:
         p = product_mps([np.full(w.shape[2], 1.0 / w.shape[2]) for w in mpo])
     else:
