@@ -632,9 +632,10 @@ def _effective_two_site(le, w1, w2, re):
 def _pick(vals: np.ndarray) -> int:
     """The Ritz value nearest 1, the stationary eigenvalue.
 
-    The projected matrix is not stochastic: it can have spurious eigenvalues of real part
-    above 1 (taking the largest real part diverged at the maximal-current TASEP, L = 200,
-    chi = 64: residual 1.3e-5 after 3 sweeps, then 1.6e-2 and marginals of -3.3).
+    The projected matrix is not stochastic and may have eigenvalues of real part above 1;
+    at the fixed point its eigenvalue is exactly 1. (At the maximal-current TASEP, L = 200,
+    chi = 64, this rule and the largest real part gave the same sweeps, both diverging
+    once the truncation set in: docs/mps_solver_notes.md.)
     """
     return int(np.argmin(np.abs(vals - 1.0)))
 
