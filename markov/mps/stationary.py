@@ -774,7 +774,7 @@ def stationary_mps(
     method: str = "dmrg",
     check_every: int | None = None,
     local_tol: float = 1e-12,
-    ncv: int = 20,
+    ncv: int = 40,
     local_maxiter: int = 4,
     progress: Callable[[int, MPS, float], dict | None] | None = None,
 ) -> StationaryMPS:
