@@ -1,0 +1,873 @@
+"""Stationary states of stochastic matrix product operators as matrix product states.
+
+Generic: nothing here knows about traffic. The conventions are shared with the MPO
+builders (``markov.mps.road_mpo``):
+
+* An MPO is a list of ``L`` float64 arrays ``W[i]`` of shape ``(Dl, d_out, d_in, Dr)``,
+  ``Dl = 1`` at the first site and ``Dr = 1`` at the last. Contracted it is the
+  column-stochastic ``T[s', s] = P(s -> s')``. Configurations are indexed row-major,
+  site 0 most significant; the physical dimension may vary by site.
+* An MPS is :class:`MPS`: site tensors ``A[i]`` of shape ``(Dl, d, Dr)`` and a natural-log
+  scale carried separately, so that the vector is ``exp(log_scale) * contraction``. A
+  probability vector is normalised to sum 1 (the contraction with the all-ones co-vector),
+  never to its L2 norm; the scale keeps L = 1000 free of under- and overflow.
+
+Truncation (``cutoff``): at every cut the smallest number of singular values is kept such
+that the discarded squared weight, relative to the cut's total squared weight, is at most
+``cutoff``, and never more than ``bond_dimension``. ``truncation_error`` sums these relative
+discarded weights over the cuts (a squared L2 quantity).
+
+Algorithm
+---------
+:func:`stationary_mps` runs a two-site non-Hermitian DMRG-type sweep (``method="dmrg"``,
+the default): the MPS is kept in mixed canonical form, the MPO is projected on the
+orthonormal left and right blocks of ``p`` itself (a Galerkin projection; Carlon, Henkel
+and Schollwoeck 1999 instead built the basis from the left and right eigenvectors), and the
+local problem is the eigenvector of the projected two-site matrix whose eigenvalue is
+nearest 1 (explicitly restarted Arnoldi started from the current two-site tensor,
+a fixed small amount of work per bond; dense for blocks of at most 64 entries). ``method="power"`` is plain power iteration
+``p <- C(T p)`` with the zip-up compression ``C`` of :func:`apply_mpo`. The numbers that
+chose the default are in ``docs/mps_solver_notes.md``.
+
+Residual
+--------
+``residual = ||T p - p||_2 / ||p||_2``, with ``T p`` formed by :func:`apply_mpo` at twice
+the bond dimension and cutoff 1e-30, and the difference's norm computed exactly in MPS form
+by a QR sweep (no Gram-matrix cancellation, so it resolves 1e-14). The compression of
+``T p`` is bounded separately by ``residual_floor`` (square root of its discarded weight).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "MPS",
+    "StationaryMPS",
+    "apply_mpo",
+    "dense_to_mpo",
+    "dense_to_mps",
+    "distance",
+    "expectation",
+    "expectations",
+    "log_norm",
+    "log_total",
+    "mps_to_dense",
+    "mpo_to_dense",
+    "negativity",
+    "normalize",
+    "one_site_marginals",
+    "pad_mps",
+    "product_mps",
+    "residual",
+    "stationary_mps",
+    "total",
+    "two_site_marginals",
+]
+
+
+@dataclass
+class MPS:
+    """A matrix product state ``exp(log_scale) * A[0] A[1] ... A[L-1]``.
+
+    Attributes
+    ----------
+    tensors : list of numpy.ndarray
+        Site tensors of shape ``(Dl, d, Dr)``.
+    log_scale : float
+        Natural logarithm of the scale factor in front of the contraction.
+    """
+
+    tensors: list[np.ndarray]
+    log_scale: float = 0.0
+
+    def __len__(self) -> int:
+        return len(self.tensors)
+
+    def copy(self) -> MPS:
+        """Return a deep copy."""
+        return MPS([a.copy() for a in self.tensors], self.log_scale)
+
+    @property
+    def bond_dimensions(self) -> list[int]:
+        """Bond dimensions of the ``L - 1`` inner bonds."""
+        return [a.shape[2] for a in self.tensors[:-1]]
+
+    @property
+    def dims(self) -> list[int]:
+        """Physical dimension of every site."""
+        return [a.shape[1] for a in self.tensors]
+
+
+@dataclass
+class StationaryMPS:
+    """Result of :func:`stationary_mps`.
+
+    Attributes
+    ----------
+    mps : MPS
+        The stationary vector, normalised to sum 1: the checked state of lowest residual
+        (the sweeps stop when the residual grows 100-fold above it).
+    residual : float
+        ``||T p - p||_2 / ||p||_2`` computed in MPS form (see the module docstring).
+    residual_floor : float
+        Square root of the discarded weight of the ``T p`` used for ``residual``: the
+        residual is exact up to about this.
+    truncation_error : float
+        Relative discarded squared weight, summed over the cuts, of the last sweep
+        (DMRG) or the last step (power iteration).
+    iterations : int
+        Sweeps (DMRG: one sweep is left-to-right and back) or power steps.
+    converged : bool
+        Whether ``residual <= tol`` was reached.
+    history : list of dict
+        One entry per check: ``iteration``, ``residual``, ``truncation_error``, ``seconds``
+        and whatever the ``progress`` callback returned (merged in when a dict).
+    negativity : dict
+        :func:`negativity` of the result.
+    bond_dimensions : list of int
+        Bond dimensions of the result.
+    seconds : float
+        Wall time.
+    """
+
+    mps: MPS
+    residual: float
+    residual_floor: float
+    truncation_error: float
+    iterations: int
+    converged: bool
+    history: list[dict] = field(default_factory=list)
+    negativity: dict = field(default_factory=dict)
+    bond_dimensions: list[int] = field(default_factory=list)
+    seconds: float = 0.0
+
+
+# --------------------------------------------------------------------------- helpers
+
+
+def _truncate(s: np.ndarray, bond_dimension: int, cutoff: float) -> tuple[int, float]:
+    """Number of singular values kept and the relative discarded squared weight."""
+    w = s * s
+    tot = w.sum()
+    if tot <= 0.0:
+        return 1, 0.0
+    # tail[k] = weight discarded when keeping k values
+    tail = np.concatenate([np.cumsum(w[::-1])[::-1], [0.0]]) / tot
+    keep = int(np.argmax(tail <= cutoff))
+    keep = max(1, min(keep, bond_dimension, len(s)))
+    return keep, float(tail[keep])
+
+
+def _svd(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    try:
+        return np.linalg.svd(m, full_matrices=False)
+    except np.linalg.LinAlgError:  # gesdd failed to converge: the slower, safer driver
+        import scipy.linalg
+
+        return scipy.linalg.svd(m, full_matrices=False, lapack_driver="gesvd")
+
+
+def product_mps(vectors: Sequence[np.ndarray]) -> MPS:
+    """Product state from one vector per site (bond dimension 1)."""
+    return MPS([np.asarray(v, dtype=float).reshape(1, -1, 1).copy() for v in vectors])
+
+
+def _left_canonical(p: MPS) -> MPS:
+    """QR sweep left to right; the norm goes into ``log_scale``, the last tensor has norm 1."""
+    out = []
+    log = p.log_scale
+    carry = np.ones((1, 1))
+    for a in p.tensors:
+        a = np.tensordot(carry, a, axes=(1, 0))
+        dl, d, dr = a.shape
+        q, r = np.linalg.qr(a.reshape(dl * d, dr))
+        nrm = np.linalg.norm(r)
+        if nrm == 0.0:
+            raise ValueError("the MPS is zero")
+        log += math.log(nrm)
+        out.append(q.reshape(dl, d, -1))
+        carry = r / nrm
+    out[-1] = np.tensordot(out[-1], carry, axes=(2, 0))
+    return MPS(out, log)
+
+
+def _right_canonical(p: MPS) -> MPS:
+    """QR sweep right to left; the norm goes into ``log_scale``, the first tensor has norm 1."""
+    out: list[np.ndarray] = []
+    log = p.log_scale
+    carry = np.ones((1, 1))
+    for a in reversed(p.tensors):
+        a = np.tensordot(a, carry, axes=(2, 0))
+        dl, d, dr = a.shape
+        q, r = np.linalg.qr(a.reshape(dl, d * dr).T)
+        nrm = np.linalg.norm(r)
+        if nrm == 0.0:
+            raise ValueError("the MPS is zero")
+        log += math.log(nrm)
+        out.append(q.T.reshape(-1, d, dr))
+        carry = r.T / nrm
+    out.reverse()
+    out[0] = np.tensordot(carry, out[0], axes=(1, 0))
+    return MPS(out, log)
+
+
+def _compress_right_to_left(
+    tensors: list[np.ndarray], log: float, bond_dimension: int, cutoff: float
+) -> tuple[MPS, float]:
+    """SVD-truncate a left-canonical MPS from the right; returns it right-canonical."""
+    out: list[np.ndarray] = [None] * len(tensors)  # type: ignore[list-item]
+    err = 0.0
+    carry = np.ones((1, 1))
+    for i in range(len(tensors) - 1, 0, -1):
+        a = np.tensordot(tensors[i], carry, axes=(2, 0))
+        dl, d, dr = a.shape
+        u, s, vt = _svd(a.reshape(dl, d * dr))
+        k, e = _truncate(s, bond_dimension, cutoff)
+        err += e
+        nrm = np.linalg.norm(s[:k])
+        log += math.log(nrm)
+        out[i] = vt[:k].reshape(k, d, dr)
+        carry = u[:, :k] * (s[:k] / nrm)
+    a = np.tensordot(tensors[0], carry, axes=(2, 0))
+    nrm = np.linalg.norm(a)
+    out[0] = a / nrm
+    return MPS(out, log + math.log(nrm)), err
+
+
+def log_total(p: MPS) -> tuple[float, float]:
+    """Sign and natural log of the sum of the vector (contraction with the all-ones co-vector).
+
+    Returns
+    -------
+    (sign, log) : tuple of float
+        The sum is ``sign * exp(log)``; ``sign`` is 0 for a zero sum.
+    """
+    v = np.ones(1)
+    log = p.log_scale
+    for a in p.tensors:
+        v = v @ a.sum(axis=1)
+        m = np.abs(v).max()
+        if m == 0.0:
+            return 0.0, -math.inf
+        log += math.log(m)
+        v = v / m
+    return float(np.sign(v[0])), log + math.log(abs(v[0]))
+
+
+def total(p: MPS) -> float:
+    """Sum of the vector (1 for a normalised probability vector); may overflow for a raw MPS."""
+    sign, log = log_total(p)
+    return sign * math.exp(log) if sign else 0.0
+
+
+def normalize(p: MPS) -> MPS:
+    """The same tensors with ``log_scale`` set so that the sum is 1.
+
+    Raises
+    ------
+    ValueError
+        When the sum is zero or negative (not a probability vector).
+    """
+    sign, log = log_total(p)
+    if sign <= 0:
+        raise ValueError("the MPS sums to a non-positive number; not a probability vector")
+    return MPS(p.tensors, p.log_scale - log)
+
+
+def log_norm(p: MPS) -> float:
+    """Natural log of the L2 norm, by a QR sweep (no cancellation)."""
+    return _left_canonical(p).log_scale
+
+
+def distance(p: MPS, q: MPS) -> float:
+    """``||p - q||_2`` computed exactly in MPS form (direct sum, then a QR sweep)."""
+    if len(p) != len(q):
+        raise ValueError("MPS of different lengths")
+    m = max(p.log_scale, q.log_scale)
+    cp, cq = math.exp(p.log_scale - m), math.exp(q.log_scale - m)
+    ts = []
+    n = len(p)
+    for i, (a, b) in enumerate(zip(p.tensors, q.tensors)):
+        if n == 1:
+            ts.append(cp * a - cq * b)
+            continue
+        if i == 0:
+            ts.append(np.concatenate([cp * a, -cq * b], axis=2))
+        elif i == n - 1:
+            ts.append(np.concatenate([a, b], axis=0))
+        else:
+            dl = a.shape[0] + b.shape[0]
+            dr = a.shape[2] + b.shape[2]
+            c = np.zeros((dl, a.shape[1], dr))
+            c[: a.shape[0], :, : a.shape[2]] = a
+            c[a.shape[0] :, :, a.shape[2] :] = b
+            ts.append(c)
+    try:
+        return math.exp(log_norm(MPS(ts, m)))
+    except ValueError:  # exactly zero difference
+        return 0.0
+
+
+def apply_mpo(
+    mpo: Sequence[np.ndarray],
+    p: MPS,
+    bond_dimension: int,
+    cutoff: float = 1e-14,
+    *,
+    zip_factor: int = 2,
+) -> tuple[MPS, float]:
+    """``T p`` compressed: zip-up, then an SVD sweep back.
+
+    ``p`` is brought to right-canonical form; the zip-up sweep (left to right) contracts
+    each MPO tensor into the carried block and splits it by SVD at bond
+    ``zip_factor * bond_dimension`` and ``cutoff / 10``; a right-to-left SVD sweep then
+    truncates the (left-canonical) result to ``bond_dimension`` and ``cutoff``.
+
+    Parameters
+    ----------
+    mpo : sequence of numpy.ndarray
+        MPO tensors ``(Dl, d_out, d_in, Dr)``.
+    p : MPS
+        The vector.
+    bond_dimension : int
+        Largest bond dimension kept.
+    cutoff : float
+        Relative discarded squared weight allowed per cut (module docstring).
+    zip_factor : int
+        Bond of the zip-up sweep in units of ``bond_dimension``.
+
+    Returns
+    -------
+    (MPS, float)
+        ``T p`` (right-canonical, its scale in ``log_scale``) and the summed relative
+        discarded weight of the final sweep.
+    """
+    if len(mpo) != len(p):
+        raise ValueError(f"MPO of {len(mpo)} sites against an MPS of {len(p)}")
+    q = _right_canonical(p)
+    log = q.log_scale
+    carry = np.ones((1, 1, 1))  # (new bond, mpo bond, old bond)
+    out = []
+    zbond = zip_factor * bond_dimension
+    n = len(mpo)
+    for i, (w, b) in enumerate(zip(mpo, q.tensors)):
+        y = np.tensordot(carry, b, axes=(2, 0))  # (a, w, t, c)
+        x = np.tensordot(y, w, axes=([1, 2], [0, 2]))  # (a, c, s, v)
+        x = x.transpose(0, 2, 3, 1)  # (a, s, v, c)
+        a_, s_, v_, c_ = x.shape
+        if i == n - 1:
+            out.append(x.reshape(a_, s_, 1))
+            break
+        u, s, vt = _svd(x.reshape(a_ * s_, v_ * c_))
+        k, _ = _truncate(s, zbond, cutoff * 0.1)
+        nrm = np.linalg.norm(s[:k])
+        log += math.log(nrm)
+        out.append(u[:, :k].reshape(a_, s_, k))
+        carry = ((s[:k] / nrm)[:, None] * vt[:k]).reshape(k, v_, c_)
+    return _compress_right_to_left(out, log, bond_dimension, cutoff)
+
+
+def residual(mpo: Sequence[np.ndarray], p: MPS, bond_dimension: int) -> tuple[float, float]:
+    """``||T p - p||_2 / ||p||_2`` and the floor of its accuracy.
+
+    ``T p`` is compressed at ``bond_dimension`` (pass about twice the bond of ``p``) with
+    cutoff 1e-15; the floor is the square root of that compression's discarded weight.
+    """
+    tp, err = apply_mpo(mpo, p, bond_dimension, 1e-30)
+    r = distance(tp, p) / math.exp(log_norm(p))
+    return r, math.sqrt(err)
+
+
+# --------------------------------------------------------------------------- marginals
+
+
+def _ones_environments(p: MPS) -> tuple[list[np.ndarray], list[float], list[np.ndarray], list[float]]:
+    """Left and right environments with the all-ones co-vector, each with its own log."""
+    n = len(p)
+    lv: list[np.ndarray] = [np.ones(1)]
+    ll = [0.0]
+    for a in p.tensors[:-1]:
+        v = lv[-1] @ a.sum(axis=1)
+        m = np.abs(v).max()
+        lv.append(v / m)
+        ll.append(ll[-1] + math.log(m))
+    rv: list[np.ndarray] = [np.ones(1)]
+    rl = [0.0]
+    for a in reversed(p.tensors[1:]):
+        v = a.sum(axis=1) @ rv[-1]
+        m = np.abs(v).max()
+        rv.append(v / m)
+        rl.append(rl[-1] + math.log(m))
+    rv.reverse()
+    rl.reverse()
+    assert len(lv) == n and len(rv) == n
+    return lv, ll, rv, rl
+
+
+def one_site_marginals(p: MPS) -> list[np.ndarray]:
+    """One-site marginal distributions of ``p / total(p)``, one array per site."""
+    lv, ll, rv, rl = _ones_environments(p)
+    _, lt = log_total(p)
+    out = []
+    for i, a in enumerate(p.tensors):
+        m = np.einsum("a,asb,b->s", lv[i], a, rv[i])
+        out.append(m * math.exp(ll[i] + rl[i] + p.log_scale - lt))
+    return out
+
+
+def two_site_marginals(p: MPS) -> list[np.ndarray]:
+    """Nearest-neighbour marginals ``P(s_i, s_{i+1})`` of ``p / total(p)``, ``L - 1`` arrays."""
+    lv, ll, rv, rl = _ones_environments(p)
+    _, lt = log_total(p)
+    out = []
+    for i in range(len(p) - 1):
+        m = np.einsum("a,asb,btc,c->st", lv[i], p.tensors[i], p.tensors[i + 1], rv[i + 1])
+        out.append(m * math.exp(ll[i] + rl[i + 1] + p.log_scale - lt))
+    return out
+
+
+def negativity(p: MPS) -> dict[str, float]:
+    """How far ``p`` is from a probability vector, measured on its marginals.
+
+    Returns
+    -------
+    dict
+        ``min_one_site`` and ``min_two_site``: the most negative one-site and
+        nearest-neighbour marginal entry (0 when none is negative), and
+        ``l1_excess_lower_bound``: ``max_i sum |P_i| - 1`` over both kinds of marginal, a
+        lower bound of ``||p||_1 - 1`` (the full L1 excess needs the whole vector).
+    """
+    one = one_site_marginals(p)
+    two = two_site_marginals(p) if len(p) > 1 else []
+    mins1 = min(min(float(m.min()) for m in one), 0.0)
+    mins2 = min([float(m.min()) for m in two] + [0.0])
+    excess = max([float(np.abs(m).sum() - m.sum()) for m in one + two] + [0.0])
+    return {"min_one_site": mins1, "min_two_site": mins2, "l1_excess_lower_bound": excess}
+
+
+# --------------------------------------------------------------------------- expectations
+
+
+def _operator_environments(
+    p: MPS, base: Sequence[np.ndarray]
+) -> tuple[list[np.ndarray], list[float], list[np.ndarray], list[float]]:
+    """Environments of (ones, base, p): left ``(wl, chi_l)`` and right ``(wr, chi_r)``."""
+    n = len(p)
+    left = [np.ones((1, 1))]
+    ll = [0.0]
+    for w, a in zip(base[:-1], p.tensors[:-1]):
+        ws = w.sum(axis=1)  # the ones co-vector on the output leg
+        e = np.tensordot(left[-1], ws, axes=(0, 0))  # (chi_l, d_in, wr)
+        e = np.tensordot(e, a, axes=([0, 1], [0, 1]))  # (wr, chi_r)
+        m = np.abs(e).max()
+        left.append(e / m)
+        ll.append(ll[-1] + math.log(m))
+    right = [np.ones((1, 1))]
+    rl = [0.0]
+    for w, a in zip(reversed(base[1:]), reversed(p.tensors[1:])):
+        ws = w.sum(axis=1)  # (wl, d_in, wr)
+        e = np.tensordot(a, right[-1], axes=(2, 1))  # (chi_l, d, wr)
+        e = np.tensordot(ws, e, axes=([1, 2], [1, 2]))  # (wl, chi_l)
+        m = np.abs(e).max()
+        right.append(e / m)
+        rl.append(rl[-1] + math.log(m))
+    right.reverse()
+    rl.reverse()
+    assert len(left) == n
+    return left, ll, right, rl
+
+
+def expectations(
+    p: MPS, base: Sequence[np.ndarray], replacements: dict[int, np.ndarray]
+) -> dict[int, float]:
+    """``1^T (T o C_i) p / 1^T p`` for every site ``i`` in ``replacements``, in one pass.
+
+    Parameters
+    ----------
+    p : MPS
+        The state (need not be normalised; the result is divided by its sum).
+    base : sequence of numpy.ndarray
+        The MPO ``T``.
+    replacements : dict
+        ``{site: tensor}``; the MPO with ``base[site]`` replaced by ``tensor`` (same shape
+        convention, same bonds) is ``T o C_site``. Every site is evaluated on its own, the
+        other sites left as ``base``.
+
+    Returns
+    -------
+    dict
+        ``{site: value}``. Cost O(L) contractions for all sites together.
+    """
+    left, ll, right, rl = _operator_environments(p, base)
+    _, lt = log_total(p)
+    out = {}
+    for i, w in replacements.items():
+        ws = np.asarray(w).sum(axis=1)
+        e = np.tensordot(left[i], ws, axes=(0, 0))  # (chi_l, d_in, wr)
+        e = np.tensordot(e, p.tensors[i], axes=([0, 1], [0, 1]))  # (wr, chi_r)
+        val = float(np.sum(e * right[i]))
+        out[i] = val * math.exp(ll[i] + rl[i] + p.log_scale - lt)
+    return out
+
+
+def expectation(p: MPS, base: Sequence[np.ndarray], replacements: dict[int, np.ndarray]) -> float:
+    """``1^T T' p / 1^T p`` with ``T'`` the MPO ``base`` with every site of ``replacements`` replaced."""
+    e = np.ones((1, 1))
+    log = p.log_scale
+    for i, a in enumerate(p.tensors):
+        w = replacements.get(i, base[i])
+        e = np.tensordot(e, np.asarray(w).sum(axis=1), axes=(0, 0))
+        e = np.tensordot(e, a, axes=([0, 1], [0, 1]))
+        m = np.abs(e).max()
+        if m == 0.0:
+            return 0.0
+        log += math.log(m)
+        e = e / m
+    _, lt = log_total(p)
+    return float(e[0, 0]) * math.exp(log - lt)
+
+
+# --------------------------------------------------------------------------- dense (tests)
+
+
+def dense_to_mps(vector: np.ndarray, dims: Sequence[int], cutoff: float = 0.0) -> MPS:
+    """Exact MPS of a dense vector by successive SVDs (for tests at small L)."""
+    v = np.asarray(vector, dtype=float).reshape(1, -1)
+    out = []
+    for d in dims[:-1]:
+        dl = v.shape[0]
+        u, s, vt = _svd(v.reshape(dl * d, -1))
+        k = max(1, int(np.sum(s > cutoff * s[0]))) if s[0] > 0 else 1
+        out.append(u[:, :k].reshape(dl, d, k))
+        v = s[:k, None] * vt[:k]
+    out.append(v.reshape(v.shape[0], dims[-1], 1))
+    return MPS(out)
+
+
+def mps_to_dense(p: MPS) -> np.ndarray:
+    """The full vector (row-major, site 0 most significant)."""
+    v = np.ones((1, 1))
+    for a in p.tensors:
+        v = np.tensordot(v, a, axes=(1, 0)).reshape(-1, a.shape[2])
+    return v[:, 0] * math.exp(p.log_scale)
+
+
+def dense_to_mpo(matrix: np.ndarray, dims: Sequence[int], cutoff: float = 1e-14) -> list[np.ndarray]:
+    """Exact MPO of a dense ``matrix[s', s]`` by successive SVDs (for tests at small L).
+
+    Singular values below ``cutoff`` times the largest of their cut are dropped.
+    """
+    n = len(dims)
+    m = np.asarray(matrix, dtype=float).reshape(tuple(dims) + tuple(dims))
+    # interleave (s'_0, s_0, s'_1, s_1, ...)
+    m = m.transpose([k for i in range(n) for k in (i, n + i)])
+    v = m.reshape(1, -1)
+    out = []
+    for d in dims[:-1]:
+        dl = v.shape[0]
+        u, s, vt = _svd(v.reshape(dl * d * d, -1))
+        k = max(1, int(np.sum(s > cutoff * s[0]))) if s[0] > 0 else 1
+        out.append(u[:, :k].reshape(dl, d, d, k))
+        v = s[:k, None] * vt[:k]
+    out.append(v.reshape(v.shape[0], dims[-1], dims[-1], 1))
+    return out
+
+
+def mpo_to_dense(mpo: Sequence[np.ndarray]) -> np.ndarray:
+    """The full matrix ``T[s', s]`` of an MPO (for tests at small L)."""
+    t = np.ones((1, 1, 1))  # (out, in, bond)
+    for w in mpo:
+        x = np.tensordot(t, w, axes=(2, 0))  # (O, I, s', s, r)
+        o, i_, so, si, r = x.shape
+        t = x.transpose(0, 2, 1, 3, 4).reshape(o * so, i_ * si, r)
+    return t[:, :, 0]
+
+
+# --------------------------------------------------------------------------- warm starts
+
+
+def pad_mps(p: MPS, length: int, position: int | None = None) -> MPS:
+    """A warm start for a longer chain: ``p`` with independent sites inserted.
+
+    The inserted sites (before ``position``, default the middle) carry the one-site
+    marginal of the site they are inserted before, as a product with the bond passing
+    through unchanged, so the sum stays 1 and both boundary regions of ``p`` are kept.
+    """
+    n = len(p)
+    if length < n:
+        raise ValueError("pad_mps only lengthens")
+    pos = n // 2 if position is None else position
+    marg = one_site_marginals(p)[pos]
+    marg = np.clip(marg, 0.0, None)
+    marg = marg / marg.sum()
+    d_bond = p.tensors[pos].shape[0]
+    eye = np.eye(d_bond)
+    insert = eye[:, None, :] * marg[None, :, None]
+    tensors = p.tensors[:pos] + [insert.copy() for _ in range(length - n)] + p.tensors[pos:]
+    return normalize(MPS([t.copy() for t in tensors], p.log_scale))
+
+
+# --------------------------------------------------------------------------- solver
+
+
+def _effective_two_site(le, w1, w2, re):
+    """Matvec of the projected two-site MPO on ``theta`` of shape (a, s, t, b)."""
+
+    def matvec(theta: np.ndarray) -> np.ndarray:
+        x = np.tensordot(le, theta, axes=(2, 0))  # (a', w, s, t, b)
+        x = np.tensordot(x, w1, axes=([1, 2], [0, 2]))  # (a', t, b, s', v)
+        x = np.tensordot(x, w2, axes=([4, 1], [0, 2]))  # (a', b, s', t', u)
+        x = np.tensordot(x, re, axes=([1, 4], [2, 1]))  # (a', s', t', b')
+        return x
+
+    return matvec
+
+
+def _pick(vals: np.ndarray) -> int:
+    """The Ritz value nearest 1, the stationary eigenvalue.
+
+    The projected matrix is not stochastic and may have eigenvalues of real part above 1;
+    at the fixed point its eigenvalue is exactly 1. (At the maximal-current TASEP, L = 200,
+    chi = 64, this rule and the largest real part gave the same sweeps, both diverging
+    once the truncation set in: docs/mps_solver_notes.md.)
+    """
+    return int(np.argmin(np.abs(vals - 1.0)))
+
+
+def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter: int) -> np.ndarray:
+    """Eigenvector of the projected matrix for its eigenvalue nearest 1.
+
+    Explicitly restarted Arnoldi from the current two-site tensor (Krylov size ``ncv``, at
+    most ``maxiter`` restarts, stop when the Ritz residual is below ``tol``); unlike ARPACK
+    it always returns its best Ritz vector, so an unconverged local step still improves
+    the sweep. Blocks of at most 64 entries are solved densely.
+    """
+    shape = theta.shape
+    n = theta.size
+    v = theta.ravel() / np.linalg.norm(theta)
+    v0 = v
+    if n <= 64:
+        m = np.empty((n, n))
+        eye = np.eye(n)
+        for j in range(n):
+            m[:, j] = matvec(eye[j].reshape(shape)).ravel()
+        vals, vecs = np.linalg.eig(m)
+        vec = vecs[:, _pick(vals)].real
+    else:
+        k = min(ncv, n)
+        for _ in range(max(1, maxiter)):
+            basis = np.empty((k + 1, n))
+            h = np.zeros((k + 1, k))
+            basis[0] = v
+            m = k
+            for j in range(k):
+                w = matvec(basis[j].reshape(shape)).ravel()
+                for _pass in range(2):  # twice is enough (Kahan)
+                    c = basis[: j + 1] @ w
+                    w = w - c @ basis[: j + 1]
+                    h[: j + 1, j] += c
+                h[j + 1, j] = np.linalg.norm(w)
+                if h[j + 1, j] < 1e-14 * abs(h[: j + 1, j]).max():
+                    m = j + 1
+                    break
+                basis[j + 1] = w / h[j + 1, j]
+            vals, vecs = np.linalg.eig(h[:m, :m])
+            i = _pick(vals)
+            y = vecs[:, i]
+            if abs(vals[i].imag) > 1e-12 * max(1.0, abs(vals[i])):
+                y = y.real  # a complex pair on top: keep the real part and go on
+            y = y.real / np.linalg.norm(y.real)
+            v = y @ basis[:m]
+            v /= np.linalg.norm(v)
+            ritz_res = abs(h[m, m - 1] * y[-1]) if m < k + 1 else 0.0
+            if m < k or ritz_res <= tol:
+                break
+        vec = v
+    if vec @ v0 < 0:  # the sign of the previous tensor
+        vec = -vec
+    return (vec / np.linalg.norm(vec)).reshape(shape)
+
+
+def _dmrg_sweep(
+    mpo: Sequence[np.ndarray],
+    tensors: list[np.ndarray],
+    bond_dimension: int,
+    cutoff: float,
+    local_tol: float,
+    ncv: int,
+    maxiter: int,
+) -> tuple[list[np.ndarray], float]:
+    """One left-to-right and right-to-left two-site sweep; ``tensors`` right-canonical in."""
+    n = len(tensors)
+    ts = list(tensors)
+    # right environments (bra, w, ket), right-canonical tensors
+    right: list[np.ndarray | None] = [None] * (n + 1)
+    right[n] = np.ones((1, 1, 1))
+    for i in range(n - 1, 1, -1):
+        right[i] = _grow_right(right[i + 1], ts[i], mpo[i])
+    left: list[np.ndarray | None] = [None] * (n + 1)
+    left[0] = np.ones((1, 1, 1))
+    err = 0.0
+    theta = np.tensordot(ts[0], ts[1], axes=(2, 0))
+    for i in range(n - 1):  # left to right, bond (i, i+1)
+        mv = _effective_two_site(left[i], mpo[i], mpo[i + 1], right[i + 2])
+        theta = _local_eigenvector(mv, theta, local_tol, ncv, maxiter)
+        a, s, t, b = theta.shape
+        u, sv, vt = _svd(theta.reshape(a * s, t * b))
+        k, e = _truncate(sv, bond_dimension, cutoff)
+        if i == n - 2:
+            err += e
+            ts[i] = u[:, :k].reshape(a, s, k)
+            ts[i + 1] = (sv[:k, None] * vt[:k]).reshape(k, t, b)
+            ts[i + 1] /= np.linalg.norm(ts[i + 1])
+            break
+        ts[i] = u[:, :k].reshape(a, s, k)
+        left[i + 1] = _grow_left(left[i], ts[i], mpo[i])
+        nxt = (sv[:k, None] * vt[:k]).reshape(k, t, b)
+        theta = np.tensordot(nxt, ts[i + 2], axes=(2, 0))
+    theta = np.tensordot(ts[n - 2], ts[n - 1], axes=(2, 0))
+    for i in range(n - 2, -1, -1):  # right to left, bond (i, i+1)
+        mv = _effective_two_site(left[i], mpo[i], mpo[i + 1], right[i + 2])
+        theta = _local_eigenvector(mv, theta, local_tol, ncv, maxiter)
+        a, s, t, b = theta.shape
+        u, sv, vt = _svd(theta.reshape(a * s, t * b))
+        k, e = _truncate(sv, bond_dimension, cutoff)
+        err += e
+        ts[i + 1] = vt[:k].reshape(k, t, b)
+        right[i + 1] = _grow_right(right[i + 2], ts[i + 1], mpo[i + 1])
+        prev = (u[:, :k] * sv[:k]).reshape(a, s, k)
+        if i == 0:
+            ts[0] = prev / np.linalg.norm(prev)
+            break
+        theta = np.tensordot(ts[i - 1], prev, axes=(2, 0))
+    return ts, err
+
+
+def _grow_left(le: np.ndarray, a: np.ndarray, w: np.ndarray) -> np.ndarray:
+    x = np.tensordot(le, a, axes=(2, 0))  # (a', w, s, b)
+    x = np.tensordot(x, w, axes=([1, 2], [0, 2]))  # (a', b, s', v)
+    x = np.tensordot(a, x, axes=([0, 1], [0, 2]))  # (b', b, v)
+    return x.transpose(0, 2, 1)
+
+
+def _grow_right(re: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
+    x = np.tensordot(b, re, axes=(2, 2))  # (b, s, c', v)
+    x = np.tensordot(x, w, axes=([1, 3], [2, 3]))  # (b, c', w, s')
+    x = np.tensordot(b, x, axes=([1, 2], [3, 1]))  # (b', b, w)
+    return x.transpose(0, 2, 1)
+
+
+def stationary_mps(
+    mpo: Sequence[np.ndarray],
+    bond_dimension: int,
+    *,
+    tol: float = 1e-10,
+    max_iterations: int = 50,
+    start: MPS | None = None,
+    cutoff: float | None = None,
+    method: str = "dmrg",
+    check_every: int | None = None,
+    local_tol: float = 1e-12,
+    ncv: int = 40,
+    local_maxiter: int = 4,
+    progress: Callable[[int, MPS, float], dict | None] | None = None,
+) -> StationaryMPS:
+    """Stationary vector ``T p = p`` of a stochastic MPO as a sum-normalised MPS.
+
+    Parameters
+    ----------
+    mpo : sequence of numpy.ndarray
+        The column-stochastic one-step matrix (module conventions).
+    bond_dimension : int
+        Largest MPS bond dimension.
+    tol : float
+        Stop when ``residual`` (module docstring) is at most ``tol``.
+    max_iterations : int
+        Most sweeps (``"dmrg"``) or power steps (``"power"``).
+    start : MPS, optional
+        Warm start (e.g. :func:`pad_mps` of a shorter chain's result); default the uniform
+        product state.
+    cutoff : float, optional
+        Relative discarded squared weight allowed per cut; default ``(tol / 10)**2 / L``,
+        so that the truncations alone cannot hold the residual above ``tol`` (a cutoff of
+        1e-20 held a random 3^6 chain at residual 9.7e-11).
+    method : {"dmrg", "power"}
+        Two-site non-Hermitian sweep, or power iteration with zip-up compression.
+    check_every : int, optional
+        Residual computed every this many iterations (it is an MPO apply at twice the bond
+        dimension); default 1 for ``"dmrg"``, 20 for ``"power"``.
+    local_tol, ncv, local_maxiter : float, int, int
+        Ritz-residual tolerance, Krylov size and restarts of the local Arnoldi solve
+        (``"dmrg"``).
+    progress : callable, optional
+        ``progress(iteration, mps, residual)`` after every check, ``mps`` normalised; a
+        returned dict is merged into that check's history entry (e.g. the flux).
+
+    Returns
+    -------
+    StationaryMPS
+    """
+    t0 = time.perf_counter()
+    if cutoff is None:
+        cutoff = (0.1 * tol) ** 2 / len(mpo)
+    if check_every is None:
+        check_every = 1 if method == "dmrg" else 20
+    if start is None:
+        p = product_mps([np.full(w.shape[2], 1.0 / w.shape[2]) for w in mpo])
+    else:
+        p = start.copy()
+    if len(p) != len(mpo):
+        raise ValueError(f"start of {len(p)} sites for an MPO of {len(mpo)}")
+    if method not in ("dmrg", "power"):
+        raise ValueError(f"method must be 'dmrg' or 'power', not {method!r}")
+    p = normalize(_right_canonical(p))
+    history: list[dict] = []
+    res, floor, err = math.inf, math.inf, 0.0
+    it = 0
+    converged = False
+    best: tuple = (math.inf, math.inf, 0.0, p, 0)  # the state of lowest residual is returned
+    for it in range(1, max_iterations + 1):
+        if method == "dmrg":
+            rc = _right_canonical(p)
+            ts, err = _dmrg_sweep(mpo, rc.tensors, bond_dimension, cutoff, local_tol, ncv, local_maxiter)
+            if log_total(MPS(ts))[0] < 0:  # an eigenvector's sign is free: take the positive sum
+                ts[0] = -ts[0]
+            p = normalize(MPS(ts))
+        else:
+            q, err = apply_mpo(mpo, p, bond_dimension, cutoff)
+            p = normalize(q)
+        if it % check_every and it != max_iterations:
+            continue
+        res, floor = residual(mpo, p, 2 * bond_dimension)
+        entry = {"iteration": it, "residual": res, "truncation_error": err, "seconds": time.perf_counter() - t0}
+        if progress is not None:
+            extra = progress(it, p, res)
+            if isinstance(extra, dict):
+                entry.update(extra)
+        history.append(entry)
+        if res < best[0]:
+            best = (res, floor, err, p, it)
+        if res <= tol:
+            converged = True
+            break
+        if res > 100 * best[0]:  # the sweeps diverge (non-Hermitian projection): stop
+            break
+    res, floor, err, p, _best_it = best
+    return StationaryMPS(
+        mps=p,
+        residual=res,
+        residual_floor=floor,
+        truncation_error=err,
+        iterations=it,
+        converged=converged,
+        history=history,
+        negativity=negativity(p),
+        bond_dimensions=p.bond_dimensions,
+        seconds=time.perf_counter() - t0,
+    )
