@@ -17,6 +17,7 @@ exact ring's fundamental diagram and from each approximation's
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import textwrap
 import warnings
@@ -373,6 +374,7 @@ class RoadRow:
     states: int | None
     known: float | None = None
     covered: bool | None = None
+    bond_dimension: int | None = None
 
     def to_dict(self) -> dict:
         """The row as in ``nasch table --road --format json``.
@@ -384,7 +386,8 @@ class RoadRow:
         return {"kind": self.kind, "length": self.length, "flux": self.flux,
                 "flux_error": self.flux_error, "inflow": self.inflow,
                 "middle_density": self.middle_density, "states": self.states,
-                "known_limit": self.known, "covered": self.covered}
+                "known_limit": self.known, "covered": self.covered,
+                "bond_dimension": self.bond_dimension}
 
 
 @dataclass(frozen=True)
@@ -494,6 +497,11 @@ class RoadTable(RenderedTable):
         for r in self.rows:
             if r.kind == "extrapolated":
                 cells = ["inf", plus_minus(r.flux, r.flux_error, latex), "", "", ""]
+            elif r.kind == "mps":
+                cells = [str(r.length), f"{r.flux:.10f} (no bar)" if r.flux_error is None
+                         else plus_minus(r.flux, r.flux_error, latex),
+                         f"{r.inflow:.10f}", f"{r.middle_density:.6f}",
+                         f"MPS chi={r.bond_dimension}"]
             else:
                 cells = [str(r.length), f"{r.flux:.10f}", f"{r.inflow:.10f}",
                          f"{r.middle_density:.6f}", f"{r.states:,}"]
@@ -519,7 +527,8 @@ class RoadTable(RenderedTable):
             [line(c).rstrip() for c in body]
 
     def _caption(self) -> str:
-        return f"exact road flux: {self.road.summary().replace(f' L={self.road.length}', '')}"
+        kind = "MPS" if any(r.kind == "mps" for r in self.rows) else "exact"
+        return f"{kind} road flux: {self.road.summary().replace(f' L={self.road.length}', '')}"
 
     def _extremal_caption(self) -> str:
         ring = (f"exact ring: the ring of L = {self.ring_length} cells, N = 0..L"
@@ -535,6 +544,11 @@ class RoadTable(RenderedTable):
                  f"inf: the ring table's fit J(L) = J_inf + sum_(k<={self.order}) a_k / L^k to"
                  " the largest roads, error = max(its two-sigma bar, |J_inf - geometric limit"
                  " of the three largest roads|) (docs/roads.md, Tables)"]
+        if any(r.kind == "mps" for r in self.rows):
+            parts[0] = parts[0].replace("exact stationary exit flux", "stationary exit flux of a"
+                                        " matrix product state of bond dimension chi, +- its"
+                                        " error bar |J(chi) - J(chi/2)| + the sweeps' tail")
+            parts[1] += "; plus the largest bar of the rows"
         if self.known is not None:
             parts.append(f"known limit: {self.known[2]}, {self.known[1]} phase")
         return "; ".join(parts + list(self.notes))
@@ -597,7 +611,8 @@ def _middle(profile: np.ndarray) -> float:
 
 def road_table(road: Road, lengths: Sequence[int], order: int = 2, *, extremal: bool = False,
                ring_length: int | None = None, methods: Sequence[str] = EXTREMAL_METHODS,
-               definition: str = "auto", extrapolation: bool = True) -> RoadTable:
+               definition: str = "auto", extrapolation: bool = True, method: str = "exact",
+               bond_dimension: int | None = None) -> RoadTable:
     """Exact exit fluxes of ``road`` at each length, extrapolated; the extremal comparison.
 
     Parameters
@@ -624,6 +639,13 @@ def road_table(road: Road, lengths: Sequence[int], order: int = 2, *, extremal: 
     extrapolation : bool
         Add the ``L = inf`` row (needs ``max(order + 1, 3)`` lengths; fewer: a
         :class:`RuntimeWarning` instead).
+    method : {"exact", "mps"}
+        The exact chain, or the matrix product state of
+        :func:`markov.solvers.road_mps.solve_road_mps` (long roads, each row with its
+        error bar; each length starts from the shorter one's state, padded).
+    bond_dimension : int, optional
+        ``method="mps"``: the bond dimension (default
+        :data:`markov.solvers.road_mps.DEFAULT_BOND_DIMENSION`).
 
     Returns
     -------
@@ -658,20 +680,43 @@ def road_table(road: Road, lengths: Sequence[int], order: int = 2, *, extremal: 
                        else ensure_int("ring length", ring_length, 2))
     roads = [Road(L, road.model, road.update, road.alpha, road.beta, road.entry, road.exit,
                   road.v_in, road.stretches, road.ramps) for L in lengths]   # checks them all
+    if method not in ("exact", "mps"):
+        raise InvalidParameterError(f"road table method: exact or mps, got {method!r}")
+    if method == "mps" and extremal:
+        raise InvalidParameterError("--extremal reads exact roads: no --method mps with it")
     rows, notes, solutions = [], [], []
     with progress_bar(len(roads), desc="roads") as bar:
+        start = None
         for r in roads:
-            sol = RoadChain(r).solution()
+            if method == "mps":
+                from markov.mps.stationary import pad_mps
+                from markov.solvers.road_mps import DEFAULT_BOND_DIMENSION, solve_road_mps
+
+                # the shorter road's state, padded in the middle, starts the next one
+                start = None if start is None else pad_mps(start, r.length)
+                sol = solve_road_mps(r, bond_dimension or DEFAULT_BOND_DIMENSION, start=start)
+                start = sol.state
+                rows.append(RoadRow("mps", r.length, sol.flux, sol.flux_error, sol.inflow,
+                                    _middle(sol.density_profile), None,
+                                    bond_dimension=sol.bond_dimension))
+            else:
+                sol = RoadChain(r).solution()
+                rows.append(RoadRow("exact", r.length, sol.flux, 0.0, sol.inflow,
+                                    _middle(sol.density_profile), sol.n_states))
             solutions.append(sol)
-            rows.append(RoadRow("exact", r.length, sol.flux, 0.0, sol.inflow,
-                                _middle(sol.density_profile), sol.n_states))
             bar.update()
     known = known_limit(roads[-1])
     ex = None
-    if not extrapolation:
+    unbarred = [r.length for r in rows if r.flux_error is None]
+    if unbarred:
+        notes.append(f"L = {', '.join(map(str, unbarred))}: the MPS missed its residual target,"
+                     " no error bar (raise --bond-dimension); no L = inf row")
+    if not extrapolation or unbarred:
         pass
     elif len(lengths) >= max(order + 1, 3):
         ex = road_extrapolation(lengths, [r.flux for r in rows], order)
+        if method == "mps":   # each flux carries its own bar: the largest widens the limit's
+            ex = dataclasses.replace(ex, error=ex.error + max(r.flux_error for r in rows))
         covered = None if known is None else abs(ex.f_inf - known[0]) <= ex.error
         if covered is False:
             notes.append(f"the known limit {known[0]:.6f} lies outside the bar"

@@ -125,6 +125,10 @@ class StationaryMPS:
         Sweeps (DMRG: one sweep is left-to-right and back) or power steps.
     converged : bool
         Whether ``residual <= tol`` was reached.
+    stopped : str
+        Why the sweeps ended: ``"residual"`` (``tol`` reached), ``"diverged"`` (the
+        residual grew 100-fold), ``"caller"`` (the ``progress`` callback), or
+        ``"max_iterations"``.
     history : list of dict
         One entry per check: ``iteration``, ``residual``, ``truncation_error``, ``seconds``
         and whatever the ``progress`` callback returned (merged in when a dict).
@@ -142,6 +146,7 @@ class StationaryMPS:
     truncation_error: float
     iterations: int
     converged: bool
+    stopped: str = ""
     history: list[dict] = field(default_factory=list)
     negativity: dict = field(default_factory=dict)
     bond_dimensions: list[int] = field(default_factory=list)
@@ -807,7 +812,8 @@ def stationary_mps(
         (``"dmrg"``).
     progress : callable, optional
         ``progress(iteration, mps, residual)`` after every check, ``mps`` normalised; a
-        returned dict is merged into that check's history entry (e.g. the flux).
+        returned dict is merged into that check's history entry (e.g. the flux), and
+        ``{"stop": True}`` in it ends the sweeps (``stopped == "caller"``).
 
     Returns
     -------
@@ -830,7 +836,7 @@ def stationary_mps(
     history: list[dict] = []
     res, floor, err = math.inf, math.inf, 0.0
     it = 0
-    converged = False
+    converged, stopped = False, "max_iterations"
     best: tuple = (math.inf, math.inf, 0.0, p, 0)  # the state of lowest residual is returned
     for it in range(1, max_iterations + 1):
         if method == "dmrg":
@@ -846,17 +852,20 @@ def stationary_mps(
             continue
         res, floor = residual(mpo, p, 2 * bond_dimension)
         entry = {"iteration": it, "residual": res, "truncation_error": err, "seconds": time.perf_counter() - t0}
-        if progress is not None:
-            extra = progress(it, p, res)
-            if isinstance(extra, dict):
-                entry.update(extra)
+        extra = progress(it, p, res) if progress is not None else None
+        if isinstance(extra, dict):
+            entry.update(extra)
         history.append(entry)
         if res < best[0]:
             best = (res, floor, err, p, it)
         if res <= tol:
-            converged = True
+            converged, stopped = True, "residual"
             break
         if res > 100 * best[0]:  # the sweeps diverge (non-Hermitian projection): stop
+            stopped = "diverged"
+            break
+        if isinstance(extra, dict) and extra.get("stop"):
+            stopped = "caller"   # e.g. the observables stopped changing at a truncation floor
             break
     res, floor, err, p, _best_it = best
     return StationaryMPS(
@@ -866,6 +875,7 @@ def stationary_mps(
         truncation_error=err,
         iterations=it,
         converged=converged,
+        stopped=stopped,
         history=history,
         negativity=negativity(p),
         bond_dimensions=p.bond_dimensions,

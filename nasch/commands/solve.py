@@ -32,14 +32,20 @@ __all__ = ["solve"]
 @click.option("--classes", "every_class", is_flag=True,
               help="Search every configuration for closed classes, even where one is proven,"
                    " and solve each (small rings).")
-@click.option("--method", type=click.Choice(METHODS), default="auto", show_default=True,
+@click.option("--method", type=click.Choice(METHODS + ("mps",)), default="auto",
+              show_default=True,
               help="Stationary solver; direct and eigs need the matrix, aggregation"
-                   " parallel update.")
+                   " parallel update; mps: a long road as a matrix product state"
+                   " (hundreds of cells, with an error bar; docs/roads.md).")
+@click.option("--bond-dimension", "chi", type=int, default=None, metavar="CHI",
+              help="--method mps: the bond dimension of the state [64]; the error bar"
+                   " compares it with CHI/2.")
 @click.option("--operator", type=click.Choice(OPERATORS), default="auto", show_default=True,
               help="Assemble P, or apply x -> xP without storing it (parallel update:"
                    " factored car by car).")
-@click.option("--tol", type=float, default=DEFAULT_TOL, show_default=True,
-              help="Target ||pi P - pi||_1 of the iterative solvers, 1e-15..1e-3.")
+@click.option("--tol", type=float, default=None,
+              help="Target ||pi P - pi||_1 of the iterative solvers, 1e-15..1e-3"
+                   f" [{DEFAULT_TOL:g}; --method mps: ||T p - p||_2 / ||p||_2, 1e-10].")
 @click.option("--no-lump", is_flag=True,
               help="Keep every state: a ring's rotations, and (ring and road) the velocities"
                    " that the rule cannot tell apart.")
@@ -65,8 +71,8 @@ __all__ = ["solve"]
 @quiet_option
 @handle_errors
 def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, stretches, ramps,
-          vmax, p, update, start, every_class, method, operator, tol, no_lump, max_memory, top,
-          save, sensitivity, fluctuations, lags, as_json):
+          vmax, p, update, start, every_class, method, chi, operator, tol, no_lump, max_memory,
+          top, save, sensitivity, fluctuations, lags, as_json):
     """Exact stationary state of one ring: flux, c_v; --json adds the gap distribution.
 
     By default a state is a rotation class of the ring and its probability is
@@ -116,6 +122,10 @@ def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, st
                         road=road, alpha=alpha, beta=beta, entry=entry, exit_=exit_, v_in=v_in,
                         stretches=stretches, ramps=ramps)
     max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
+    if method == "mps" or chi is not None:
+        return _solve_mps(ring, method, chi, start, every_class, operator, tol, no_lump,
+                          max_memory, top, save, sensitivity, fluctuations, lags, as_json)
+    tol = DEFAULT_TOL if tol is None else tol
     if is_lattice_system(ring):
         return _solve_lattice(ring, start, every_class, method, operator, tol, no_lump,
                               max_memory, top, save, sensitivity, fluctuations, lags, as_json)
@@ -292,6 +302,61 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
             click.echo(f"    {r['configuration']}  {r['probability']:.12g}")
     if save is not None:
         click.echo(f"wrote {save} ({full.n_states:,} states, every velocity)", err=True)
+
+
+def _solve_mps(system, method, chi, start, every_class, operator, tol, no_lump, max_memory,
+               top, save, sensitivity, fluctuations, lags, as_json) -> None:
+    """``--method mps``: a long road as a matrix product state, every refusal first."""
+    from markov.model.road import Road
+    from markov.solvers import road_mps
+
+    if method != "mps":
+        raise click.UsageError("--bond-dimension belongs to --method mps")
+    if not isinstance(system, Road):
+        raise click.UsageError("--method mps solves open roads (add --road); a ring is"
+                               " solved exactly")
+    for flag, given in (("--start", start is not None), ("--classes", every_class),
+                        ("--top", top is not None), ("--save", save is not None),
+                        ("--sensitivity", bool(sensitivity)), ("--fluctuations", fluctuations),
+                        ("--autocorrelation", lags is not None),
+                        ("--operator", operator != "auto")):
+        if given:
+            raise click.UsageError(f"{flag} needs the whole stationary vector or the exact"
+                                   " chain; --method mps holds a matrix product state (solve a"
+                                   " short road exactly for it)")
+    chi = road_mps.DEFAULT_BOND_DIMENSION if chi is None else chi
+    sol = road_mps.solve_road_mps(system, chi, road_mps.DEFAULT_MPS_TOL if tol is None else tol,
+                                  lump=not no_lump,
+                                  max_memory=None if max_memory is None else max_memory * 2**30)
+    data = sol.to_dict()
+    if as_json:
+        emit_json(data)
+        return
+    click.echo(system.summary())
+    click.echo(f"  entry {system.entry}: {data['entry_convention']}")
+    click.echo(f"  exit {system.exit}: {data['exit_convention']}")
+    click.echo(f"  matrix product state: bond dimension {sol.bond_dimension} (error bar against"
+               f" {max(sol.bond_dimension // 2, 2)}), MPO bond dimension"
+               f" {sol.mpo_bond_dimension}, residual {sol.residual:.2e} (||T p - p|| / ||p||),"
+               f" discarded weight {sol.truncation_error:.1e}, most negative marginal"
+               f" {sol.negative_marginal:.1e}, {sol.iterations} sweeps (ended: {sol.stopped}),"
+               f" {sol.seconds:.1f} s")
+    click.echo(f"  states: velocities {sol.velocities}; closed classes: {sol.closed_classes};"
+               f" per time step ({data['time_step']})")
+    if sol.flux_error is None:
+        click.echo(f"  flux           {sol.flux:.12g}  NO ERROR BAR: J has not settled over the"
+                   f" sweeps (they ended: {sol.stopped}; residual {sol.residual:.1e})")
+    else:
+        click.echo(f"  flux           {sol.flux:.12g} +- {sol.flux_error:.1e}  (cars leaving per"
+                   " time step; the bar: |J(chi) - J(chi/2)| + the last sweep's change)")
+    click.echo(f"  inflow         {sol.inflow:.12g}  (cars entering at cell 1)")
+    for r, x in zip(system.ramps, sol.ramp_inflows):
+        click.echo(f"  on-ramp {r.cell:<6} {x:.12g}")
+    click.echo(f"  conservation   |flux - inflow - ramps| = {sol.conservation:.1e}")
+    click.echo(f"  mean cars      {sol.mean_cars:.12g}")
+    click.echo(f"  bond currents  {_numbers(sol.bond_currents)}")
+    click.echo(f"  density        {_numbers(sol.density_profile)}")
+    click.echo(f"  velocity       {_numbers(sol.velocity_profile)}")
 
 
 def _say_prediction(chain) -> None:

@@ -64,14 +64,20 @@ __all__ = ["table"]
               help="Road, --extremal: rho_- and rho_+ (auto: exact for the TASEP, else"
                    " reservoir = alpha, 1 - beta; profile: the exact road's cells 1 and L;"
                    " one-sided: from the exact roads at (alpha, 1) and (1, beta)).")
+@click.option("--method", type=click.Choice(["exact", "mps"]), default="exact",
+              show_default=True,
+              help="Road: the exact chain, or matrix product states (long roads, e.g."
+                   " -L 50,100,200,400; each flux with its error bar; docs/roads.md).")
+@click.option("--bond-dimension", "chi", type=int, default=None, metavar="CHI",
+              help="Road, --method mps: the bond dimension [64].")
 @model_options
 @road_options
 @quiet_option
 @handle_errors
 def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, density_text, update, fmt, output,
           mc_steps, mc_length, seed, order, no_extrapolation, serial, scheduler, workers,
-          extremal, ring_length, definition, road, alpha, beta, entry, exit_, v_in, stretches,
-          ramps):
+          extremal, ring_length, definition, method, chi, road, alpha, beta, entry, exit_, v_in,
+          stretches, ramps):
     """Exact finite-ring fluxes beside MF, pMF, 2-cluster and Monte Carlo.
 
     \b
@@ -81,11 +87,14 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
       nasch table --vmax 1 --p 0.25,0.5 --lengths 8,12,16 --format latex -o flux.tex
       nasch table --model vdr --param p0=0.75 --p 0.1 --lengths 8,10,12 --mc-steps 0
       nasch table --road --vmax 2 --p 0.25 --alpha 0.3 --beta 0.6 -L 6,8,10,12 --extremal
+      nasch table --road --vmax 1 --p 0.25 --alpha 0.3 --beta 0.6 -L 50,100,200 --method mps
 
     With --road: one row per road length (the exact exit flux, the inflow, the
     density of the middle cell, the states), the L -> inf extrapolation with
     its bar, the closed-form limit of a TASEP road beside it, and with
     --extremal the extremal-current predictions (no Monte Carlo; docs/roads.md).
+    --method mps solves each road as a matrix product state (hundreds of cells),
+    each flux with its error bar, each length started from the shorter one's state.
 
     For a model other than NaSch the approximations it refuses (pMF, pMF2) are
     left out with a note, and a ring with several closed classes gets a note
@@ -96,7 +105,8 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
     from ..tables import flux_table as _flux_table
 
     if road:
-        return _road_table(model, params, vmax, p_text, lengths_text, budget_text, cars_text,
+        return _road_table(method, chi, model, params, vmax, p_text, lengths_text, budget_text,
+                           cars_text,
                            density_text, update, fmt, output, order, no_extrapolation,
                            extremal, ring_length, definition, alpha, beta, entry, exit_, v_in,
                            stretches, ramps)
@@ -105,7 +115,8 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
                         ("--on-ramp", ramps),
                         ("--extremal", extremal), ("--stretch", stretches),
                         ("--boundary-densities", definition != "auto"),
-                        ("--ring-length", ring_length is not None)):
+                        ("--ring-length", ring_length is not None),
+                        ("--method mps", method != "exact"), ("--bond-dimension", chi is not None)):
         if given:
             raise InvalidParameterError(f"{flag} belongs to the road table: add --road")
     if cars_text is not None and density_text is not None:
@@ -119,6 +130,14 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
             click.echo(f"note: --workers {workers} capped at the {capped_workers(workers)}"
                        " usable cores (more processes than cores only add start-up time)",
                        err=True)
+    if chi is not None and method != "mps":
+        raise InvalidParameterError("--bond-dimension belongs to --method mps")
+    if method == "mps" and extremal:
+        raise InvalidParameterError("--extremal reads exact roads: no --method mps with it")
+    if chi is not None:
+        from markov.solvers.road_mps import MAX_BOND_DIMENSION, MIN_BOND_DIMENSION
+        from markov.validate import ensure_int
+        chi = ensure_int("--bond-dimension", chi, MIN_BOND_DIMENSION, MAX_BOND_DIMENSION)
     ps = None if p_text is None else ensure_probabilities(number_list("--p", p_text),
                                                          closed=True)
     # --vmax and the first --p set the model (checked against --param), the others
@@ -165,7 +184,8 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
         click.echo(text, nl=False)
 
 
-def _road_table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, density_text,
+def _road_table(method, chi, model, params, vmax, p_text, lengths_text, budget_text, cars_text,
+                density_text,
                 update, fmt, output, order, no_extrapolation, extremal, ring_length, definition,
                 alpha, beta, entry, exit_, v_in, stretches, ramps) -> None:
     """``nasch table --road``: checked in one line each, then solved (nasch.road_table)."""
@@ -180,6 +200,14 @@ def _road_table(model, params, vmax, p_text, lengths_text, budget_text, cars_tex
         if given is not None:
             raise InvalidParameterError(f"{flag} is the ring table's: a road table takes"
                                         " --lengths (-L) only")
+    if chi is not None and method != "mps":
+        raise InvalidParameterError("--bond-dimension belongs to --method mps")
+    if method == "mps" and extremal:
+        raise InvalidParameterError("--extremal reads exact roads: no --method mps with it")
+    if chi is not None:
+        from markov.solvers.road_mps import MAX_BOND_DIMENSION, MIN_BOND_DIMENSION
+        from markov.validate import ensure_int
+        chi = ensure_int("--bond-dimension", chi, MIN_BOND_DIMENSION, MAX_BOND_DIMENSION)
     ps = None if p_text is None else ensure_probabilities(number_list("--p", p_text),
                                                          closed=True)
     if ps is not None and len(ps) > 1:
@@ -205,7 +233,7 @@ def _road_table(model, params, vmax, p_text, lengths_text, budget_text, cars_tex
         warnings.simplefilter("always", RuntimeWarning)
         t = road_table(system, lengths, order_or_none or 2, extremal=extremal,
                        ring_length=ring_length, definition=definition,
-                       extrapolation=not no_extrapolation)
+                       extrapolation=not no_extrapolation, method=method, bond_dimension=chi)
     for w in caught:
         click.echo(f"warning: {w.message}", err=True)
     if output or fmt == "csv":

@@ -1,0 +1,407 @@
+"""Long open roads as matrix product states: the stationary state of hundreds of cells.
+
+An exact road chain ends near ``L = 20`` (its states grow like ``2.4^L``).  Here
+the one-step matrix of the road is the exact matrix product operator of
+:mod:`markov.mps.road_mpo` (built from the tabulated rule, the entry and the
+exit as boundary tensors, velocities lumped where the rule cannot tell them
+apart), and its stationary vector ``p`` (``T p = p``) is a matrix product state
+of bond dimension ``chi`` found by :func:`markov.mps.stationary.stationary_mps`.
+Every observable is a local contraction: the density profile from the one-site
+marginals, the flux, the inflow, the bond currents and the velocity profile
+from the step's counts (``1^T (T o C) p``, :meth:`markov.mps.road_mpo.RoadMPO.count`).
+
+The sweeps.  At a bond dimension too small for the exact vector the residual
+``||T p - p|| / ||p||`` (two-norm, in MPS form) stops falling at a floor set by
+the truncation; the sweeps end there when J has settled (:func:`flux_tail`), or
+at the residual target ``tol``.
+
+The error bar.  A road is solved twice: at ``chi / 2`` and then, from that
+state, at ``chi``; ``flux_error`` is ``|J(chi) - J(chi / 2)|`` plus the change of
+J still to come (:func:`flux_error`), None where J has not settled (no bar: the
+output says so).  Its coverage against exact chains is measured in
+``benchmarks/mps_roads.py`` and written in ``docs/roads.md``.  The residual, the
+discarded weight and the most negative marginal are reported, never hidden.
+
+Time: one chain step is one time step (parallel, ordered-sequential) or one of
+the ``L + 1`` sub-steps (random-sequential); every observable is per time step.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from markov.errors import InvalidParameterError
+from markov.model.ring import RANDOM_SEQUENTIAL
+from markov.model.road import Road
+from markov.validate import ensure_int, ensure_tol
+
+__all__ = ["MPSRoadSolution", "solve_road_mps", "DEFAULT_BOND_DIMENSION", "DEFAULT_MPS_TOL",
+           "MIN_BOND_DIMENSION", "MAX_BOND_DIMENSION", "flux_error", "flux_tail", "mps_bytes"]
+
+#: ``--bond-dimension`` when none is given.
+DEFAULT_BOND_DIMENSION = 64
+#: Smallest and largest bond dimension taken (the half-chi solve needs 2 at least).
+MIN_BOND_DIMENSION, MAX_BOND_DIMENSION = 4, 2048
+#: Target relative residual ``||T p - p||_2 / ||p||_2`` of the MPS solve.
+DEFAULT_MPS_TOL = 1e-10
+
+
+#: J has settled when the change still to come (:func:`flux_tail`) is below this, relative.
+SETTLED = 1e-12
+
+
+def flux_tail(fluxes) -> float:
+    """The change of J still to come over further sweeps, from its last three values.
+
+    The sweeps' changes of J shrink geometrically once the state is near its fixed
+    point at this bond dimension: with the last two changes ``d1``, ``d2`` and
+    ``r = d2 / d1 < 0.9``, the tail is ``d2 r / (1 - r)``; a change below 1e-13 of J
+    is rounding (tail 0).  ``inf`` where three values are not there or the changes
+    do not shrink: J has not settled and no bar can be given.
+
+    Parameters
+    ----------
+    fluxes : sequence of float
+        J after each sweep.
+
+    Returns
+    -------
+    float
+    """
+    if len(fluxes) < 3:
+        return math.inf
+    d1, d2 = abs(fluxes[-2] - fluxes[-3]), abs(fluxes[-1] - fluxes[-2])
+    if d2 <= 1e-13 * abs(fluxes[-1]):
+        return 0.0
+    r = d2 / d1 if d1 > 0 else 1.0
+    return d2 * r / (1 - r) if r < 0.9 else math.inf
+
+
+def flux_error(flux: float, flux_half: float, tail: float) -> float | None:
+    """The flux's error bar: the change from ``chi / 2`` to ``chi`` plus the tail of the sweeps.
+
+    Parameters
+    ----------
+    flux, flux_half : float
+        The flux at ``chi`` and at ``chi / 2``.
+    tail : float
+        :func:`flux_tail` at ``chi``.
+
+    Returns
+    -------
+    float or None
+        None where J has not settled (``tail`` infinite): no bar.
+    """
+    return None if math.isinf(tail) else abs(flux - flux_half) + tail
+
+
+@dataclass
+class MPSRoadSolution:
+    """The stationary state of a road as a matrix product state, with its observables.
+
+    Attributes
+    ----------
+    system : Road
+    bond_dimension : int
+        ``chi`` of the reported state.
+    flux, flux_half : float
+        Cars leaving per time step, and the flux at ``chi / 2``.
+    flux_error : float or None
+        The flux's error bar (:func:`flux_error`); None where the state did not reach
+        the residual target (no bar can be given: say so, raise ``chi``).
+    inflow : float
+    ramp_inflows, bond_currents, density_profile, velocity_profile : ndarray
+    residual : float
+        ``||T p - p||_2 / ||p||_2`` of the reported state.
+    truncation_error : float
+        Weight discarded by the compressions of the last iteration.
+    negative_marginal : float
+        The most negative one-site marginal probability (0 where none is negative).
+    iterations : int
+    seconds : float
+    mpo_bond_dimension : int
+    velocities : str
+        The site basis in words (lumped or every velocity).
+    closed_classes : str
+        How one closed class is known (:func:`_check_classes`).
+    converged : bool
+        Whether the sweeps at ``chi`` ended converged: the residual target ``tol`` met,
+        or J settled (:func:`flux_tail`) with the residual at its truncation floor.
+    stopped : str
+        Why they ended (:class:`markov.mps.stationary.StationaryMPS` ``stopped``).
+    tol : float
+        The residual target.
+    state : MPS
+        The stationary vector (:mod:`markov.mps.stationary`).
+    """
+
+    system: Road
+    bond_dimension: int
+    flux: float
+    flux_error: float | None
+    flux_half: float
+    inflow: float
+    ramp_inflows: np.ndarray = field(repr=False)
+    bond_currents: np.ndarray = field(repr=False)
+    density_profile: np.ndarray = field(repr=False)
+    velocity_profile: np.ndarray = field(repr=False)
+    residual: float
+    truncation_error: float
+    negative_marginal: float
+    iterations: int
+    seconds: float
+    mpo_bond_dimension: int
+    velocities: str
+    closed_classes: str
+    converged: bool
+    tol: float
+    stopped: str
+    state: object = field(default=None, repr=False, compare=False)
+
+    @property
+    def mean_cars(self) -> float:
+        """Expected number of cars."""
+        return float(self.density_profile.sum())
+
+    @property
+    def conservation(self) -> float:
+        """``|flux - inflow - sum(ramp inflows)|``: zero up to the state's residual."""
+        return float(abs(self.flux - self.inflow - self.ramp_inflows.sum()))
+
+    def to_dict(self) -> dict:
+        """JSON-ready: the road with its conventions, the observables, the solver's figures.
+
+        Returns
+        -------
+        dict
+        """
+        d = self.system.describe()
+        d.update({
+            "method": "mps", "flux": self.flux, "flux_error": self.flux_error,
+            "flux_error_definition": "|J(chi) - J(chi/2)| + the geometric tail of J's"
+                                     " changes over the sweeps (coverage: docs/roads.md);"
+                                     " null: J has not settled, no bar",
+            "flux_half_bond": self.flux_half,
+            "inflow": self.inflow, "ramp_inflows": self.ramp_inflows.tolist(),
+            "bond_currents": self.bond_currents.tolist(),
+            "density_profile": self.density_profile.tolist(),
+            "velocity_profile": [None if np.isnan(x) else float(x)
+                                 for x in self.velocity_profile],
+            "mean_cars": self.mean_cars, "conservation": self.conservation,
+            "bond_dimension": self.bond_dimension,
+            "mpo_bond_dimension": self.mpo_bond_dimension,
+            "truncation_error": self.truncation_error, "residual": self.residual,
+            "residual_definition": "||T p - p||_2 / ||p||_2, in MPS form",
+            "negative_marginal": self.negative_marginal,
+            "iterations": self.iterations, "seconds": self.seconds,
+            "velocities": self.velocities, "closed_classes": self.closed_classes,
+            "converged": self.converged, "tol": self.tol, "stopped": self.stopped,
+            "time_step": (f"{self.system.length + 1} sub-steps"
+                          if self.system.update == RANDOM_SEQUENTIAL else "one step"),
+        })
+        return d
+
+    def to_record(self) -> dict:
+        """One flat row: the road's values and the scalars.
+
+        Returns
+        -------
+        dict
+        """
+        s = self.system
+        rec = {"model": s.model.name, **{k: (v if isinstance(v, (int, float)) else float(v))
+                                         for k, v in s.model.params.items()},
+               "update": s.update, "length": s.length, "entry": s.entry, "exit": s.exit,
+               "alpha": s.alpha, "beta": s.beta}
+        rec.update(flux=self.flux, flux_error=self.flux_error, inflow=self.inflow,
+                   mean_cars=self.mean_cars, bond_dimension=self.bond_dimension,
+                   residual=self.residual, method="mps")
+        return rec
+
+
+def _check_classes(road: Road) -> str:
+    """How the road is known to have one closed class; refused where it has several.
+
+    A road that drains (:func:`markov.chain.classes.road_drains`) has one, proven for
+    every ``L``.  Otherwise the exact chain of the same road at a short length is
+    searched over every configuration: one class there is said, not proven, at ``L``;
+    several are refused (an MPS would return one mixture of them, silently).
+    """
+    from markov.chain.classes import road_drains
+    from markov.chain.lattice import _stack_tables
+    from markov.errors import NoUniqueStationaryStateError
+    from markov.solvers.road_chain import RoadChain
+
+    top = road.top_vmax
+    H = max(max(m.horizon(top), m.vmax) for m in road.zones)
+    count, new, _ = _stack_tables(road.zones, top, H)
+    if road_drains(road, count, new):
+        return "one, proven (every configuration reaches the empty road)"
+    short = _shortened(road, CLASS_CHECK_LENGTH)
+    chain = RoadChain(short, predict=False)
+    chain.search_all_configurations()
+    n = chain.census.count
+    if n != 1:
+        raise NoUniqueStationaryStateError(
+            f"{road.summary()}: the same road at L = {short.length} has {n} closed classes"
+            " (every configuration searched); an MPS cannot tell them apart: solve a short"
+            " road exactly (--method auto) class by class")
+    return (f"one at L = {short.length} (the exact chain, every configuration searched);"
+            f" assumed, not proven, at L = {road.length}")
+
+
+#: Length of the exact road whose closed classes stand for a long road's where no proof holds.
+CLASS_CHECK_LENGTH = 8
+
+
+def _shortened(road: Road, length: int) -> Road:
+    """The same road cut to ``length`` cells (stretches and ramps clipped to them)."""
+    import dataclasses
+
+    if road.length <= length:
+        return road
+    from markov.model.stretch import Stretch
+
+    stretches = tuple(Stretch(s.first, min(s.last, length), s.values)
+                      for s in road.stretches if s.first <= length)
+    ramps = tuple(r for r in road.ramps if r.cell <= length)
+    return dataclasses.replace(road, length=length, stretches=stretches, ramps=ramps)
+
+
+def mps_bytes(length: int, bond_dimension: int, site_dimension: int, mpo_bond: int) -> float:
+    """Bytes the MPS solve holds at its peak, estimated: the state, the two sweeps'
+    environments, the local two-site problem and the residual's product at ``2 chi``.
+
+    Parameters
+    ----------
+    length, bond_dimension, site_dimension, mpo_bond : int
+
+    Returns
+    -------
+    float
+    """
+    chi, d, w = bond_dimension, site_dimension, mpo_bond
+    state = length * chi * chi * d
+    environments = 2 * length * chi * chi * w
+    local = 6 * chi * chi * d * d * w
+    product = 2 * length * (2 * chi) ** 2 * d + 4 * (2 * chi * w) ** 2 * d
+    return 8.0 * (3 * state + environments + local + product)
+
+
+def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
+                   tol: float = DEFAULT_MPS_TOL, lump: bool = True, max_sweeps: int = 40,
+                   start=None, max_memory: float | None = None) -> MPSRoadSolution:
+    """The stationary state of an open road as a matrix product state, with its error bar.
+
+    Parameters
+    ----------
+    road : Road
+        Any model, update, entry, exit, stretches and ramps (``docs/roads.md``).
+    bond_dimension : int
+        ``chi`` of the reported state; the error bar compares it with ``chi / 2``.
+    tol : float
+        Target residual ``||T p - p||_2 / ||p||_2``.
+    lump : bool
+        Merge the velocities the rule cannot tell apart (parallel, ordered-sequential).
+    max_sweeps : int
+        Most sweeps of each of the two solves.
+    start : MPS, optional
+        A warm start for the ``chi / 2`` solve (e.g. a shorter road's, padded).
+    max_memory : float, optional
+        Bytes allowed (default 75 % of physical memory): refused before the solve.
+
+    Returns
+    -------
+    MPSRoadSolution
+
+    Raises
+    ------
+    InvalidParameterError
+        A ring, or a bond dimension out of range.
+    NoUniqueStationaryStateError
+        Several closed classes (:func:`_check_classes`).
+    StateSpaceTooLargeError
+        The solve would not fit ``max_memory`` (:func:`mps_bytes`).
+    """
+    from markov import memory
+    from markov.mps.road_mpo import road_mpo
+    from markov.mps.stationary import (expectation, expectations, negativity,
+                                       one_site_marginals, stationary_mps)
+
+    if not isinstance(road, Road):
+        raise InvalidParameterError("the MPS solver takes an open road (a ring: the exact solver)")
+    chi = ensure_int("bond dimension", bond_dimension, MIN_BOND_DIMENSION, MAX_BOND_DIMENSION)
+    tol = ensure_tol(tol)
+    classes = _check_classes(road)
+    t0 = time.perf_counter()
+    mpo = road_mpo(road, lump=lump)
+    d = max(w.shape[1] for w in mpo.tensors)
+    w = max(max(mpo.bond_dimensions, default=1), max(mpo.raw_bond_dimensions, default=1))
+    memory.check_fits(f"the MPS of {road.summary()} at bond dimension {chi}",
+                      mps_bytes(road.length, chi, d, w), memory.memory_limit(max_memory),
+                      ": a smaller --bond-dimension")
+    steps = road.length + 1 if road.update == RANDOM_SEQUENTIAL else 1
+    base, left = mpo.count_base, mpo.count("left")
+    fluxes: list[float] = []
+
+    def record(iteration, p, res) -> dict:
+        # the residual floors at the truncation of chi: J's settling ends the sweeps
+        fluxes.append(steps * expectation(p, base, left))
+        return {"flux": fluxes[-1],
+                "stop": flux_tail(fluxes) <= SETTLED * abs(fluxes[-1])}
+
+    half = stationary_mps(mpo.tensors, max(chi // 2, 2), tol=tol, max_iterations=max_sweeps,
+                          start=start, progress=record)
+    flux_half = steps * expectation(half.mps, base, left)
+    fluxes.clear()
+    full = stationary_mps(mpo.tensors, chi, tol=tol, max_iterations=max_sweeps,
+                          start=half.mps, progress=record)
+    p = full.mps
+    flux = steps * expectation(p, base, left)
+    # the reported state is the lowest-residual one: its J is among those recorded
+    tail = 0.0 if full.converged and len(fluxes) < 3 else flux_tail(fluxes)
+    L = road.length
+    density = np.array([1.0 - m[0] / m.sum() for m in one_site_marginals(p)])
+
+    def profile(kind: str, indices) -> np.ndarray:
+        repl: dict = {}
+        for k in indices:
+            repl.update(mpo.count(kind, k))
+        got = expectations(p, base, repl)
+        return np.array([got[site] for site in sorted(got)])
+
+    velocity = profile("velocity", range(1, L + 1))
+    bonds = steps * profile("bond", range(1, L)) if L > 1 else np.zeros(0)
+    ramps = np.array([steps * expectation(p, base, mpo.count("ramp", r))
+                      for r in range(len(road.ramps))])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        vel = np.where(density > 0, velocity / np.where(density > 0, density, 1), np.nan)
+    neg = negativity(p)
+    bar = flux_error(flux, flux_half, tail)
+    settled = full.converged or full.stopped == "caller"
+    return MPSRoadSolution(
+        system=road, bond_dimension=chi, flux=flux, flux_error=bar,
+        flux_half=flux_half, inflow=steps * expectation(p, base, mpo.count("entered")),
+        ramp_inflows=ramps, bond_currents=bonds, density_profile=density,
+        velocity_profile=vel, residual=full.residual, truncation_error=full.truncation_error,
+        negative_marginal=float(min(0.0, neg.get("min_one_site", 0.0))),
+        iterations=half.iterations + full.iterations, seconds=time.perf_counter() - t0,
+        mpo_bond_dimension=max(mpo.bond_dimensions, default=1),
+        velocities=_velocities(road, mpo), closed_classes=classes,
+        converged=settled, tol=tol, stopped=full.stopped, state=p)
+
+
+def _velocities(road: Road, mpo) -> str:
+    """The site basis in words, as the exact solver says it (``RoadSolution.velocities``)."""
+    if mpo.lumped:
+        from markov.chain.lattice import _stack_tables
+        from markov.model.lumping import velocity_classes
+
+        top = road.top_vmax
+        H = max(max(m.horizon(top), m.vmax) for m in road.zones)
+        return "lumped: " + velocity_classes(*_stack_tables(road.zones, top, H)).describe()
+    return "every velocity kept" + (" (random-sequential: a sub-step moves one car)"
+                                    if road.update == RANDOM_SEQUENTIAL else "")

@@ -1,0 +1,134 @@
+"""Long roads as matrix product states (markov.solvers.road_mps), against other routes.
+
+* Short roads: every observable against the exact chain (markov.solvers.road_chain),
+  at a bond dimension that holds the whole vector, for each update, entry and exit,
+  with a stretch and a ramp.
+* Longer roads: closed forms, the random-sequential TASEP (Derrida, Evans, Hakim &
+  Pasquier 1993, tests/reference.dehp_Z) and the parallel TASEP on the line
+  (1 - alpha)(1 - beta) = p (de Gier & Nienhuis 1999), where the exact chain cannot go.
+* The error bar covers the exact error; refusals are one line and exit status 2.
+"""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from markov.errors import InvalidParameterError, NoUniqueStationaryStateError
+from markov.model.load import load_model
+from markov.model.road import OnRamp, Road, Stretch
+from markov.solvers.road_chain import solve_road
+from markov.solvers.road_mps import solve_road_mps
+from nasch.cli import main
+from tests.reference import dehp_Z
+
+
+def _nasch(vmax: int, p: float):
+    return load_model("nasch", {"vmax": vmax, "p": p})
+
+
+SHORT = [
+    Road(7, _nasch(1, 0.25), "parallel", 0.3, 0.7, "site1", "sink"),
+    Road(6, _nasch(2, 0.25), "parallel", 0.6, 0.4, "reservoir", "wall"),
+    Road(6, _nasch(2, 0.5), "parallel", 0.5, 0.8, "insert", "sink"),
+    Road(6, _nasch(2, 0.25), "ordered-sequential", 0.5, 0.6, "reservoir", "wall"),
+    Road(5, _nasch(2, 0.25), "random-sequential", 0.5, 0.6, "site1", "wall"),
+    Road(6, _nasch(2, 0.25), "parallel", 0.5, 0.6, "reservoir", "wall",
+         stretches=(Stretch(3, 4, (("p", 0.6),)),), ramps=(OnRamp(4, 0.2, 0),)),
+    Road(6, load_model("vdr", {"vmax": 2, "p": 0.2, "p0": 0.6}), "parallel", 0.6, 0.5),
+]
+
+
+@pytest.mark.parametrize("road", SHORT, ids=lambda r: r.summary())
+def test_short_roads_against_the_exact_chain(road):
+    exact = solve_road(road, tol=1e-14)
+    mps = solve_road_mps(road, 64, tol=1e-12)
+    assert mps.residual < 1e-11 and mps.converged
+    assert mps.flux == pytest.approx(exact.flux, abs=1e-10)
+    assert mps.inflow == pytest.approx(exact.inflow, abs=1e-10)
+    assert np.allclose(mps.ramp_inflows, exact.ramp_inflows, atol=1e-10)
+    assert np.allclose(mps.bond_currents, exact.bond_currents, atol=1e-10)
+    assert np.allclose(mps.density_profile, exact.density_profile, atol=1e-10)
+    assert np.allclose(mps.velocity_profile, exact.velocity_profile, atol=1e-9, equal_nan=True)
+    assert mps.flux_error < 1e-9
+    assert mps.negative_marginal > -1e-12
+    assert mps.velocities == exact.velocities
+
+
+def test_random_sequential_tasep_at_L_40_the_bar_never_lies():
+    # hop probability q = 1 - p per chosen car, L + 1 sub-steps a time step: the
+    # continuous-time TASEP with rates alpha, q, beta, so J = q J_DEHP(alpha/q, beta/q).
+    # The two-site sweep does not settle on this road at chi = 16 (its J jumps between
+    # sweeps, docs/roads.md): then no bar is given; where one is, it covers.
+    L, alpha, beta, q = 40, 0.3, 0.6, 0.75
+    road = Road(L, _nasch(1, 1 - q), "random-sequential", alpha, beta, "site1", "sink")
+    a, b = alpha / q, beta / q
+    exact = q * dehp_Z(L - 1, a, b) / dehp_Z(L, a, b)
+    sol = solve_road_mps(road, 16, tol=1e-12, max_sweeps=8)
+    assert sol.flux_error is None or abs(sol.flux - exact) <= sol.flux_error
+    assert sol.flux_error is not None or not sol.converged
+
+
+def test_parallel_tasep_on_the_special_line_at_L_60():
+    # (1 - alpha)(1 - beta) = 1 - q: J = alpha (q - alpha)/(q - alpha^2) and a flat
+    # profile alpha (1 - alpha)/(q - alpha^2) for every L
+    L, alpha, q = 60, 0.35, 0.6
+    beta = 1 - (1 - q) / (1 - alpha)
+    road = Road(L, _nasch(1, 1 - q), "parallel", alpha, beta, "site1", "sink")
+    sol = solve_road_mps(road, 8, tol=1e-11)
+    assert sol.flux == pytest.approx(alpha * (q - alpha) / (q - alpha ** 2), abs=1e-10)
+    assert np.allclose(sol.density_profile, alpha * (1 - alpha) / (q - alpha ** 2), atol=1e-10)
+    assert sol.closed_classes.startswith("one, proven")
+
+
+def test_several_closed_classes_are_refused():
+    # p = 1 at vmax 1: no car ever moves, every configuration of stuck cars is absorbing
+    with pytest.raises(NoUniqueStationaryStateError, match="closed classes"):
+        solve_road_mps(Road(40, _nasch(1, 1.0), "parallel", 0.5, 1.0), 8)
+
+
+def test_one_class_without_a_proof_is_said():
+    sol = solve_road_mps(Road(12, _nasch(2, 0.25), "parallel", 1.0, 1.0), 8)
+    assert "not proven" in sol.closed_classes
+    assert sol.to_dict()["closed_classes"] == sol.closed_classes
+
+
+def test_bad_bond_dimension_and_rings():
+    with pytest.raises(InvalidParameterError):
+        solve_road_mps(Road(10, _nasch(1, 0.25)), 1)
+    from markov.model.ring import Ring
+    with pytest.raises(InvalidParameterError, match="open road"):
+        solve_road_mps(Ring(10, 5, model=_nasch(2, 0.25)), 8)
+
+
+def _run(*args):
+    return CliRunner().invoke(main, ["solve", *args])
+
+
+def test_cli_json_fields():
+    r = _run("--road", "-L", "30", "--vmax", "1", "--p", "0.25", "--alpha", "0.3", "--beta",
+             "0.7", "--method", "mps", "--bond-dimension", "8", "--json")
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.output)
+    for key in ("flux", "flux_error", "inflow", "density_profile", "velocity_profile",
+                "bond_dimension", "truncation_error", "residual", "closed_classes",
+                "velocities", "entry_convention", "exit_convention", "negative_marginal"):
+        assert key in d, key
+    assert d["method"] == "mps" and d["bond_dimension"] == 8 and len(d["density_profile"]) == 30
+
+
+@pytest.mark.parametrize("args", [
+    ("-L", "10", "-N", "5", "--method", "mps"),
+    ("--road", "-L", "10", "--method", "mps", "--top", "3"),
+    ("--road", "-L", "10", "--method", "mps", "--save", "x.npz"),
+    ("--road", "-L", "10", "--method", "mps", "--fluctuations"),
+    ("--road", "-L", "10", "--bond-dimension", "8"),
+    ("--road", "-L", "10", "--method", "mps", "--bond-dimension", "1"),
+    ("--road", "-L", "10", "--method", "mps", "--tol", "2"),
+])
+def test_cli_refusals_are_one_line(args):
+    r = _run(*args)
+    assert r.exit_code == 2, r.output
+    assert len(r.output.strip().splitlines()) == 1, r.output
