@@ -43,6 +43,7 @@ bench: $(BENCH_STAMP) $(KERNELS_STAMP)
 bench-large: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/large.py
 	$(BIN)/python benchmarks/roads_large.py
+	$(BIN)/python benchmarks/mps_roads.py
 
 bench-coverage: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/error_coverage.py

@@ -318,33 +318,52 @@ def profile_cases(base, alphas: Sequence[float], betas: Sequence[float],
     return out
 
 
-def profile_data(cases: Sequence[ProfileCase], max_memory: float | None = None) -> list[dict]:
-    """Each case solved exactly: its road (``describe``), label, flux and profiles.
+def profile_data(cases: Sequence[ProfileCase], max_memory: float | None = None,
+                 method: str = "exact", bond_dimension: int | None = None) -> list[dict]:
+    """Each case solved: its road (``describe``), label, flux and profiles.
 
     Parameters
     ----------
     cases : sequence of ProfileCase
     max_memory : float, optional
+    method : {"exact", "mps"}
+        The exact chain, or a matrix product state
+        (:func:`markov.solvers.road_mps.solve_road_mps`: long roads).
+    bond_dimension : int, optional
+        ``method="mps"``: its bond dimension (default 64).
 
     Returns
     -------
     list of dict
         ``label``, ``road`` (:meth:`Road.describe`), ``summary``, ``flux``, ``inflow``,
         ``density_profile``, ``velocity_profile`` (NaN where no car stands),
-        ``states``, ``residual``.
+        ``states`` (None for an MPS), ``residual``, ``method``; an MPS adds
+        ``flux_error`` and ``bond_dimension``.
     """
     from markov.progress import progress_bar
     from markov.solvers.road_chain import RoadChain
 
+    if method not in ("exact", "mps"):
+        raise InvalidParameterError(f"profile method: exact or mps, got {method!r}")
     out = []
     with progress_bar(len(cases), "profiles", "road") as bar:
         for case in cases:
-            sol = RoadChain(case.road, max_memory=max_memory).solution()
+            extra: dict = {"method": method}
+            if method == "mps":
+                from markov.solvers.road_mps import DEFAULT_BOND_DIMENSION, solve_road_mps
+
+                sol = solve_road_mps(case.road, bond_dimension or DEFAULT_BOND_DIMENSION,
+                                     max_memory=max_memory)
+                states = None
+                extra.update(flux_error=sol.flux_error, bond_dimension=sol.bond_dimension)
+            else:
+                sol = RoadChain(case.road, max_memory=max_memory).solution()
+                states = sol.n_states
             out.append({"label": case.label, "road": case.road.describe(),
                         "summary": case.road.summary(), "flux": sol.flux,
                         "inflow": sol.inflow, "density_profile": sol.density_profile,
-                        "velocity_profile": sol.velocity_profile, "states": sol.n_states,
-                        "residual": sol.residual, "_road": case.road})
+                        "velocity_profile": sol.velocity_profile, "states": states,
+                        "residual": sol.residual, **extra, "_road": case.road})
             bar.update(1)
     return out
 
@@ -406,6 +425,9 @@ def profile_figure(data: Sequence[dict], width: float = 7.0, height: float = 6.4
     bottom.set_xlim(0.5, L + 0.5)
     top.legend(fontsize=7, loc="best", framealpha=0.8)
     base = roads[0]
+    kind = ("exact stationary profiles" if data[0].get("method", "exact") == "exact" else
+            f"stationary profiles of matrix product states (bond dimension"
+            f" {data[0]['bond_dimension']})")
     fig.suptitle(_title(base).split("\n")[0] + f"\nentry {base.entry}, exit {base.exit};"
-                 " exact stationary profiles", fontsize=9)
+                 f" {kind}", fontsize=9)
     return fig

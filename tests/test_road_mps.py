@@ -132,3 +132,31 @@ def test_cli_refusals_are_one_line(args):
     r = _run(*args)
     assert r.exit_code == 2, r.output
     assert len(r.output.strip().splitlines()) == 1, r.output
+
+
+def test_table_rows_carry_bars_that_cover_the_exact_flux():
+    r = CliRunner().invoke(main, ["table", "--road", "--vmax", "2", "--p", "0.25", "--alpha",
+                                  "0.6", "--beta", "0.4", "-L", "8,10,12", "--method", "mps",
+                                  "--bond-dimension", "16", "--format", "json"])
+    assert r.exit_code == 0, r.output
+    rows = [x for x in json.loads(r.output)["rows"] if x["kind"] == "mps"]
+    assert [x["length"] for x in rows] == [8, 10, 12]
+    for x in rows:
+        exact = solve_road(Road(x["length"], _nasch(2, 0.25), "parallel", 0.6, 0.4)).flux
+        assert x["bond_dimension"] == 16
+        assert abs(x["flux"] - exact) <= x["flux_error"], (x, exact)
+
+
+def test_profile_route(tmp_path):
+    out, data = tmp_path / "p.png", tmp_path / "p.json"
+    r = CliRunner().invoke(main, ["plot", "profile", "-L", "9", "--vmax", "1", "--p", "0.25",
+                                  "--alpha", "0.3", "--beta", "0.6", "--method", "mps",
+                                  "--bond-dimension", "32", "-o", str(out), "--json", str(data)])
+    assert r.exit_code == 0, r.output
+    d = json.loads(data.read_text())[0]
+    exact = solve_road(Road(9, _nasch(1, 0.25), "parallel", 0.3, 0.6, "site1", "sink"))
+    assert d["method"] == "mps" and d["states"] is None
+    assert np.allclose(d["density_profile"], exact.density_profile, atol=1e-10)
+    r = CliRunner().invoke(main, ["plot", "profile", "-L", "9", "--bond-dimension", "8",
+                                  "-o", str(out)])
+    assert r.exit_code == 2

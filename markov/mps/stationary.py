@@ -90,7 +90,13 @@ class MPS:
         return len(self.tensors)
 
     def copy(self) -> MPS:
-        """Return a deep copy."""
+        """Return a deep copy.
+
+        Returns
+        -------
+        MPS
+            A new MPS holding a copy of every site tensor and the same ``log_scale``.
+        """
         return MPS([a.copy() for a in self.tensors], self.log_scale)
 
     @property
@@ -179,7 +185,20 @@ def _svd(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def product_mps(vectors: Sequence[np.ndarray]) -> MPS:
-    """Product state from one vector per site (bond dimension 1)."""
+    """Product state from one vector per site (bond dimension 1).
+
+    Parameters
+    ----------
+    vectors : sequence of array_like
+        One vector per site, in site order; each is flattened and converted to float64,
+        and its length is that site's physical dimension.
+
+    Returns
+    -------
+    MPS
+        The tensor (Kronecker) product of the vectors: site tensors of shape
+        ``(1, d_i, 1)`` (copies of the inputs) and ``log_scale`` 0; not normalised.
+    """
     return MPS([np.asarray(v, dtype=float).reshape(1, -1, 1).copy() for v in vectors])
 
 
@@ -248,10 +267,16 @@ def _compress_right_to_left(
 def log_total(p: MPS) -> tuple[float, float]:
     """Sign and natural log of the sum of the vector (contraction with the all-ones co-vector).
 
+    Parameters
+    ----------
+    p : MPS
+        The vector; its ``log_scale`` is included in the sum.
+
     Returns
     -------
     (sign, log) : tuple of float
-        The sum is ``sign * exp(log)``; ``sign`` is 0 for a zero sum.
+        The sum is ``sign * exp(log)``; ``sign`` is 0 for a zero sum (then ``log`` is
+        ``-inf``).
     """
     v = np.ones(1)
     log = p.log_scale
@@ -266,13 +291,36 @@ def log_total(p: MPS) -> tuple[float, float]:
 
 
 def total(p: MPS) -> float:
-    """Sum of the vector (1 for a normalised probability vector); may overflow for a raw MPS."""
+    """Sum of the vector (1 for a normalised probability vector); may overflow for a raw MPS.
+
+    Parameters
+    ----------
+    p : MPS
+        The vector; its ``log_scale`` is included.
+
+    Returns
+    -------
+    float
+        ``sign * exp(log)`` from :func:`log_total`, 0.0 for a zero sum. ``math.exp``
+        raises ``OverflowError`` when the sum is beyond the float range.
+    """
     sign, log = log_total(p)
     return sign * math.exp(log) if sign else 0.0
 
 
 def normalize(p: MPS) -> MPS:
     """The same tensors with ``log_scale`` set so that the sum is 1.
+
+    Parameters
+    ----------
+    p : MPS
+        The vector to normalise; it is not modified.
+
+    Returns
+    -------
+    MPS
+        A new MPS sharing ``p``'s tensor list (not copied) whose ``log_scale`` is
+        ``p.log_scale`` minus the log of ``p``'s sum, so that it sums to 1.
 
     Raises
     ------
@@ -286,12 +334,45 @@ def normalize(p: MPS) -> MPS:
 
 
 def log_norm(p: MPS) -> float:
-    """Natural log of the L2 norm, by a QR sweep (no cancellation)."""
+    """Natural log of the L2 norm, by a QR sweep (no cancellation).
+
+    Parameters
+    ----------
+    p : MPS
+        The vector; its ``log_scale`` is included.
+
+    Returns
+    -------
+    float
+        ``log ||p||_2``.
+
+    Raises
+    ------
+    ValueError
+        When the MPS is exactly zero.
+    """
     return _left_canonical(p).log_scale
 
 
 def distance(p: MPS, q: MPS) -> float:
-    """``||p - q||_2`` computed exactly in MPS form (direct sum, then a QR sweep)."""
+    """``||p - q||_2`` computed exactly in MPS form (direct sum, then a QR sweep).
+
+    Parameters
+    ----------
+    p, q : MPS
+        The two vectors, of the same length and the same physical dimension at every
+        site; their ``log_scale`` are included.
+
+    Returns
+    -------
+    float
+        The L2 norm of the difference; 0.0 when the difference is exactly zero.
+
+    Raises
+    ------
+    ValueError
+        When ``p`` and ``q`` have different numbers of sites.
+    """
     if len(p) != len(q):
         raise ValueError("MPS of different lengths")
     m = max(p.log_scale, q.log_scale)
@@ -382,7 +463,25 @@ def residual(mpo: Sequence[np.ndarray], p: MPS, bond_dimension: int) -> tuple[fl
     """``||T p - p||_2 / ||p||_2`` and the floor of its accuracy.
 
     ``T p`` is compressed at ``bond_dimension`` (pass about twice the bond of ``p``) with
-    cutoff 1e-15; the floor is the square root of that compression's discarded weight.
+    cutoff 1e-30; the floor is the square root of that compression's discarded weight.
+
+    Parameters
+    ----------
+    mpo : sequence of numpy.ndarray
+        MPO tensors ``(Dl, d_out, d_in, Dr)`` of ``T`` (module conventions).
+    p : MPS
+        The vector; need not be normalised (the residual is relative to ``||p||_2``).
+    bond_dimension : int
+        Largest bond dimension of the compressed ``T p`` (passed to :func:`apply_mpo`,
+        called with cutoff 1e-30).
+
+    Returns
+    -------
+    (residual, floor) : tuple of float
+        ``residual`` is ``||T p - p||_2 / ||p||_2``, the difference's norm computed by
+        :func:`distance`; ``floor`` is the square root of the relative discarded squared
+        weight, summed over the cuts, that :func:`apply_mpo` reports for its final
+        truncation sweep.
     """
     tp, err = apply_mpo(mpo, p, bond_dimension, 1e-30)
     r = distance(tp, p) / math.exp(log_norm(p))
@@ -416,7 +515,21 @@ def _ones_environments(p: MPS) -> tuple[list[np.ndarray], list[float], list[np.n
 
 
 def one_site_marginals(p: MPS) -> list[np.ndarray]:
-    """One-site marginal distributions of ``p / total(p)``, one array per site."""
+    """One-site marginal distributions of ``p / total(p)``, one array per site.
+
+    Parameters
+    ----------
+    p : MPS
+        The vector; need not be normalised.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        ``L`` arrays; the ``i``-th has length ``d_i`` and entry ``s`` is the sum of ``p``
+        over all configurations with site ``i`` in state ``s``, divided by ``|total(p)|``
+        (so each sums to 1 when the total is positive). Entries can be negative when
+        ``p`` is not a non-negative vector.
+    """
     lv, ll, rv, rl = _ones_environments(p)
     _, lt = log_total(p)
     out = []
@@ -427,7 +540,21 @@ def one_site_marginals(p: MPS) -> list[np.ndarray]:
 
 
 def two_site_marginals(p: MPS) -> list[np.ndarray]:
-    """Nearest-neighbour marginals ``P(s_i, s_{i+1})`` of ``p / total(p)``, ``L - 1`` arrays."""
+    """Nearest-neighbour marginals ``P(s_i, s_{i+1})`` of ``p / total(p)``, ``L - 1`` arrays.
+
+    Parameters
+    ----------
+    p : MPS
+        The vector; need not be normalised.
+
+    Returns
+    -------
+    list of numpy.ndarray
+        ``L - 1`` arrays (none for a single site); the ``i``-th has shape
+        ``(d_i, d_{i+1})`` and entry ``[s, t]`` is the sum of ``p`` over all
+        configurations with site ``i`` in state ``s`` and site ``i + 1`` in state ``t``,
+        divided by ``|total(p)|``.
+    """
     lv, ll, rv, rl = _ones_environments(p)
     _, lt = log_total(p)
     out = []
@@ -439,6 +566,12 @@ def two_site_marginals(p: MPS) -> list[np.ndarray]:
 
 def negativity(p: MPS) -> dict[str, float]:
     """How far ``p`` is from a probability vector, measured on its marginals.
+
+    Parameters
+    ----------
+    p : MPS
+        The vector; its marginals (:func:`one_site_marginals`,
+        :func:`two_site_marginals`) are taken of ``p / total(p)``.
 
     Returns
     -------
@@ -522,7 +655,24 @@ def expectations(
 
 
 def expectation(p: MPS, base: Sequence[np.ndarray], replacements: dict[int, np.ndarray]) -> float:
-    """``1^T T' p / 1^T p`` with ``T'`` the MPO ``base`` with every site of ``replacements`` replaced."""
+    """``1^T T' p / 1^T p`` with ``T'`` the MPO ``base`` with every site of ``replacements`` replaced.
+
+    Parameters
+    ----------
+    p : MPS
+        The state; need not be normalised.
+    base : sequence of numpy.ndarray
+        The MPO tensors ``(Dl, d_out, d_in, Dr)`` of ``T``.
+    replacements : dict
+        ``{site: tensor}``; all of them replace ``base[site]`` at once (same shape
+        convention, same bonds). For one site at a time see :func:`expectations`.
+
+    Returns
+    -------
+    float
+        The value, divided by ``|1^T p|`` (the same as ``1^T p`` for a positive sum);
+        0.0 when the left-to-right contraction vanishes exactly.
+    """
     e = np.ones((1, 1))
     log = p.log_scale
     for i, a in enumerate(p.tensors):
@@ -542,7 +692,24 @@ def expectation(p: MPS, base: Sequence[np.ndarray], replacements: dict[int, np.n
 
 
 def dense_to_mps(vector: np.ndarray, dims: Sequence[int], cutoff: float = 0.0) -> MPS:
-    """Exact MPS of a dense vector by successive SVDs (for tests at small L)."""
+    """Exact MPS of a dense vector by successive SVDs (for tests at small L).
+
+    Parameters
+    ----------
+    vector : array_like
+        The full vector of ``prod(dims)`` entries, row-major (site 0 most significant).
+    dims : sequence of int
+        Physical dimension of every site.
+    cutoff : float
+        At every cut only singular values above ``cutoff`` times the cut's largest are
+        kept (at least one); the default 0.0 keeps every non-zero singular value, which
+        is exact.
+
+    Returns
+    -------
+    MPS
+        The vector with ``log_scale`` 0: left-orthonormal tensors, the norm in the last.
+    """
     v = np.asarray(vector, dtype=float).reshape(1, -1)
     out = []
     for d in dims[:-1]:
@@ -556,7 +723,18 @@ def dense_to_mps(vector: np.ndarray, dims: Sequence[int], cutoff: float = 0.0) -
 
 
 def mps_to_dense(p: MPS) -> np.ndarray:
-    """The full vector (row-major, site 0 most significant)."""
+    """The full vector (row-major, site 0 most significant).
+
+    Parameters
+    ----------
+    p : MPS
+        The state to contract.
+
+    Returns
+    -------
+    numpy.ndarray
+        1-D array of ``prod(p.dims)`` entries, ``exp(log_scale)`` times the contraction.
+    """
     v = np.ones((1, 1))
     for a in p.tensors:
         v = np.tensordot(v, a, axes=(1, 0)).reshape(-1, a.shape[2])
@@ -567,6 +745,22 @@ def dense_to_mpo(matrix: np.ndarray, dims: Sequence[int], cutoff: float = 1e-14)
     """Exact MPO of a dense ``matrix[s', s]`` by successive SVDs (for tests at small L).
 
     Singular values below ``cutoff`` times the largest of their cut are dropped.
+
+    Parameters
+    ----------
+    matrix : array_like
+        Square matrix ``T[s', s]`` of side ``prod(dims)``, rows and columns indexed
+        row-major (site 0 most significant).
+    dims : sequence of int
+        Physical dimension of every site (the same for the output and input leg).
+    cutoff : float
+        Relative singular-value threshold per cut (at least one value is kept).
+
+    Returns
+    -------
+    list of numpy.ndarray
+        MPO tensors of shape ``(Dl, d, d, Dr)`` (module conventions), ``Dl = 1`` at the
+        first site and ``Dr = 1`` at the last.
     """
     n = len(dims)
     m = np.asarray(matrix, dtype=float).reshape(tuple(dims) + tuple(dims))
@@ -585,7 +779,20 @@ def dense_to_mpo(matrix: np.ndarray, dims: Sequence[int], cutoff: float = 1e-14)
 
 
 def mpo_to_dense(mpo: Sequence[np.ndarray]) -> np.ndarray:
-    """The full matrix ``T[s', s]`` of an MPO (for tests at small L)."""
+    """The full matrix ``T[s', s]`` of an MPO (for tests at small L).
+
+    Parameters
+    ----------
+    mpo : sequence of numpy.ndarray
+        MPO tensors ``(Dl, d_out, d_in, Dr)`` with ``Dl = 1`` at the first site and
+        ``Dr = 1`` at the last.
+
+    Returns
+    -------
+    numpy.ndarray
+        2-D array of shape ``(prod(d_out), prod(d_in))``, rows and columns row-major
+        (site 0 most significant).
+    """
     t = np.ones((1, 1, 1))  # (out, in, bond)
     for w in mpo:
         x = np.tensordot(t, w, axes=(2, 0))  # (O, I, s', s, r)
@@ -603,6 +810,29 @@ def pad_mps(p: MPS, length: int, position: int | None = None) -> MPS:
     The inserted sites (before ``position``, default the middle) carry the one-site
     marginal of the site they are inserted before, as a product with the bond passing
     through unchanged, so the sum stays 1 and both boundary regions of ``p`` are kept.
+
+    Parameters
+    ----------
+    p : MPS
+        The state of the shorter chain (need not be normalised).
+    length : int
+        Number of sites of the result, at least ``len(p)``.
+    position : int, optional
+        Index of the site of ``p`` before which the ``length - len(p)`` new sites go
+        (an index into ``p``'s sites, so not ``len(p)``); default ``len(p) // 2``. The inserted sites take
+        that site's physical dimension and left bond, and its one-site marginal with
+        negative entries clipped to 0 and renormalised.
+
+    Returns
+    -------
+    MPS
+        The padded state (all tensors copied), normalised to sum 1.
+
+    Raises
+    ------
+    ValueError
+        When ``length < len(p)``, or (from :func:`normalize`) the result does not sum
+        to a positive number.
     """
     n = len(p)
     if length < n:

@@ -536,12 +536,18 @@ def phase_diagram(length, vmax, p, model, params, update, entry, exit_, v_in, st
                    " 'alpha=0.3;stretch=5-7:p=0.8;label=slow'.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
               help="Also write the curves' data (JSON) to this file.")
+@click.option("--method", type=click.Choice(["exact", "mps"]), default="exact",
+              show_default=True,
+              help="The exact chain, or matrix product states (long roads, L = 100 and more;"
+                   " docs/roads.md).")
+@click.option("--bond-dimension", "chi", type=int, default=None, metavar="CHI",
+              help="--method mps: the bond dimension [64].")
 @click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
               help="Figure file, .png or .pdf.")
 @quiet_option
 @handle_errors
 def profile(length, vmax, p, model, params, update, entry, exit_, v_in, stretches, ramps,
-            alpha_text, beta_text, cases, json_path, output):
+            alpha_text, beta_text, cases, json_path, method, chi, output):
     """Density rho(x) and mean velocity <v>(x) along the cells 1..L, exactly.
 
     Curves: every (alpha, beta) of --alpha x --beta, or one per --case (then
@@ -554,6 +560,8 @@ def profile(length, vmax, p, model, params, update, entry, exit_, v_in, stretche
       nasch plot profile -L 10 --vmax 2 --alpha 0.2,0.6 --beta 0.3 -o prof.png
       nasch plot profile -L 10 --case 'label=open' --case 'stretch=5-7:p=0.8;label=slow'
           --case 'stretch=5-7:vmax=1;label=speed limit' -o stretch.png
+      nasch plot profile -L 200 --vmax 1 --p 0.25 --alpha 0.3,1 --beta 0.6 --method mps
+          --bond-dimension 16 -o long.png
     """
     import json
 
@@ -574,8 +582,14 @@ def profile(length, vmax, p, model, params, update, entry, exit_, v_in, stretche
             raise InvalidParameterError(f"every {name} must lie in [0, 1], got {bad[0]:g}")
     base = _road_base(length, model, params, vmax, p, update, entry, exit_, v_in, stretches,
                       ramps, alphas[0], betas[0])
+    if chi is not None:
+        if method != "mps":
+            raise InvalidParameterError("--bond-dimension belongs to --method mps")
+        from markov.solvers.road_mps import MAX_BOND_DIMENSION, MIN_BOND_DIMENSION
+        from markov.validate import ensure_int
+        chi = ensure_int("--bond-dimension", chi, MIN_BOND_DIMENSION, MAX_BOND_DIMENSION)
     chosen = profile_cases(base, alphas, betas, cases)
-    data = profile_data(chosen)
+    data = profile_data(chosen, method=method, bond_dimension=chi)
     if json_path is not None:
         dump = [{k: (v.tolist() if hasattr(v, "tolist") else v) for k, v in d.items()
                  if k != "_road"} for d in data]
