@@ -21,7 +21,7 @@ import click
 
 from markov.errors import InvalidParameterError
 
-__all__ = ["road_options", "build_system", "ring_only", "ROAD_ONLY"]
+__all__ = ["road_options", "build_system", "ring_only", "ROAD_ONLY", "bond_dimension_option"]
 
 #: Options that mean something on a road only, as (parameter, flag).
 ROAD_ONLY = (("alpha", "--alpha"), ("beta", "--beta"), ("entry", "--entry"),
@@ -114,6 +114,33 @@ def build_system(length, cars, model, update, *, road: bool, alpha=None, beta=No
                   parsed, tuple(OnRamp.parse(r) for r in ramps))
     check_v_in(system, v_in)
     return system
+
+
+def bond_dimension_option(chi, method: str):
+    """``--bond-dimension`` checked against ``--method``: None, or an int in range.
+
+    Parameters
+    ----------
+    chi : int or None
+    method : str
+
+    Returns
+    -------
+    int or None
+
+    Raises
+    ------
+    InvalidParameterError
+        Given without ``--method mps``, or out of range.
+    """
+    if chi is None:
+        return None
+    if method != "mps":
+        raise InvalidParameterError("--bond-dimension belongs to --method mps")
+    from markov.solvers.road_mps import MAX_BOND_DIMENSION, MIN_BOND_DIMENSION
+    from markov.validate import ensure_int
+
+    return ensure_int("--bond-dimension", chi, MIN_BOND_DIMENSION, MAX_BOND_DIMENSION)
 
 
 def check_v_in(road, v_in) -> None:

@@ -746,14 +746,7 @@ class RoadSolution:
         -------
         dict
         """
-        s = self.system
-        rec = {"model": s.model.name, **{k: (v if isinstance(v, (int, float)) else float(v))
-                                         for k, v in s.model.params.items()},
-               "update": s.update, "length": s.length}
-        if s.periodic:
-            rec.update(cars=s.cars, density=s.cars / s.length)
-        else:
-            rec.update(entry=s.entry, exit=s.exit, alpha=s.alpha, beta=s.beta)
+        rec = system_record(self.system)
         rec.update(flux=self.flux, inflow=self.inflow, mean_cars=self.mean_cars,
                    states=self.n_states, residual=self.residual, method=self.result.method,
                    closed_classes=None if self.census is None else self.census.count)
@@ -791,6 +784,29 @@ class RoadSolution:
         from markov.solvers.storage import save_road_solution
 
         return save_road_solution(self.expanded(), path)
+
+
+def system_record(s) -> dict:
+    """The values of a road (or a ring with stretches) as one flat row's first columns.
+
+    Parameters
+    ----------
+    s : Road or Ring
+
+    Returns
+    -------
+    dict
+        ``model``, the model's parameters, ``update``, ``length``; then ``cars`` and
+        ``density`` (a ring) or ``entry``, ``exit``, ``alpha``, ``beta`` (a road).
+    """
+    rec = {"model": s.model.name, **{k: (v if isinstance(v, (int, float)) else float(v))
+                                     for k, v in s.model.params.items()},
+           "update": s.update, "length": s.length}
+    if s.periodic:
+        rec.update(cars=s.cars, density=s.cars / s.length)
+    else:
+        rec.update(entry=s.entry, exit=s.exit, alpha=s.alpha, beta=s.beta)
+    return rec
 
 
 def _measure(road, lump: bool, factored: bool) -> tuple[int, int, float]:

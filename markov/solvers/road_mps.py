@@ -217,11 +217,9 @@ class MPSRoadSolution:
         -------
         dict
         """
-        s = self.system
-        rec = {"model": s.model.name, **{k: (v if isinstance(v, (int, float)) else float(v))
-                                         for k, v in s.model.params.items()},
-               "update": s.update, "length": s.length, "entry": s.entry, "exit": s.exit,
-               "alpha": s.alpha, "beta": s.beta}
+        from markov.solvers.road_chain import system_record
+
+        rec = system_record(self.system)
         rec.update(flux=self.flux, flux_error=self.flux_error, inflow=self.inflow,
                    mean_cars=self.mean_cars, bond_dimension=self.bond_dimension,
                    residual=self.residual, method="mps")
@@ -334,6 +332,7 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
     """
     from markov import memory
     from markov.mps.road_mpo import road_mpo
+    from markov.progress import progress_bar
     from markov.mps.stationary import (expectation, expectations, negativity,
                                        one_site_marginals, stationary_mps)
 
@@ -353,18 +352,23 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
     base, left = mpo.count_base, mpo.count("left")
     fluxes: list[float] = []
 
+    bar = progress_bar(2 * max_sweeps, "MPS sweeps", "sweep")
+
     def record(iteration, p, res) -> dict:
         # the residual floors at the truncation of chi: J's settling ends the sweeps
         fluxes.append(steps * expectation(p, base, left))
+        bar.set_description(f"MPS sweeps (residual {res:.1e}, J {fluxes[-1]:.10f})")
+        bar.update(1)
         return {"flux": fluxes[-1],
                 "stop": flux_tail(fluxes) <= SETTLED * abs(fluxes[-1])}
 
-    half = stationary_mps(mpo.tensors, max(chi // 2, 2), tol=tol, max_iterations=max_sweeps,
-                          start=start, progress=record)
-    flux_half = steps * expectation(half.mps, base, left)
-    fluxes.clear()
-    full = stationary_mps(mpo.tensors, chi, tol=tol, max_iterations=max_sweeps,
-                          start=half.mps, progress=record)
+    with bar:
+        half = stationary_mps(mpo.tensors, max(chi // 2, 2), tol=tol,
+                              max_iterations=max_sweeps, start=start, progress=record)
+        flux_half = steps * expectation(half.mps, base, left)
+        fluxes.clear()
+        full = stationary_mps(mpo.tensors, chi, tol=tol, max_iterations=max_sweeps,
+                              start=half.mps, progress=record)
     p = full.mps
     flux = steps * expectation(p, base, left)
     # the reported state is the lowest-residual one: its J is among those recorded

@@ -10,7 +10,7 @@ from markov.errors import InvalidParameterError
 
 from ..cli_common import (ensure_dask_options, ensure_probabilities, handle_errors, number_list,
                           quiet_option)
-from ..road_options import ring_only
+from ..road_options import bond_dimension_option, ring_only
 from ..model_options import model_options
 
 __all__ = ["plot"]
@@ -582,12 +582,7 @@ def profile(length, vmax, p, model, params, update, entry, exit_, v_in, stretche
             raise InvalidParameterError(f"every {name} must lie in [0, 1], got {bad[0]:g}")
     base = _road_base(length, model, params, vmax, p, update, entry, exit_, v_in, stretches,
                       ramps, alphas[0], betas[0])
-    if chi is not None:
-        if method != "mps":
-            raise InvalidParameterError("--bond-dimension belongs to --method mps")
-        from markov.solvers.road_mps import MAX_BOND_DIMENSION, MIN_BOND_DIMENSION
-        from markov.validate import ensure_int
-        chi = ensure_int("--bond-dimension", chi, MIN_BOND_DIMENSION, MAX_BOND_DIMENSION)
+    chi = bond_dimension_option(chi, method)
     chosen = profile_cases(base, alphas, betas, cases)
     data = profile_data(chosen, method=method, bond_dimension=chi)
     if json_path is not None:

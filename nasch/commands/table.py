@@ -9,7 +9,7 @@ from ..cli_common import (ensure_dask_options, ensure_probabilities, handle_erro
                           quiet_option)
 from ..formatting import format_for_path
 from ..model_options import build_model, model_options
-from ..road_options import road_options
+from ..road_options import bond_dimension_option, road_options
 
 __all__ = ["table"]
 
@@ -130,14 +130,6 @@ def table(model, params, vmax, p_text, lengths_text, budget_text, cars_text, den
             click.echo(f"note: --workers {workers} capped at the {capped_workers(workers)}"
                        " usable cores (more processes than cores only add start-up time)",
                        err=True)
-    if chi is not None and method != "mps":
-        raise InvalidParameterError("--bond-dimension belongs to --method mps")
-    if method == "mps" and extremal:
-        raise InvalidParameterError("--extremal reads exact roads: no --method mps with it")
-    if chi is not None:
-        from markov.solvers.road_mps import MAX_BOND_DIMENSION, MIN_BOND_DIMENSION
-        from markov.validate import ensure_int
-        chi = ensure_int("--bond-dimension", chi, MIN_BOND_DIMENSION, MAX_BOND_DIMENSION)
     ps = None if p_text is None else ensure_probabilities(number_list("--p", p_text),
                                                          closed=True)
     # --vmax and the first --p set the model (checked against --param), the others
@@ -200,14 +192,9 @@ def _road_table(method, chi, model, params, vmax, p_text, lengths_text, budget_t
         if given is not None:
             raise InvalidParameterError(f"{flag} is the ring table's: a road table takes"
                                         " --lengths (-L) only")
-    if chi is not None and method != "mps":
-        raise InvalidParameterError("--bond-dimension belongs to --method mps")
+    chi = bond_dimension_option(chi, method)
     if method == "mps" and extremal:
         raise InvalidParameterError("--extremal reads exact roads: no --method mps with it")
-    if chi is not None:
-        from markov.solvers.road_mps import MAX_BOND_DIMENSION, MIN_BOND_DIMENSION
-        from markov.validate import ensure_int
-        chi = ensure_int("--bond-dimension", chi, MIN_BOND_DIMENSION, MAX_BOND_DIMENSION)
     ps = None if p_text is None else ensure_probabilities(number_list("--p", p_text),
                                                          closed=True)
     if ps is not None and len(ps) > 1:
