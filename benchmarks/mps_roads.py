@@ -146,7 +146,11 @@ def _dehp_ratio(L: int, a: float, b: float) -> float:
 def work_target(vmax: int, L: int, chi: int) -> list[dict]:
     from markov.solvers.road_mps import solve_road_mps
 
-    sol = solve_road_mps(_road(vmax, L, 1.0, 1.0), chi, tol=1e-10)
+    t0 = time.perf_counter()
+
+    def log(sweep: int, flux: float) -> None:   # read back if the case runs out of time
+        print(f"SWEEP {sweep} {time.perf_counter() - t0:.1f} s J {flux:.12f}", flush=True)
+    sol = solve_road_mps(_road(vmax, L, 1.0, 1.0), chi, tol=1e-10, on_sweep=log)
     return [{"case": f"target vmax {vmax} maximal current", "L": L, **_mps_row(sol, None),
              "note": f"flux_half {sol.flux_half:.12g}"}]
 
@@ -225,9 +229,11 @@ def main() -> None:
             got = [json.loads(x[7:]) for x in out.stdout.splitlines() if x.startswith("RESULT ")]
             new = got[0] if got else [{"case": f"{table} {args}",
                                        "note": (out.stderr.strip().splitlines() or ["?"])[-1][:120]}]
-        except subprocess.TimeoutExpired:
+        except subprocess.TimeoutExpired as exc:
+            done = [x for x in (exc.stdout or b"").decode().splitlines() if x.startswith("SWEEP")]
             new = [{"case": f"{table} {args}", "seconds": time.perf_counter() - t,
-                    "note": f"over {LIMIT_S[table]} s"}]
+                    "note": f"over {LIMIT_S[table]} s; {len(done)} sweeps done"
+                            + (f", last: {done[-1][6:]}" if done else "")}]
         for r in new:
             r["table"] = table
             print(json.dumps(r), flush=True)

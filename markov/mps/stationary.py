@@ -1012,6 +1012,7 @@ def stationary_mps(
     ncv: int = 40,
     local_maxiter: int = 4,
     progress: Callable[[int, MPS, float], dict | None] | None = None,
+    monitor: Callable[[int, MPS], bool] | None = None,
 ) -> StationaryMPS:
     """Stationary vector ``T p = p`` of a stochastic MPO as a sum-normalised MPS.
 
@@ -1044,6 +1045,10 @@ def stationary_mps(
         ``progress(iteration, mps, residual)`` after every check, ``mps`` normalised; a
         returned dict is merged into that check's history entry (e.g. the flux), and
         ``{"stop": True}`` in it ends the sweeps (``stopped == "caller"``).
+    monitor : callable, optional
+        ``monitor(iteration, mps)`` after every iteration, ``mps`` normalised, before the
+        (costly) residual check; True ends the sweeps there (``stopped == "caller"``),
+        with the residual computed once for the state it stops at.
 
     Returns
     -------
@@ -1078,7 +1083,8 @@ def stationary_mps(
         else:
             q, err = apply_mpo(mpo, p, bond_dimension, cutoff)
             p = normalize(q)
-        if it % check_every and it != max_iterations:
+        halt = monitor is not None and bool(monitor(it, p))
+        if it % check_every and it != max_iterations and not halt:
             continue
         res, floor = residual(mpo, p, 2 * bond_dimension)
         entry = {"iteration": it, "residual": res, "truncation_error": err, "seconds": time.perf_counter() - t0}
@@ -1094,7 +1100,7 @@ def stationary_mps(
         if res > 100 * best[0]:  # the sweeps diverge (non-Hermitian projection): stop
             stopped = "diverged"
             break
-        if isinstance(extra, dict) and extra.get("stop"):
+        if halt or isinstance(extra, dict) and extra.get("stop"):
             stopped = "caller"   # e.g. the observables stopped changing at a truncation floor
             break
     res, floor, err, p, _best_it = best

@@ -52,6 +52,9 @@ DEFAULT_MPS_TOL = 1e-10
 #: Relative rounding of J's contractions, a floor under the bar (where chi holds the whole
 #: vector, J(chi) = J(chi/2) to rounding: 2e-15 was seen against the exact chain at L = 12).
 ROUNDING = 1e-13
+#: Sweeps between two residual checks (an MPO product at 2 chi each; J is watched every
+#: sweep, and the residual is computed where the sweeps stop).
+RESIDUAL_EVERY = 10
 #: J has settled when the change still to come (:func:`flux_tail`) is below this, relative.
 SETTLED = 1e-12
 
@@ -297,7 +300,8 @@ def mps_bytes(length: int, bond_dimension: int, site_dimension: int, mpo_bond: i
 
 def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
                    tol: float = DEFAULT_MPS_TOL, lump: bool = True, max_sweeps: int = 40,
-                   start=None, max_memory: float | None = None) -> MPSRoadSolution:
+                   start=None, max_memory: float | None = None,
+                   on_sweep=None) -> MPSRoadSolution:
     """The stationary state of an open road as a matrix product state, with its error bar.
 
     Parameters
@@ -316,6 +320,8 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         A warm start for the ``chi / 2`` solve (e.g. a shorter road's, padded).
     max_memory : float, optional
         Bytes allowed (default 75 % of physical memory): refused before the solve.
+    on_sweep : callable, optional
+        ``on_sweep(sweep, flux)`` after every sweep of either solve (a log of progress).
 
     Returns
     -------
@@ -334,7 +340,7 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
     from markov.mps.road_mpo import road_mpo
     from markov.progress import progress_bar
     from markov.mps.stationary import (expectation, expectations, negativity,
-                                       one_site_marginals, stationary_mps)
+                                       one_site_marginals)
 
     if not isinstance(road, Road):
         raise InvalidParameterError("the MPS solver takes an open road (a ring: the exact solver)")
@@ -350,25 +356,10 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
                       ": a smaller --bond-dimension")
     steps = road.length + 1 if road.update == RANDOM_SEQUENTIAL else 1
     base, left = mpo.count_base, mpo.count("left")
-    fluxes: list[float] = []
-
-    bar = progress_bar(2 * max_sweeps, "MPS sweeps", "sweep")
-
-    def record(iteration, p, res) -> dict:
-        # the residual floors at the truncation of chi: J's settling ends the sweeps
-        fluxes.append(steps * expectation(p, base, left))
-        bar.set_description(f"MPS sweeps (residual {res:.1e}, J {fluxes[-1]:.10f})")
-        bar.update(1)
-        return {"flux": fluxes[-1],
-                "stop": flux_tail(fluxes) <= SETTLED * abs(fluxes[-1])}
-
-    with bar:
-        half = stationary_mps(mpo.tensors, max(chi // 2, 2), tol=tol,
-                              max_iterations=max_sweeps, start=start, progress=record)
+    with progress_bar(None, "MPS sweeps", "sweep") as bar:
+        half, _ = _sweeps(mpo, max(chi // 2, 2), tol, max_sweeps, start, bar, on_sweep)
         flux_half = steps * expectation(half.mps, base, left)
-        fluxes.clear()
-        full = stationary_mps(mpo.tensors, chi, tol=tol, max_iterations=max_sweeps,
-                              start=half.mps, progress=record)
+        full, fluxes = _sweeps(mpo, chi, tol, max_sweeps, half.mps, bar, on_sweep)
     p = full.mps
     flux = steps * expectation(p, base, left)
     # the reported state is the lowest-residual one: its J is among those recorded
@@ -402,6 +393,31 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         mpo_bond_dimension=max(mpo.bond_dimensions, default=1),
         velocities=_velocities(road, mpo), closed_classes=classes,
         converged=settled, tol=tol, stopped=full.stopped, state=p)
+
+
+def _sweeps(mpo, chi: int, tol: float, max_sweeps: int, start, bar, on_sweep):
+    """Sweeps at bond dimension ``chi`` until J settles (or ``tol``): the result and J's
+    values after each sweep."""
+    from markov.mps.stationary import expectation, stationary_mps
+
+    road = mpo.road
+    steps = road.length + 1 if road.update == RANDOM_SEQUENTIAL else 1
+    base, left = mpo.count_base, mpo.count("left")
+    fluxes: list[float] = []
+
+    def settled(sweep: int, p) -> bool:
+        # the residual floors at the truncation of chi, and computing it costs an MPO
+        # product at 2 chi: J, cheap, is watched every sweep and its settling ends them
+        fluxes.append(steps * expectation(p, base, left))
+        bar.set_description(f"MPS L={road.length} chi={chi} J={fluxes[-1]:.12f}")
+        bar.update(1)
+        if on_sweep is not None:
+            on_sweep(sweep, fluxes[-1])
+        return flux_tail(fluxes) <= SETTLED * abs(fluxes[-1])
+
+    result = stationary_mps(mpo.tensors, chi, tol=tol, max_iterations=max_sweeps,
+                            check_every=RESIDUAL_EVERY, start=start, monitor=settled)
+    return result, fluxes
 
 
 def _velocities(road: Road, mpo) -> str:
