@@ -63,6 +63,7 @@ def main():
       nasch solve -L 12 -N 6 --vmax 2 --p 0.5             exact flux, c_v, residual
       nasch solve -L 10 -N 5 --p 0.5 --top 5 --save pi.npz  likeliest states; pi on disk
       nasch solve --road -L 16 --vmax 1 --alpha 0.3 --beta 0.5   an open road: flux, profiles
+      nasch solve --road -L 200 --vmax 1 --method mps --bond-dimension 16   a long road (MPS)
       nasch approx --method pmf --vmax 2 --p 0.5 -c 0.25    an analytic approximation
       nasch approx --method cluster --order 4 --p 0.5 -c 0.25   the 4-cluster approximation
       nasch derive --method mf --vmax 2 --latex            its equations

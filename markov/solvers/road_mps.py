@@ -208,7 +208,7 @@ class MPSRoadSolution:
             "iterations": self.iterations, "seconds": self.seconds,
             "velocities": self.velocities, "closed_classes": self.closed_classes,
             "converged": self.converged, "tol": self.tol, "stopped": self.stopped,
-            "time_step": (f"{self.system.length + 1} sub-steps"
+            "time_step": (f"{_chain_steps(self.system)} sub-steps"
                           if self.system.update == RANDOM_SEQUENTIAL else "one step"),
         })
         return d
@@ -354,7 +354,7 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
     memory.check_fits(f"the MPS of {road.summary()} at bond dimension {chi}",
                       mps_bytes(road.length, chi, d, w), memory.memory_limit(max_memory),
                       ": a smaller --bond-dimension")
-    steps = road.length + 1 if road.update == RANDOM_SEQUENTIAL else 1
+    steps = _chain_steps(road)
     base, left = mpo.count_base, mpo.count("left")
     with progress_bar(None, "MPS sweeps", "sweep") as bar:
         half, _ = _sweeps(mpo, max(chi // 2, 2), tol, max_sweeps, start, bar, on_sweep)
@@ -381,10 +381,9 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
     with np.errstate(invalid="ignore", divide="ignore"):
         vel = np.where(density > 0, velocity / np.where(density > 0, density, 1), np.nan)
     neg = negativity(p)
-    bar = flux_error(flux, flux_half, tail)
     settled = full.converged or full.stopped == "caller"
     return MPSRoadSolution(
-        system=road, bond_dimension=chi, flux=flux, flux_error=bar,
+        system=road, bond_dimension=chi, flux=flux, flux_error=flux_error(flux, flux_half, tail),
         flux_half=flux_half, inflow=steps * expectation(p, base, mpo.count("entered")),
         ramp_inflows=ramps, bond_currents=bonds, density_profile=density,
         velocity_profile=vel, residual=full.residual, truncation_error=full.truncation_error,
@@ -395,13 +394,18 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         converged=settled, tol=tol, stopped=full.stopped, state=p)
 
 
+def _chain_steps(road: Road) -> int:
+    """Chain steps a time step: ``L + 1`` sub-steps under random-sequential update, else 1."""
+    return road.length + 1 if road.update == RANDOM_SEQUENTIAL else 1
+
+
 def _sweeps(mpo, chi: int, tol: float, max_sweeps: int, start, bar, on_sweep):
     """Sweeps at bond dimension ``chi`` until J settles (or ``tol``): the result and J's
     values after each sweep."""
     from markov.mps.stationary import expectation, stationary_mps
 
     road = mpo.road
-    steps = road.length + 1 if road.update == RANDOM_SEQUENTIAL else 1
+    steps = _chain_steps(road)
     base, left = mpo.count_base, mpo.count("left")
     fluxes: list[float] = []
 
