@@ -229,7 +229,15 @@ class MPSRoadSolution:
         return rec
 
 
-def _check_classes(road: Road) -> str:
+def _tables(road: Road):
+    """The road's zones' stacked tables ``(count, new, weight)``, as the lattice reads them."""
+    from markov.chain.lattice import _stack_tables
+
+    top = road.top_vmax
+    return _stack_tables(road.zones, top, max(max(m.horizon(top), m.vmax) for m in road.zones))
+
+
+def _check_classes(road: Road, tables) -> str:
     """How the road is known to have one closed class; refused where it has several.
 
     A road that drains (:func:`markov.chain.classes.road_drains`) has one, proven for
@@ -238,13 +246,10 @@ def _check_classes(road: Road) -> str:
     several are refused (an MPS would return one mixture of them, silently).
     """
     from markov.chain.classes import road_drains
-    from markov.chain.lattice import _stack_tables
     from markov.errors import NoUniqueStationaryStateError
     from markov.solvers.road_chain import RoadChain
 
-    top = road.top_vmax
-    H = max(max(m.horizon(top), m.vmax) for m in road.zones)
-    count, new, _ = _stack_tables(road.zones, top, H)
+    count, new, _ = tables
     if road_drains(road, count, new):
         return "one, proven (every configuration reaches the empty road)"
     short = _shortened(road, CLASS_CHECK_LENGTH)
@@ -346,7 +351,8 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         raise InvalidParameterError("the MPS solver takes an open road (a ring: the exact solver)")
     chi = ensure_int("bond dimension", bond_dimension, MIN_BOND_DIMENSION, MAX_BOND_DIMENSION)
     tol = ensure_tol(tol)
-    classes = _check_classes(road)
+    tables = _tables(road)
+    classes = _check_classes(road, tables)
     t0 = time.perf_counter()
     mpo = road_mpo(road, lump=lump)
     d = max(w.shape[1] for w in mpo.tensors)
@@ -390,7 +396,7 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         negative_marginal=float(min(0.0, neg.get("min_one_site", 0.0))),
         iterations=half.iterations + full.iterations, seconds=time.perf_counter() - t0,
         mpo_bond_dimension=max(mpo.bond_dimensions, default=1),
-        velocities=_velocities(road, mpo), closed_classes=classes,
+        velocities=_velocities(road, mpo, tables), closed_classes=classes,
         converged=settled, tol=tol, stopped=full.stopped, state=p)
 
 
@@ -424,14 +430,11 @@ def _sweeps(mpo, chi: int, tol: float, max_sweeps: int, start, bar, on_sweep):
     return result, fluxes
 
 
-def _velocities(road: Road, mpo) -> str:
+def _velocities(road: Road, mpo, tables) -> str:
     """The site basis in words, as the exact solver says it (``RoadSolution.velocities``)."""
     if mpo.lumped:
-        from markov.chain.lattice import _stack_tables
         from markov.model.lumping import velocity_classes
 
-        top = road.top_vmax
-        H = max(max(m.horizon(top), m.vmax) for m in road.zones)
-        return "lumped: " + velocity_classes(*_stack_tables(road.zones, top, H)).describe()
+        return "lumped: " + velocity_classes(*tables).describe()
     return "every velocity kept" + (" (random-sequential: a sub-step moves one car)"
                                     if road.update == RANDOM_SEQUENTIAL else "")
