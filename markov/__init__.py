@@ -43,7 +43,7 @@ os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 __all__ = [
     "Ring", "UPDATES", "PARALLEL", "RANDOM_SEQUENTIAL", "ORDERED_SEQUENTIAL",
     "Road", "Stretch", "OnRamp", "RoadChain", "RoadSolution", "solve_road",
-    "phase_grid", "PhaseGrid",
+    "phase_grid", "PhaseGrid", "phase_grid_mps", "PhaseGridMPS",
     "rule", "ModelSpec", "Model", "load_model", "MODELS", "available_models", "tabulate",
     "RingChain", "Solution", "ClassSolution", "ClassSolutions", "solve", "solve_classes",
     "to_frame", "load_solution", "stationary", "StationaryResult",
@@ -65,6 +65,8 @@ _WHERE = {
     **{name: "markov.solvers.road_chain" for name in ("RoadChain", "RoadSolution",
                                                      "solve_road")},
     "phase_grid": "markov.solvers.road_grid", "PhaseGrid": "markov.solvers.road_grid",
+    "phase_grid_mps": "markov.solvers.road_grid_mps",
+    "PhaseGridMPS": "markov.solvers.road_grid_mps",
     "rule": "markov.model.spec", "ModelSpec": "markov.model.spec",
     **{name: "markov.model.load" for name in ("Model", "load_model", "MODELS",
                                              "available_models")},

@@ -1,7 +1,8 @@
 """Road figures: the exact phase diagram in ``(alpha, beta)`` and density/velocity profiles.
 
 * :func:`phase_diagram_figure` draws :class:`markov.solvers.road_grid.PhaseGrid`
-  (:func:`markov.solvers.road_grid.phase_grid`): heat maps of the exact exit
+  (:func:`markov.solvers.road_grid.phase_grid`), or the matrix product states'
+  :class:`markov.solvers.road_grid_mps.PhaseGridMPS`: heat maps of the exit
   flux ``J`` and of the bulk density (the middle cell, or the mean of the two
   middle cells of an even road) side by side; on a TASEP-type road
   (:func:`tasep_boundaries`) the ``L -> infinity`` phase boundaries are drawn
@@ -127,9 +128,13 @@ def _draw_boundaries(ax, bounds: dict, lo: float, hi: float) -> None:
 def phase_diagram_figure(grid, width: float = 10.5, height: float = 4.6):
     """The flux and the bulk density of a :class:`~markov.solvers.road_grid.PhaseGrid`.
 
+    A :class:`~markov.solvers.road_grid_mps.PhaseGridMPS` is drawn the same way, its
+    titles naming the matrix product states and their bond dimension; a point without
+    an error bar is marked x, a refused point (several closed classes) is left grey.
+
     Parameters
     ----------
-    grid : PhaseGrid
+    grid : PhaseGrid or PhaseGridMPS
     width, height : float
         Inches.
 
@@ -150,11 +155,20 @@ def phase_diagram_figure(grid, width: float = 10.5, height: float = 4.6):
     fig, axes = plt.subplots(1, 2, figsize=(width, height), constrained_layout=True)
     ea, eb = _edges(grid.alphas), _edges(grid.betas)
     bounds = tasep_boundaries(road)
-    panels = ((grid.flux, "viridis", "exit flux J (cars per time step)", "exact flux J"),
+    mps = getattr(grid, "method", "exact") == "mps"
+    kind = f"MPS (χ = {grid.bond_dimension})" if mps else "exact"
+    panels = ((grid.flux, "viridis", "exit flux J (cars per time step)", f"{kind} flux J"),
               (grid.bulk_density, "magma", f"bulk density ρ ({bulk})",
-               f"exact bulk density ρ, {bulk}"))
+               f"{kind} bulk density ρ, {bulk}"))
     for ax, (values, cmap, label, title) in zip(axes, panels):
-        mesh = ax.pcolormesh(ea, eb, values.T, cmap=cmap, shading="flat")
+        if mps:
+            ax.set_facecolor("0.75")        # refused points (NaN) show the axes' grey
+        mesh = ax.pcolormesh(ea, eb, np.ma.masked_invalid(values.T), cmap=cmap,
+                             shading="flat")
+        if mps and grid.no_bar.any():
+            ia, ib = np.nonzero(grid.no_bar)
+            ax.plot(grid.alphas[ia], grid.betas[ib], "x", color="white", ms=7, mew=1.5,
+                    ls="none")
         bar = fig.colorbar(mesh, ax=ax)
         bar.set_label(label)
         ax.set_xlabel("entry rate α")
@@ -169,7 +183,20 @@ def phase_diagram_figure(grid, width: float = 10.5, height: float = 4.6):
             ax.set_ylim(eb[0], eb[-1])
             ax.legend(loc="lower right", fontsize=7, facecolor="0.25", labelcolor="white",
                       framealpha=0.8)
-    n = f"{len(grid.alphas)} × {len(grid.betas)} grid, {grid.states:,} states"
+    if mps:
+        bars = grid.flux_error[np.isfinite(grid.flux_error)]
+        n = (f"{len(grid.alphas)} × {len(grid.betas)} grid, matrix product states of bond"
+             f" dimension {grid.bond_dimension} (each point at χ/2 and χ)"
+             + (f"; largest flux bar {bars.max():.1g}" if bars.size else ""))
+        marks = []
+        if grid.no_bar.any():
+            marks.append("x: no error bar (J did not settle)")
+        if grid.refused.any():
+            marks.append("grey: several closed classes, not solved")
+        if marks:
+            n += "\n" + "; ".join(marks)
+    else:
+        n = f"{len(grid.alphas)} × {len(grid.betas)} grid, {grid.states:,} states"
     if bounds is not None:
         extra = (f"\ndashed: the L → ∞ phase boundaries, {bounds['source']},"
                  f" α_c = β_c = {bounds['alpha_c']:.4g}")

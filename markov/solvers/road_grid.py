@@ -164,7 +164,8 @@ class PhaseGrid:
         d = self.road.describe()
         d.pop("alpha", None)
         d.pop("beta", None)
-        d.update({"alphas": self.alphas.tolist(), "betas": self.betas.tolist(),
+        d.update({"method": "exact", "alphas": self.alphas.tolist(),
+                  "betas": self.betas.tolist(),
                   "index": "[i][j] = alphas[i], betas[j]",
                   "bulk_cells": list(middle_cells(self.road.length)),
                   "flux": self.flux.tolist(), "inflow": self.inflow.tolist(),

@@ -438,7 +438,8 @@ PHASE_SECONDS_PER_NONZERO = 2.6e-7
 PHASE_WORKERS = max(1, min(2, os.cpu_count() or 1))
 
 
-@plot.command("phase-diagram", short_help="Exact flux and bulk density of a road over (alpha, beta).")
+@plot.command("phase-diagram",
+              short_help="Flux and bulk density of a road over (alpha, beta), exact or MPS.")
 @_road_convention_options
 @click.option("--alphas", "alphas_text", default=None,
               help="Entry rates: LO:HI:N or a comma list [0.05:1:21].")
@@ -446,29 +447,43 @@ PHASE_WORKERS = max(1, min(2, os.cpu_count() or 1))
               help="Exit rates: LO:HI:N or a comma list [0.05:1:21].")
 @click.option("--budget", "budget_text", default=None,
               help="Time for the grid, e.g. 2m: refused after the states are built if the"
-                   " predicted solves exceed it.")
+                   " predicted solves exceed it (--method mps: after the first point, from"
+                   " its time).")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None,
               help="Also write the grid's data (JSON) to this file.")
+@click.option("--method", type=click.Choice(["exact", "mps"]), default="exact",
+              show_default=True,
+              help="The exact chain, or matrix product states (long roads; each point at"
+                   " chi/2 and chi with its error bar; docs/roads.md).")
+@click.option("--bond-dimension", "chi", type=int, default=None, metavar="CHI",
+              help="--method mps: the bond dimension [64].")
 @click.option("--output", "-o", type=click.Path(dir_okay=False), required=True,
               help="Figure file, .png or .pdf.")
 @quiet_option
 @handle_errors
 def phase_diagram(length, vmax, p, model, params, update, entry, exit_, v_in, stretches, ramps,
-                  alphas_text, betas_text, budget_text, json_path, output):
-    """Heat maps of the exact exit flux J and of the bulk density over (alpha, beta).
+                  alphas_text, betas_text, budget_text, json_path, method, chi, output):
+    """Heat maps of the exit flux J and of the bulk density over (alpha, beta).
 
     The bulk density is the occupation of the middle cell (odd L) or the mean
-    of the two middle cells (even L).  The chain's states are built once and
-    every transition probability is bilinear in (alpha, beta)
-    (markov.solvers.road_grid), so each grid point costs one stationary solve.
-    On NaSch vmax 1 roads (site1/sink or reservoir/wall, parallel or
-    random-sequential) the L -> infinity TASEP phase boundaries are drawn.
-    Progress goes to stderr, one line per grid row.
+    of the two middle cells (even L).  --method exact (the default): the
+    chain's states are built once and every transition probability is
+    bilinear in (alpha, beta) (markov.solvers.road_grid), so each grid point
+    costs one stationary solve.  --method mps: each point is a matrix product
+    state (markov.solvers.road_grid_mps), solved at chi/2 and chi with its
+    error bar, warm-started from its neighbour; a point without a bar is
+    marked x, a point with several closed classes (e.g. alpha = beta = 0) is
+    drawn grey and named in a note, never dropped (the grid is refused only if
+    every point is).  On NaSch vmax 1 roads (site1/sink or reservoir/wall,
+    parallel or random-sequential) the L -> infinity TASEP phase boundaries
+    are drawn.  Progress goes to stderr, one line per grid row.
 
     \b
     Example:
       nasch plot phase-diagram -L 12 --vmax 2 -o phase.png
       nasch plot phase-diagram -L 10 --vmax 1 --p 0.25 --alphas 0.05:1:11 -o tasep.png
+      nasch plot phase-diagram -L 100 --vmax 2 --method mps --bond-dimension 32
+          --alphas 0.1:1:4 --betas 0.1:1:4 -o long.png
     """
     import json
     import sys
@@ -490,6 +505,7 @@ def phase_diagram(length, vmax, p, model, params, update, entry, exit_, v_in, st
     betas = _grid_axis("beta", betas_text)
     road = _road_base(length, model, params, vmax, p, update, entry, exit_, v_in, stretches,
                       ramps)
+    chi = bond_dimension_option(chi, method)
     click.echo(f"phase grid: {road.summary()}; {len(alphas)} x {len(betas)} points",
                err=True)
 
@@ -512,7 +528,28 @@ def phase_diagram(length, vmax, p, model, params, update, entry, exit_, v_in, st
                 f"the grid needs about {spent + predicted:.0f} s, over --budget {budget:g} s:"
                 " fewer points (--alphas/--betas LO:HI:N) or a shorter road")
 
-    grid = phase_grid(road, alphas, betas, before_solves=check, workers=PHASE_WORKERS)
+    def check_mps(first, remaining):
+        # no model of an MPS solve's time: the first point's (cold) time, for every point
+        spent = time.perf_counter() - started
+        predicted = first * remaining
+        of = "" if budget is None else f" (budget {budget:g} s)"
+        print(f"predicted: {remaining + 1} MPS solves at bond dimension {grid_chi}, about"
+              f" {spent + predicted:.2g} s in all, from the first point's {first:.2g} s{of}",
+              file=sys.stderr)
+        if budget is not None and spent + predicted > budget:
+            raise InvalidParameterError(
+                f"the grid needs about {spent + predicted:.0f} s (from its first point's"
+                f" {first:.1f} s), over --budget {budget:g} s: fewer points (--alphas/--betas"
+                " LO:HI:N), a smaller --bond-dimension or a shorter road")
+
+    if method == "mps":
+        from markov.solvers.road_grid_mps import phase_grid_mps
+        from markov.solvers.road_mps import DEFAULT_BOND_DIMENSION
+
+        grid_chi = DEFAULT_BOND_DIMENSION if chi is None else chi
+        grid = phase_grid_mps(road, alphas, betas, grid_chi, after_first=check_mps)
+    else:
+        grid = phase_grid(road, alphas, betas, before_solves=check, workers=PHASE_WORKERS)
     for note in grid.notes:
         click.echo(f"note: {note}", err=True)
     if json_path is not None:
