@@ -73,7 +73,8 @@ def _mps_row(sol, reference: float | None, profile=None) -> dict:
     return {"chi": sol.bond_dimension, "flux": sol.flux, "reference": reference,
             "rel_error": None if err is None else err / abs(reference),
             "flux_error": sol.flux_error,
-            "covered": None if err is None else bool(err <= sol.flux_error),
+            "covered": None if err is None or sol.flux_error is None
+            else bool(err <= sol.flux_error),
             "profile_error": None if profile is None else
             float(np.max(np.abs(sol.density_profile - np.asarray(profile)))),
             "residual": sol.residual, "truncation": sol.truncation_error,
@@ -195,8 +196,11 @@ def _write(rows: list[dict], out: str) -> None:
         w.writerow(r)
     (RESULTS / f"{out}.csv").write_text(buf.getvalue())
     ex = [r for r in rows if r.get("table") == "exact" and r.get("covered") is not None]
+    bare = [r for r in rows if r.get("table") == "exact" and r.get("reference") is not None
+            and r.get("flux_error") is None]
     cover = (f"flux_error covers the exact error in {sum(r['covered'] for r in ex)} of"
-             f" {len(ex)} cases" if ex else "no exact comparison yet")
+             f" {len(ex)} cases" + (f"; {len(bare)} without a bar (J did not settle)"
+                                    if bare else "") if ex else "no exact comparison yet")
 
     def fmt(v):
         if v is None or v == "":

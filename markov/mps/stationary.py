@@ -875,6 +875,19 @@ def _pick(vals: np.ndarray) -> int:
     return int(np.argmin(np.abs(vals - 1.0)))
 
 
+#: Krylov steps between two looks at the local Ritz residual (an eigenproblem of at most
+#: ``ncv`` x ``ncv``, cheap beside a product).
+CHECK_EVERY = 2
+
+
+def _ritz(h: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Ritz values of the leading ``m x m`` Hessenberg block and the unit real Ritz vector
+    nearest 1 (a complex pair on top: its real part)."""
+    vals, vecs = np.linalg.eig(h[:m, :m])
+    y = vecs[:, _pick(vals)].real
+    return vals, y / np.linalg.norm(y)
+
+
 def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter: int) -> np.ndarray:
     """Eigenvector of the projected matrix for its eigenvalue nearest 1.
 
@@ -900,7 +913,7 @@ def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter:
             basis = np.empty((k + 1, n))
             h = np.zeros((k + 1, k))
             basis[0] = v
-            m = k
+            m, done = k, False
             for j in range(k):
                 w = matvec(basis[j].reshape(shape)).ravel()
                 for _pass in range(2):  # twice is enough (Kahan)
@@ -909,19 +922,19 @@ def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter:
                     h[: j + 1, j] += c
                 h[j + 1, j] = np.linalg.norm(w)
                 if h[j + 1, j] < 1e-14 * abs(h[: j + 1, j]).max():
-                    m = j + 1
+                    m, done = j + 1, True
                     break
                 basis[j + 1] = w / h[j + 1, j]
-            vals, vecs = np.linalg.eig(h[:m, :m])
-            i = _pick(vals)
-            y = vecs[:, i]
-            if abs(vals[i].imag) > 1e-12 * max(1.0, abs(vals[i])):
-                y = y.real  # a complex pair on top: keep the real part and go on
-            y = y.real / np.linalg.norm(y.real)
+                if j + 1 < k and (j + 1) % CHECK_EVERY == 0:
+                    # near the fixed point a few products suffice: look before the space is full
+                    _, y = _ritz(h, j + 1)
+                    if abs(h[j + 1, j] * y[-1]) <= tol:
+                        m, done = j + 1, True
+                        break
+            vals, y = _ritz(h, m)
             v = y @ basis[:m]
             v /= np.linalg.norm(v)
-            ritz_res = abs(h[m, m - 1] * y[-1]) if m < k + 1 else 0.0
-            if m < k or ritz_res <= tol:
+            if done or abs(h[m, m - 1] * y[-1]) <= tol:
                 break
         vec = v
     if vec @ v0 < 0:  # the sign of the previous tensor
@@ -1036,8 +1049,9 @@ def stationary_mps(
     method : {"dmrg", "power"}
         Two-site non-Hermitian sweep, or power iteration with zip-up compression.
     check_every : int, optional
-        Residual computed every this many iterations (it is an MPO apply at twice the bond
-        dimension); default 1 for ``"dmrg"``, 20 for ``"power"``.
+        Residual computed every this many iterations and where they stop (it is an MPO
+        apply at twice the bond dimension); default 1 for ``"dmrg"``, 20 for ``"power"``;
+        0: never (a warm-up: the last state is returned, its residual NaN).
     local_tol, ncv, local_maxiter : float, int, int
         Ritz-residual tolerance, Krylov size and restarts of the local Arnoldi solve
         (``"dmrg"``).
@@ -1084,6 +1098,12 @@ def stationary_mps(
             q, err = apply_mpo(mpo, p, bond_dimension, cutoff)
             p = normalize(q)
         halt = monitor is not None and bool(monitor(it, p))
+        if check_every == 0:  # no residual (a warm-up): the last state is returned
+            best = (math.nan, math.nan, err, p, it)
+            if halt:
+                stopped = "caller"
+                break
+            continue
         if it % check_every and it != max_iterations and not halt:
             continue
         res, floor = residual(mpo, p, 2 * bond_dimension)

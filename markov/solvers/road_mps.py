@@ -15,10 +15,11 @@ The sweeps.  At a bond dimension too small for the exact vector the residual
 the truncation; the sweeps end there when J has settled (:func:`flux_tail`), or
 at the residual target ``tol``.
 
-The error bar.  A road is solved twice: at ``chi / 2`` and then, from that
-state, at ``chi``; ``flux_error`` is ``|J(chi) - J(chi / 2)|`` plus the change of
-J still to come (:func:`flux_error`), None where J has not settled (no bar: the
-output says so).  Its coverage against exact chains is measured in
+The error bar.  A road is solved along a ladder of bond dimensions (16, 32,
+..., ``chi / 2``, ``chi``; :func:`ladder`), each rung from the last one's state:
+cheap sweeps at small ``chi`` find the profile's shape.  ``flux_error`` is
+``|J(chi) - J(chi / 2)|`` plus the change of J still to come at both
+(:func:`flux_error`), None where J has not settled (no bar: the output says so).  Its coverage against exact chains is measured in
 ``benchmarks/mps_roads.py`` and written in ``docs/roads.md``.  The residual, the
 discarded weight and the most negative marginal are reported, never hidden.
 
@@ -57,16 +58,45 @@ ROUNDING = 1e-13
 RESIDUAL_EVERY = 10
 #: J has settled when the change still to come (:func:`flux_tail`) is below this, relative.
 SETTLED = 1e-12
+#: ... or below this fraction of its distance to the last bond dimension's J (the bar
+#: holds that distance, so more sweeps would not narrow it).
+LADDER_FRACTION = 0.1
+#: ... or, below ``chi / 2``, where the state is only a start, below this, relative.
+WARM_UP_SETTLED = 1e-4
+#: Most sweeps of a rung below ``chi / 2`` (its state is a start, not a result).
+WARM_UP_SWEEPS = 12
+#: The smallest bond dimension of the ladder (:func:`ladder`).
+LADDER_START = 16
+#: Krylov vectors of the local eigenproblem at each bond, one pass: near the fixed point a
+#: few products suffice (the local solve stops at its tolerance), and the sweeps, not the
+#: local solve, decide how fast the state settles (docs/mps_solver_notes.md).
+KRYLOV = 12
+
+
+def _geometric_tail(values) -> float:
+    """The change still to come of a sequence whose last three changes shrink
+    geometrically (:func:`flux_tail`); ``inf`` where they do not."""
+    if len(values) < 4:
+        return math.inf
+    d = [abs(values[i] - values[i - 1]) for i in (-3, -2, -1)]
+    if d[2] <= 1e-13 * abs(values[-1]):
+        return 0.0
+    r = max(d[1] / d[0] if d[0] > 0 else 1.0, d[2] / d[1] if d[1] > 0 else 1.0)
+    return d[2] * r / (1 - r) if r < 0.9 else math.inf
 
 
 def flux_tail(fluxes) -> float:
-    """The change of J still to come over further sweeps, from its last three values.
+    """The change of J still to come over further sweeps, from its last values.
 
     The sweeps' changes of J shrink geometrically once the state is near its fixed
-    point at this bond dimension: with the last two changes ``d1``, ``d2`` and
-    ``r = d2 / d1 < 0.9``, the tail is ``d2 r / (1 - r)``; a change below 1e-13 of J
-    is rounding (tail 0).  ``inf`` where three values are not there or the changes
-    do not shrink: J has not settled and no bar can be given.
+    point at this bond dimension: with the last three changes ``d1, d2, d3`` and
+    ``r = max(d2 / d1, d3 / d2) < 0.9``, the tail is ``d3 r / (1 - r)``; a last change
+    below 1e-13 of J is rounding (tail 0).  (Three values were too few: the first
+    sweeps from a smaller bond dimension's state go back and forth, and one shrinking
+    ratio there stopped a vmax 2 road 2e-3 short of its J.)  Where J alternates between
+    two values, each settling (a two-cycle of the sweeps, seen on a vmax 2 road at
+    L = 12, chi 16: 2.5e-5 apart), the tail is their distance plus the two tails.
+    ``inf`` otherwise: J has not settled and no bar can be given.
 
     Parameters
     ----------
@@ -77,13 +107,21 @@ def flux_tail(fluxes) -> float:
     -------
     float
     """
-    if len(fluxes) < 3:
-        return math.inf
-    d1, d2 = abs(fluxes[-2] - fluxes[-3]), abs(fluxes[-1] - fluxes[-2])
-    if d2 <= 1e-13 * abs(fluxes[-1]):
-        return 0.0
-    r = d2 / d1 if d1 > 0 else 1.0
-    return d2 * r / (1 - r) if r < 0.9 else math.inf
+    fluxes = list(fluxes)
+    tail = _geometric_tail(fluxes)
+    if math.isinf(tail) and len(fluxes) >= 8:
+        last, before = fluxes[::-2][:4][::-1], fluxes[-2::-2][:4][::-1]
+        tail = abs(fluxes[-1] - fluxes[-2]) + _geometric_tail(last) + _geometric_tail(before)
+    return tail
+
+
+def _stalled(fluxes) -> bool:
+    """More sweeps will not narrow the tail: finite and no smaller than two sweeps ago
+    (a two-cycle whose two values have settled)."""
+    if len(fluxes) < 10:
+        return False
+    now, before = flux_tail(fluxes), flux_tail(fluxes[:-2])
+    return math.isfinite(now) and now > 0 and now >= 0.99 * before
 
 
 def flux_error(flux: float, flux_half: float, tail: float) -> float | None:
@@ -95,7 +133,7 @@ def flux_error(flux: float, flux_half: float, tail: float) -> float | None:
     flux, flux_half : float
         The flux at ``chi`` and at ``chi / 2``.
     tail : float
-        :func:`flux_tail` at ``chi``.
+        :func:`flux_tail` at ``chi`` plus that at ``chi / 2``.
 
     Returns
     -------
@@ -314,7 +352,8 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
     road : Road
         Any model, update, entry, exit, stretches and ramps (``docs/roads.md``).
     bond_dimension : int
-        ``chi`` of the reported state; the error bar compares it with ``chi / 2``.
+        ``chi`` of the reported state; the error bar compares it with ``chi / 2``.  Solved
+        along :func:`ladder` (16, 32, ..., ``chi / 2``, ``chi``), each from the last state.
     tol : float
         Target residual ``||T p - p||_2 / ||p||_2``.
     lump : bool
@@ -322,7 +361,8 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
     max_sweeps : int
         Most sweeps of each of the two solves.
     start : MPS, optional
-        A warm start for the ``chi / 2`` solve (e.g. a shorter road's, padded).
+        A warm start (e.g. a neighbouring grid point's state): the ladder then starts at
+        ``chi / 2``.
     max_memory : float, optional
         Bytes allowed (default 75 % of physical memory): refused before the solve.
     on_sweep : callable, optional
@@ -363,13 +403,24 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
     steps = _chain_steps(road)
     base, left = mpo.count_base, mpo.count("left")
     with progress_bar(None, "MPS sweeps", "sweep") as bar:
-        half, _ = _sweeps(mpo, max(chi // 2, 2), tol, max_sweeps, start, bar, on_sweep)
-        flux_half = steps * expectation(half.mps, base, left)
-        full, fluxes = _sweeps(mpo, chi, tol, max_sweeps, half.mps, bar, on_sweep)
+        results = []
+        # a warm start (a neighbour's state, a shorter road's) already has the shape the
+        # ladder's first rungs would find: from it, chi / 2 and chi only
+        levels = ladder(chi) if start is None else ladder(chi)[-2:]
+        for c in levels:
+            final = c == chi
+            previous = results[-1][1][-1] if results else None
+            got = _sweeps(mpo, c, tol, max_sweeps, start, bar, on_sweep, previous,
+                          warm_up=len(levels) > 2 and c < chi // 2, residuals=final)
+            results.append(got)
+            start = got[0].mps
+    (half, half_fluxes), (full, fluxes) = results[-2], results[-1]
+    flux_half = steps * expectation(half.mps, base, left)
     p = full.mps
     flux = steps * expectation(p, base, left)
     # the reported state is the lowest-residual one: its J is among those recorded
-    tail = 0.0 if full.converged and len(fluxes) < 3 else flux_tail(fluxes)
+    tail = 0.0 if full.converged and len(fluxes) < 4 else flux_tail(fluxes)
+    tail += 0.0 if half.converged and len(half_fluxes) < 4 else flux_tail(half_fluxes)
     L = road.length
     density = np.array([1.0 - m[0] / m.sum() for m in one_site_marginals(p)])
 
@@ -394,7 +445,7 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         ramp_inflows=ramps, bond_currents=bonds, density_profile=density,
         velocity_profile=vel, residual=full.residual, truncation_error=full.truncation_error,
         negative_marginal=float(min(0.0, neg.get("min_one_site", 0.0))),
-        iterations=half.iterations + full.iterations, seconds=time.perf_counter() - t0,
+        iterations=sum(r.iterations for r, _ in results), seconds=time.perf_counter() - t0,
         mpo_bond_dimension=max(mpo.bond_dimensions, default=1),
         velocities=_velocities(road, mpo, tables), closed_classes=classes,
         converged=settled, tol=tol, stopped=full.stopped, state=p)
@@ -405,9 +456,25 @@ def _chain_steps(road: Road) -> int:
     return road.length + 1 if road.update == RANDOM_SEQUENTIAL else 1
 
 
-def _sweeps(mpo, chi: int, tol: float, max_sweeps: int, start, bar, on_sweep):
+def ladder(chi: int) -> list[int]:
+    """The bond dimensions solved in turn, each from the last one's state: doubling from
+    :data:`LADDER_START` (cheap sweeps find the profile's shape) to ``chi / 2`` and ``chi``."""
+    levels = [chi]
+    while levels[0] // 2 >= 2 and (len(levels) < 2 or levels[0] // 2 >= LADDER_START):
+        levels.insert(0, levels[0] // 2)
+    return levels
+
+
+def _sweeps(mpo, chi: int, tol: float, max_sweeps: int, start, bar, on_sweep,
+            previous: float | None, warm_up: bool, residuals: bool):
     """Sweeps at bond dimension ``chi`` until J settles (or ``tol``): the result and J's
-    values after each sweep."""
+    values after each sweep.
+
+    J has settled when the change still to come (:func:`flux_tail`) is below
+    :data:`SETTLED`, or below :data:`LADDER_FRACTION` of its distance to the last
+    bond dimension's J ``previous`` (which the bar holds anyway), or, in a ``warm_up``,
+    below :data:`WARM_UP_SETTLED`.  The residual is computed only where ``residuals``.
+    """
     from markov.mps.stationary import expectation, stationary_mps
 
     road = mpo.road
@@ -418,15 +485,24 @@ def _sweeps(mpo, chi: int, tol: float, max_sweeps: int, start, bar, on_sweep):
     def settled(sweep: int, p) -> bool:
         # the residual floors at the truncation of chi, and computing it costs an MPO
         # product at 2 chi: J, cheap, is watched every sweep and its settling ends them
-        fluxes.append(steps * expectation(p, base, left))
-        bar.set_description(f"MPS L={road.length} chi={chi} J={fluxes[-1]:.12f}")
+        j = steps * expectation(p, base, left)
+        fluxes.append(j)
+        bar.set_description(f"MPS L={road.length} chi={chi} J={j:.12f}")
         bar.update(1)
         if on_sweep is not None:
-            on_sweep(sweep, fluxes[-1])
-        return flux_tail(fluxes) <= SETTLED * abs(fluxes[-1])
+            on_sweep(sweep, j)
+        enough = SETTLED * abs(j)
+        if previous is not None:
+            enough = max(enough, LADDER_FRACTION * abs(j - previous))
+        if warm_up:
+            enough = max(enough, WARM_UP_SETTLED * abs(j))
+        return flux_tail(fluxes) <= enough or _stalled(fluxes)
 
-    result = stationary_mps(mpo.tensors, chi, tol=tol, max_iterations=max_sweeps,
-                            check_every=RESIDUAL_EVERY, start=start, monitor=settled)
+    result = stationary_mps(mpo.tensors, chi, tol=tol,
+                            max_iterations=min(max_sweeps, WARM_UP_SWEEPS) if warm_up
+                            else max_sweeps,
+                            check_every=RESIDUAL_EVERY if residuals else 0, start=start,
+                            monitor=settled, ncv=KRYLOV, local_maxiter=1)
     return result, fluxes
 
 
