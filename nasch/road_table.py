@@ -547,7 +547,8 @@ class RoadTable(RenderedTable):
         if any(r.kind == "mps" for r in self.rows):
             parts[0] = parts[0].replace("exact stationary exit flux", "stationary exit flux of a"
                                         " matrix product state of bond dimension chi, +- its"
-                                        " error bar |J(chi) - J(chi/2)| + the sweeps' tail")
+                                        " error bar |J(chi) - J(chi/2)| + the sweeps' tails"
+                                        " + 1e-13 L J")
             parts[1] += "; plus the largest bar of the rows"
         if self.known is not None:
             parts.append(f"known limit: {self.known[2]}, {self.known[1]} phase")

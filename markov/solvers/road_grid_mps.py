@@ -101,6 +101,7 @@ class PhaseGridMPS:
             NaN values (refused points, no bar) are for the caller to write as null.
         """
         from markov.solvers.road_grid import middle_cells
+        from markov.solvers.road_mps import FLUX_ERROR_DEFINITION
 
         d = self.road.describe()
         d.pop("alpha", None)
@@ -112,9 +113,7 @@ class PhaseGridMPS:
             "index": "[i][j] = alphas[i], betas[j]",
             "bulk_cells": list(middle_cells(self.road.length)),
             "flux": self.flux.tolist(), "flux_error": self.flux_error.tolist(),
-            "flux_error_definition": "|J(chi) - J(chi/2)| + the geometric tail of J's changes"
-                                     " over the sweeps (markov.solvers.road_mps); null: no bar"
-                                     " (J has not settled) or a refused point",
+            "flux_error_definition": FLUX_ERROR_DEFINITION + "; null also at a refused point",
             "inflow": self.inflow.tolist(), "bulk_density": self.bulk_density.tolist(),
             "mean_density": self.mean_density.tolist(),
             "residual_max": float(finite.max()) if finite.size else None,

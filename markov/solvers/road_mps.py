@@ -40,7 +40,8 @@ from markov.model.road import Road
 from markov.validate import ensure_int, ensure_tol
 
 __all__ = ["MPSRoadSolution", "solve_road_mps", "DEFAULT_BOND_DIMENSION", "DEFAULT_MPS_TOL",
-           "MIN_BOND_DIMENSION", "MAX_BOND_DIMENSION", "flux_error", "flux_tail", "mps_bytes"]
+           "MIN_BOND_DIMENSION", "MAX_BOND_DIMENSION", "flux_error", "flux_tail", "mps_bytes",
+           "ladder", "FLUX_ERROR_DEFINITION"]
 
 #: ``--bond-dimension`` when none is given.
 DEFAULT_BOND_DIMENSION = 64
@@ -50,9 +51,16 @@ MIN_BOND_DIMENSION, MAX_BOND_DIMENSION = 4, 2048
 DEFAULT_MPS_TOL = 1e-10
 
 
-#: Relative rounding of J's contractions, a floor under the bar (where chi holds the whole
-#: vector, J(chi) = J(chi/2) to rounding: 2e-15 was seen against the exact chain at L = 12).
+#: A floor under the bar, relative to J and per cell: the sweeps' own accuracy.  Where chi
+#: holds the whole vector, J(chi) = J(chi/2) to rounding (2e-15 was seen against the exact
+#: chain at L = 12); at L = 1000 (vmax 1, low density, chi 32) the two rungs agreed to
+#: 1.2e-11 of J and missed its closed form by 2.1e-11: an error the sweeps leave at every
+#: chi, growing with L, which no difference of rungs shows.
 ROUNDING = 1e-13
+#: What ``flux_error`` is, in the JSON outputs.
+FLUX_ERROR_DEFINITION = ("|J(chi) - J(chi/2)| + the geometric tails of J's changes over the"
+                         " sweeps at chi and chi/2 + 1e-13 L |J| (coverage: docs/roads.md);"
+                         " null: J has not settled, no bar")
 #: Sweeps between two residual checks (an MPO product at 2 chi each; J is watched every
 #: sweep, and the residual is computed where the sweeps stop).
 RESIDUAL_EVERY = 10
@@ -124,9 +132,9 @@ def _stalled(fluxes) -> bool:
     return math.isfinite(now) and now > 0 and now >= 0.99 * before
 
 
-def flux_error(flux: float, flux_half: float, tail: float) -> float | None:
+def flux_error(flux: float, flux_half: float, tail: float, length: int = 1) -> float | None:
     """The flux's error bar: the change from ``chi / 2`` to ``chi``, the tail of the sweeps,
-    and the rounding floor :data:`ROUNDING`.
+    and the floor ``ROUNDING * length * |J|`` (:data:`ROUNDING`).
 
     Parameters
     ----------
@@ -134,6 +142,8 @@ def flux_error(flux: float, flux_half: float, tail: float) -> float | None:
         The flux at ``chi`` and at ``chi / 2``.
     tail : float
         :func:`flux_tail` at ``chi`` plus that at ``chi / 2``.
+    length : int
+        Cells of the road.
 
     Returns
     -------
@@ -142,7 +152,7 @@ def flux_error(flux: float, flux_half: float, tail: float) -> float | None:
     """
     if math.isinf(tail):
         return None
-    return abs(flux - flux_half) + tail + ROUNDING * abs(flux)
+    return abs(flux - flux_half) + tail + ROUNDING * length * abs(flux)
 
 
 @dataclass
@@ -228,9 +238,7 @@ class MPSRoadSolution:
         d = self.system.describe()
         d.update({
             "method": "mps", "flux": self.flux, "flux_error": self.flux_error,
-            "flux_error_definition": "|J(chi) - J(chi/2)| + the geometric tail of J's"
-                                     " changes over the sweeps (coverage: docs/roads.md);"
-                                     " null: J has not settled, no bar",
+            "flux_error_definition": FLUX_ERROR_DEFINITION,
             "flux_half_bond": self.flux_half,
             "inflow": self.inflow, "ramp_inflows": self.ramp_inflows.tolist(),
             "bond_currents": self.bond_currents.tolist(),
@@ -440,7 +448,7 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
     neg = negativity(p)
     settled = full.converged or full.stopped == "caller"
     return MPSRoadSolution(
-        system=road, bond_dimension=chi, flux=flux, flux_error=flux_error(flux, flux_half, tail),
+        system=road, bond_dimension=chi, flux=flux, flux_error=flux_error(flux, flux_half, tail, L),
         flux_half=flux_half, inflow=steps * expectation(p, base, mpo.count("entered")),
         ramp_inflows=ramps, bond_currents=bonds, density_profile=density,
         velocity_profile=vel, residual=full.residual, truncation_error=full.truncation_error,

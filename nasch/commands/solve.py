@@ -348,7 +348,7 @@ def _solve_mps(system, method, chi, start, every_class, operator, tol, no_lump, 
                    f" sweeps (they ended: {sol.stopped}; residual {sol.residual:.1e})")
     else:
         click.echo(f"  flux           {sol.flux:.12g} +- {sol.flux_error:.1e}  (cars leaving per"
-                   " time step; the bar: |J(chi) - J(chi/2)| + the sweeps' tail)")
+                   " time step; the bar: |J(chi) - J(chi/2)| + the sweeps' tails + 1e-13 L J)")
     click.echo(f"  inflow         {sol.inflow:.12g}  (cars entering at cell 1)")
     for r, x in zip(system.ramps, sol.ramp_inflows):
         click.echo(f"  on-ramp {r.cell:<6} {x:.12g}")
