@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -160,3 +161,31 @@ def test_profile_route(tmp_path):
     r = CliRunner().invoke(main, ["plot", "profile", "-L", "9", "--bond-dimension", "8",
                                   "-o", str(out)])
     assert r.exit_code == 2
+
+
+def test_flux_tail_covers_a_geometric_approach_and_a_settled_two_cycle():
+    from markov.solvers.road_mps import _stalled, flux_tail
+
+    limit = 0.3
+    geometric = [limit + 1e-3 * 0.5 ** k for k in range(8)]
+    assert flux_tail(geometric[:3]) == math.inf            # three values are too few
+    assert flux_tail(geometric) >= abs(geometric[-1] - limit) * (1 - 1e-9)
+    assert not _stalled(geometric + [limit + 1e-3 * 0.5 ** k for k in range(8, 12)])
+    # J alternating about 0.3 +- 1e-5 while each of the two values settles
+    cycle = [limit + (-1) ** k * 1e-5 + 1e-4 * 0.5 ** k for k in range(12)]
+    tail = flux_tail(cycle)
+    assert 2e-5 <= tail < 3e-5 and tail >= abs(cycle[-1] - limit)
+    settled = cycle + [limit + (-1) ** k * 1e-5 + 1e-4 * 0.5 ** k for k in range(12, 24)]
+    assert _stalled(settled)
+    rng = np.random.default_rng(0)
+    wandering = list(limit + 1e-3 * rng.standard_normal(12))
+    assert flux_tail(wandering) == math.inf and not _stalled(wandering)
+
+
+def test_ladder_doubles_from_16_to_chi():
+    from markov.solvers.road_mps import ladder
+
+    assert ladder(128) == [16, 32, 64, 128]
+    assert ladder(64) == [16, 32, 64]
+    assert ladder(16) == [8, 16] and ladder(8) == [4, 8] and ladder(4) == [2, 4]
+    assert ladder(100) == [25, 50, 100]
