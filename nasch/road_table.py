@@ -548,6 +548,7 @@ class RoadTable(RenderedTable):
             parts[0] = parts[0].replace("exact stationary exit flux", "stationary exit flux of a"
                                         " matrix product state of bond dimension chi, +- its"
                                         " error bar |J(chi) - J(chi/2)| + the sweeps' tails"
+                                        " + the bond currents' spread"
                                         " + 1e-13 L J")
             parts[1] += "; plus the largest bar of the rows"
         if self.known is not None:

@@ -53,7 +53,7 @@ def test_short_roads_against_the_exact_chain(road):
     assert np.allclose(mps.bond_currents, exact.bond_currents, atol=1e-10)
     assert np.allclose(mps.density_profile, exact.density_profile, atol=1e-10)
     assert np.allclose(mps.velocity_profile, exact.velocity_profile, atol=1e-9, equal_nan=True)
-    assert mps.flux_error < 1e-9
+    assert mps.flux_error < 1e-9 and mps.current_spread < 1e-10
     assert mps.negative_marginal > -1e-12
     assert mps.velocities == exact.velocities
 
@@ -189,3 +189,16 @@ def test_ladder_doubles_from_16_to_chi():
     assert ladder(64) == [16, 32, 64]
     assert ladder(16) == [8, 16] and ladder(8) == [4, 8] and ladder(4) == [2, 4]
     assert ladder(100) == [25, 50, 100]
+
+
+def test_current_spread_counts_the_cars_fed_in_upstream():
+    from markov.solvers.road_mps import current_spread
+
+    road = Road(5, load_model("nasch", {"vmax": 2, "p": 0.25}), alpha=0.5, beta=0.5,
+                ramps=[OnRamp(3, 0.2)])
+    # bonds 1, 2 carry the inflow 0.3; bonds 3, 4 and the exit also the ramp's 0.1
+    assert current_spread(road, 0.4, 0.3, np.array([0.1]), [0.3, 0.3, 0.4, 0.4]) < 1e-15
+    assert current_spread(road, 0.4, 0.3, np.array([0.1]),
+                          [0.3, 0.31, 0.4, 0.4]) == pytest.approx(0.01)
+    assert current_spread(road, 0.42, 0.3, np.array([0.1]),
+                          [0.3, 0.3, 0.4, 0.4]) == pytest.approx(0.02)

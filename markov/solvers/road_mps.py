@@ -41,7 +41,7 @@ from markov.validate import ensure_int, ensure_tol
 
 __all__ = ["MPSRoadSolution", "solve_road_mps", "DEFAULT_BOND_DIMENSION", "DEFAULT_MPS_TOL",
            "MIN_BOND_DIMENSION", "MAX_BOND_DIMENSION", "flux_error", "flux_tail", "mps_bytes",
-           "ladder", "FLUX_ERROR_DEFINITION"]
+           "ladder", "FLUX_ERROR_DEFINITION", "current_spread"]
 
 #: ``--bond-dimension`` when none is given.
 DEFAULT_BOND_DIMENSION = 64
@@ -59,8 +59,9 @@ DEFAULT_MPS_TOL = 1e-10
 ROUNDING = 1e-13
 #: What ``flux_error`` is, in the JSON outputs.
 FLUX_ERROR_DEFINITION = ("|J(chi) - J(chi/2)| + the geometric tails of J's changes over the"
-                         " sweeps at chi and chi/2 + 1e-13 L |J| (coverage: docs/roads.md);"
-                         " null: J has not settled, no bar")
+                         " sweeps at chi and chi/2 + current_spread (the largest violation of"
+                         " car conservation over the bonds) + 1e-13 L |J| (coverage:"
+                         " docs/roads.md); null: J has not settled, no bar")
 #: Sweeps between two residual checks (an MPO product at 2 chi each; J is watched every
 #: sweep, and the residual is computed where the sweeps stop).
 RESIDUAL_EVERY = 10
@@ -132,9 +133,34 @@ def _stalled(fluxes) -> bool:
     return math.isfinite(now) and now > 0 and now >= 0.99 * before
 
 
-def flux_error(flux: float, flux_half: float, tail: float, length: int = 1) -> float | None:
+def current_spread(road: Road, flux: float, inflow: float, ramp_inflows, bond_currents) -> float:
+    """The largest violation of car conservation along the road.
+
+    In the stationary state every bond carries the cars fed in upstream of it (the
+    inflow plus the ramps on cells ``<= k`` for bond ``k``), and the exit the whole
+    of it.  An MPS that is not stationary in the bulk breaks this even where J at the
+    exit has settled (vmax 2, L = 100, alpha = 1, beta = 0.25, chi 32: J right to the
+    Monte Carlo's 2e-4, the bond currents falling from 0.16475 at the entry to the exit's
+    0.16242, the density profile 3e-3 off), so the spread is part of the bar.
+
+    Returns
+    -------
+    float
+    """
+    fed = np.full(max(road.length - 1, 0), float(inflow))
+    for ramp, x in zip(road.ramps, ramp_inflows):
+        fed[ramp.cell - 1:] += x                     # bond k (1-based) is after cell k
+    spread = abs(flux - inflow - float(np.sum(ramp_inflows)))
+    if fed.size:
+        spread = max(spread, float(np.max(np.abs(np.asarray(bond_currents) - fed))))
+    return spread
+
+
+def flux_error(flux: float, flux_half: float, tail: float, length: int = 1,
+               spread: float = 0.0) -> float | None:
     """The flux's error bar: the change from ``chi / 2`` to ``chi``, the tail of the sweeps,
-    and the floor ``ROUNDING * length * |J|`` (:data:`ROUNDING`).
+    the state's violation of car conservation ``spread`` (:func:`current_spread`), and the
+    floor ``ROUNDING * length * |J|`` (:data:`ROUNDING`).
 
     Parameters
     ----------
@@ -144,6 +170,8 @@ def flux_error(flux: float, flux_half: float, tail: float, length: int = 1) -> f
         :func:`flux_tail` at ``chi`` plus that at ``chi / 2``.
     length : int
         Cells of the road.
+    spread : float
+        :func:`current_spread` of the state at ``chi``.
 
     Returns
     -------
@@ -152,7 +180,7 @@ def flux_error(flux: float, flux_half: float, tail: float, length: int = 1) -> f
     """
     if math.isinf(tail):
         return None
-    return abs(flux - flux_half) + tail + ROUNDING * length * abs(flux)
+    return abs(flux - flux_half) + tail + spread + ROUNDING * length * abs(flux)
 
 
 @dataclass
@@ -228,6 +256,13 @@ class MPSRoadSolution:
         """``|flux - inflow - sum(ramp inflows)|``: zero up to the state's residual."""
         return float(abs(self.flux - self.inflow - self.ramp_inflows.sum()))
 
+    @property
+    def current_spread(self) -> float:
+        """How far the state is from conserving cars: the largest difference of a bond's
+        current, or the flux, from the cars fed in upstream of it (:func:`current_spread`)."""
+        return current_spread(self.system, self.flux, self.inflow, self.ramp_inflows,
+                              self.bond_currents)
+
     def to_dict(self) -> dict:
         """JSON-ready: the road with its conventions, the observables, the solver's figures.
 
@@ -246,6 +281,7 @@ class MPSRoadSolution:
             "velocity_profile": [None if np.isnan(x) else float(x)
                                  for x in self.velocity_profile],
             "mean_cars": self.mean_cars, "conservation": self.conservation,
+            "current_spread": self.current_spread,
             "bond_dimension": self.bond_dimension,
             "mpo_bond_dimension": self.mpo_bond_dimension,
             "truncation_error": self.truncation_error, "residual": self.residual,
@@ -447,9 +483,12 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         vel = np.where(density > 0, velocity / np.where(density > 0, density, 1), np.nan)
     neg = negativity(p)
     settled = full.converged or full.stopped == "caller"
+    inflow = steps * expectation(p, base, mpo.count("entered"))
+    spread = current_spread(road, flux, inflow, ramps, bonds)
     return MPSRoadSolution(
-        system=road, bond_dimension=chi, flux=flux, flux_error=flux_error(flux, flux_half, tail, L),
-        flux_half=flux_half, inflow=steps * expectation(p, base, mpo.count("entered")),
+        system=road, bond_dimension=chi, flux=flux,
+        flux_error=flux_error(flux, flux_half, tail, L, spread),
+        flux_half=flux_half, inflow=inflow,
         ramp_inflows=ramps, bond_currents=bonds, density_profile=density,
         velocity_profile=vel, residual=full.residual, truncation_error=full.truncation_error,
         negative_marginal=float(min(0.0, neg.get("min_one_site", 0.0))),

@@ -348,11 +348,13 @@ def _solve_mps(system, method, chi, start, every_class, operator, tol, no_lump, 
                    f" sweeps (they ended: {sol.stopped}; residual {sol.residual:.1e})")
     else:
         click.echo(f"  flux           {sol.flux:.12g} +- {sol.flux_error:.1e}  (cars leaving per"
-                   " time step; the bar: |J(chi) - J(chi/2)| + the sweeps' tails + 1e-13 L J)")
+                   " time step; the bar: |J(chi) - J(chi/2)| + the sweeps' tails + the bond"
+                   " currents' spread + 1e-13 L J)")
     click.echo(f"  inflow         {sol.inflow:.12g}  (cars entering at cell 1)")
     for r, x in zip(system.ramps, sol.ramp_inflows):
         click.echo(f"  on-ramp {r.cell:<6} {x:.12g}")
-    click.echo(f"  conservation   |flux - inflow - ramps| = {sol.conservation:.1e}")
+    click.echo(f"  conservation   |flux - inflow - ramps| = {sol.conservation:.1e}; bond currents"
+               f" against the cars fed in upstream: {sol.current_spread:.1e} (0 when stationary)")
     click.echo(f"  mean cars      {sol.mean_cars:.12g}")
     click.echo(f"  bond currents  {_numbers(sol.bond_currents)}")
     click.echo(f"  density        {_numbers(sol.density_profile)}")
