@@ -462,8 +462,10 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
     flux_half = steps * expectation(half.mps, base, left)
     p = full.mps
     flux = steps * expectation(p, base, left)
-    # the reported state is the lowest-residual one: its J is among those recorded
+    # the reported state is the lowest-residual one, not always the last: the tail is the
+    # last J's, so the bar also holds the distance between the two
     tail = 0.0 if full.converged and len(fluxes) < 4 else flux_tail(fluxes)
+    tail += abs(flux - fluxes[-1]) if fluxes else 0.0
     tail += 0.0 if half.converged and len(half_fluxes) < 4 else flux_tail(half_fluxes)
     L = road.length
     density = np.array([1.0 - m[0] / m.sum() for m in one_site_marginals(p)])
