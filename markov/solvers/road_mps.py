@@ -143,6 +143,17 @@ def current_spread(road: Road, flux: float, inflow: float, ramp_inflows, bond_cu
     Monte Carlo's 2e-4, the bond currents falling from 0.16475 at the entry to the exit's
     0.16242, the density profile 3e-3 off), so the spread is part of the bar.
 
+    Parameters
+    ----------
+    road : Road
+        Its ramps say where cars are fed in.
+    flux, inflow : float
+        Cars leaving at the exit and entering at cell 1, per time step.
+    ramp_inflows : sequence of float
+        Cars entering at each ramp, per time step.
+    bond_currents : sequence of float
+        Cars crossing bond ``k = 1..L-1`` (after cell ``k``), per time step.
+
     Returns
     -------
     float
@@ -507,7 +518,18 @@ def _chain_steps(road: Road) -> int:
 
 def ladder(chi: int) -> list[int]:
     """The bond dimensions solved in turn, each from the last one's state: doubling from
-    :data:`LADDER_START` (cheap sweeps find the profile's shape) to ``chi / 2`` and ``chi``."""
+    :data:`LADDER_START` (cheap sweeps find the profile's shape) to ``chi / 2`` and ``chi``.
+
+    Parameters
+    ----------
+    chi : int
+        The bond dimension of the reported state.
+
+    Returns
+    -------
+    list of int
+        Increasing, each twice the last, ending ``chi / 2, chi``.
+    """
     levels = [chi]
     while levels[0] // 2 >= 2 and (len(levels) < 2 or levels[0] // 2 >= LADDER_START):
         levels.insert(0, levels[0] // 2)
