@@ -2,9 +2,10 @@
 
 The exact grid (:func:`markov.solvers.road_grid.phase_grid`) builds one chain and ends
 where the chain does (``L`` near 12 to 20).  Here every grid point is one
-:func:`markov.solvers.road_mps.solve_road_mps` (at ``chi / 2`` and then ``chi``, with the
-error bar of that solver), warm-started from the neighbour's state: the grid is walked
-as a snake, as the exact grid walks it, so each point starts from the point before.
+:func:`markov.solvers.road_mps.solve_road_mps` with the error bar of that solver: the
+first point along its whole ladder of bond dimensions, every later one at ``chi / 2``
+and then ``chi`` from the neighbour's state (the grid is walked as a snake, as the
+exact grid walks it, so each point starts from the point before).
 
 A point whose road has several closed classes (e.g. ``alpha = beta = 0``; ``beta = 0``
 with the ``insert`` entry) raises :class:`~markov.errors.NoUniqueStationaryStateError`
