@@ -699,12 +699,7 @@ class RoadSolution:
         """Largest ``|J_k - (inflow + ramp inflows at cells <= k)|`` over the bonds (a road)."""
         if self.system.periodic:
             return self.conservation
-        ramps = self.system.ramps
-        inflows = self.ramp_inflows
-        expected = np.array([self.inflow + sum(inflows[i] for i, r in enumerate(ramps)
-                                               if r.cell <= k)
-                             for k in range(1, self.system.length)])
-        return float(np.abs(self.bond_currents - expected).max()) if len(expected) else 0.0
+        return bond_mismatch(self.system, self.inflow, self.ramp_inflows, self.bond_currents)
 
     def to_dict(self) -> dict:
         """JSON-ready: the system with its conventions, the observables, the solver's figures.
@@ -784,6 +779,34 @@ class RoadSolution:
         from markov.solvers.storage import save_road_solution
 
         return save_road_solution(self.expanded(), path)
+
+
+def bond_mismatch(road, inflow: float, ramp_inflows, bond_currents) -> float:
+    """Largest ``|J_k - (inflow + ramp inflows at cells <= k)|`` over the bonds of a road.
+
+    Every bond of a stationary road carries the cars fed in upstream of it (bond ``k``
+    lies after cell ``k``); zero to rounding for an exact solution, the state's
+    departure from stationarity for an approximate one.
+
+    Parameters
+    ----------
+    road : Road
+        Its ramps say where cars are fed in.
+    inflow : float
+        Cars entering at cell 1 per time step.
+    ramp_inflows : sequence of float
+        Cars entering at each ramp per time step.
+    bond_currents : sequence of float
+        Cars crossing bond ``k = 1..L-1`` per time step.
+
+    Returns
+    -------
+    float
+    """
+    fed = np.full(max(road.length - 1, 0), float(inflow))
+    for ramp, x in zip(road.ramps, ramp_inflows):
+        fed[ramp.cell - 1:] += x
+    return float(np.max(np.abs(np.asarray(bond_currents) - fed))) if fed.size else 0.0
 
 
 def system_record(s) -> dict:

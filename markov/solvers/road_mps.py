@@ -158,13 +158,10 @@ def current_spread(road: Road, flux: float, inflow: float, ramp_inflows, bond_cu
     -------
     float
     """
-    fed = np.full(max(road.length - 1, 0), float(inflow))
-    for ramp, x in zip(road.ramps, ramp_inflows):
-        fed[ramp.cell - 1:] += x                     # bond k (1-based) is after cell k
-    spread = abs(flux - inflow - float(np.sum(ramp_inflows)))
-    if fed.size:
-        spread = max(spread, float(np.max(np.abs(np.asarray(bond_currents) - fed))))
-    return spread
+    from markov.solvers.road_chain import bond_mismatch
+
+    return max(abs(flux - inflow - float(np.sum(ramp_inflows))),
+               bond_mismatch(road, inflow, ramp_inflows, bond_currents))
 
 
 def flux_error(flux: float, flux_half: float, tail: float, length: int = 1,
