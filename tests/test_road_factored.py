@@ -210,24 +210,3 @@ def test_the_sweep_is_refused_where_it_does_not_apply():
     with pytest.raises(InvalidParameterError, match="parallel"):
         RoadChain(road, operator="matrix-free")
 
-
-def test_the_product_solvers_hold_blas_to_one_thread():
-    """The numba-parallel products need the cores; BLAS threads spinning after a dot
-    product took them (1.7x slower products inside BiCGSTAB on 2 cores)."""
-    from threadpoolctl import threadpool_info
-
-    chain = RoadChain(Road(6, load_model("nasch", {"vmax": 2}), alpha=0.4, beta=0.7))
-    op = RoadFactoredOperator.from_chain(chain)
-    seen = []
-
-    def product(v):
-        seen.append(max((i["num_threads"] for i in threadpool_info()
-                         if i["user_api"] == "blas"), default=1))
-        return op.matvec(v)
-
-    A = spla.LinearOperator(op.shape, matvec=product, dtype=np.float64)
-    for method in ("iterative", "power", "gmres"):
-        seen.clear()
-        result = stationary(A, method=method, tol=1e-12)
-        assert result.residual <= 1e-12
-        assert seen and set(seen) == {1}, method

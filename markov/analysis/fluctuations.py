@@ -51,6 +51,7 @@ import scipy.linalg
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from markov._blas import one_blas_thread
 from markov._jit import njit
 from markov import memory
 from markov.analysis.correlations import MAX_LAGS, StationaryChain, prepare, sub_steps
@@ -416,22 +417,23 @@ class SCGF(NamedTuple):
 
 def _perron(apply, n: int, v0: np.ndarray, tol: float = 1e-14) -> tuple[float, float]:
     """Perron root of a nonnegative irreducible operator and the residual of its vector."""
-    if n <= DENSE_EIG_LIMIT:
-        M = np.column_stack([apply(e) for e in np.eye(n)])
-        vals, vecs = scipy.linalg.eig(M)
-        k = int(np.argmax(vals.real))
-        lam, v = float(vals[k].real), vecs[:, k].real
-    else:
-        op = spla.LinearOperator((n, n), matvec=apply, dtype=np.float64)
-        try:
-            vals, vecs = spla.eigs(op, k=1, which="LR", v0=v0, tol=tol, maxiter=20_000)
-        except spla.ArpackNoConvergence as err:
-            raise ConvergenceError(f"ARPACK found no Perron pair of the tilted chain: {err}",
-                                   20_000, math.inf, None) from None
-        lam, v = float(vals[0].real), vecs[:, 0].real
-    v = v / v.sum()    # the Perron vector has one sign
-    res = float(np.abs(apply(v) - lam * v).sum() / np.abs(v).sum())
-    return lam, res
+    with one_blas_thread():   # the products are numba-parallel (markov._blas)
+        if n <= DENSE_EIG_LIMIT:
+            M = np.column_stack([apply(e) for e in np.eye(n)])
+            vals, vecs = scipy.linalg.eig(M)
+            k = int(np.argmax(vals.real))
+            lam, v = float(vals[k].real), vecs[:, k].real
+        else:
+            op = spla.LinearOperator((n, n), matvec=apply, dtype=np.float64)
+            try:
+                vals, vecs = spla.eigs(op, k=1, which="LR", v0=v0, tol=tol, maxiter=20_000)
+            except spla.ArpackNoConvergence as err:
+                raise ConvergenceError(f"ARPACK found no Perron pair of the tilted chain: {err}",
+                                       20_000, math.inf, None) from None
+            lam, v = float(vals[0].real), vecs[:, 0].real
+        v = v / v.sum()    # the Perron vector has one sign
+        res = float(np.abs(apply(v) - lam * v).sum() / np.abs(v).sum())
+        return lam, res
 
 
 def scgf(ring_or_chain, s_values, pi: np.ndarray | None = None) -> SCGF:

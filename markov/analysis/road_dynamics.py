@@ -52,6 +52,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from markov._blas import one_blas_thread
 from markov.chain.lattice import increments, lattice_of, successor_branches, successors
 from markov.errors import InvalidParameterError, NoUniqueStationaryStateError
 from markov.model.road import OnRamp, Road
@@ -833,8 +834,9 @@ def exit_scgf(system, s_values, solution: RoadSolution | None = None) -> np.ndar
         if n <= 300:
             lam = float(np.max(np.linalg.eigvals(Ps.toarray()).real))
         else:
-            lam = float(spla.eigs(Ps.T.tocsr(), k=1, which="LR", v0=sv.pi + 1e-300,
-                                  tol=1e-14)[0][0].real)
+            with one_blas_thread():
+                lam = float(spla.eigs(Ps.T.tocsr(), k=1, which="LR", v0=sv.pi + 1e-300,
+                                      tol=1e-14)[0][0].real)
         out.append(math.log(lam))
     return np.array(out)
 

@@ -40,6 +40,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from markov._blas import one_blas_thread
 from markov._jit import njit
 from markov.chain.encoding import powers
 from markov.chain.kernels import canonical_shift, orbit_size, shift_bits
@@ -362,30 +363,29 @@ def _ncv(count: int) -> int:
 def _leading(A, count: int, tol: float, maxiter: int):
     """The ``count`` eigenvalues of largest modulus of the operator ``A``, with residuals."""
     m = A.shape[0]
-    if m <= DENSE_SECTOR_STATES or count >= m - 1:
-        from threadpoolctl import threadpool_limits
-
-        M = A.matmat(np.eye(m, dtype=np.complex128))
-        # one BLAS thread: on these small matrices threads only contend (10x slower
-        # on a loaded 2-core machine)
-        with threadpool_limits(limits=1, user_api="blas"):
+    # one BLAS thread: on the small dense matrices threads only contend (10x slower on
+    # a loaded 2-core machine), and ARPACK's vector work between the numba-parallel
+    # sector products gains nothing from them (markov._blas)
+    with one_blas_thread():
+        if m <= DENSE_SECTOR_STATES or count >= m - 1:
+            M = A.matmat(np.eye(m, dtype=np.complex128))
             vals, vecs = np.linalg.eig(M)
-    else:
-        v0 = np.random.default_rng(12345).standard_normal(m) + 0j
-        try:
-            vals, vecs = spla.eigs(A, k=count, which="LM", tol=tol, maxiter=maxiter, v0=v0,
-                                   ncv=min(m, _ncv(count)))
-        except spla.ArpackNoConvergence as exc:
-            raise ConvergenceError(
-                f"ARPACK found {len(exc.eigenvalues)} of {count} eigenvalues in {maxiter}"
-                " iterations", maxiter, np.inf) from None
-    order = np.lexsort((np.angle(vals), -np.abs(vals)))[:count]
-    out = []
-    for i in order:
-        v = vecs[:, i]
-        r = A.matvec(v) - vals[i] * v
-        out.append((complex(vals[i]), float(np.linalg.norm(r) / np.linalg.norm(v))))
-    return out
+        else:
+            v0 = np.random.default_rng(12345).standard_normal(m) + 0j
+            try:
+                vals, vecs = spla.eigs(A, k=count, which="LM", tol=tol, maxiter=maxiter,
+                                       v0=v0, ncv=min(m, _ncv(count)))
+            except spla.ArpackNoConvergence as exc:
+                raise ConvergenceError(
+                    f"ARPACK found {len(exc.eigenvalues)} of {count} eigenvalues in"
+                    f" {maxiter} iterations", maxiter, np.inf) from None
+        order = np.lexsort((np.angle(vals), -np.abs(vals)))[:count]
+        out = []
+        for i in order:
+            v = vecs[:, i]
+            r = A.matvec(v) - vals[i] * v
+            out.append((complex(vals[i]), float(np.linalg.norm(r) / np.linalg.norm(v))))
+        return out
 
 
 #: Bytes per transition of the sector-matrix route: the shifted rows (row, column,

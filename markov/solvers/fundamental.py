@@ -20,6 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from markov._blas import one_blas_thread
 from markov.errors import ConvergenceError, InvalidParameterError
 from markov.solvers.stationary import _product_of
 
@@ -91,18 +92,19 @@ def solve_fundamental(P, pi: np.ndarray, h: np.ndarray, tol: float = 1e-12,
     A = spla.LinearOperator((n, n), dtype=np.float64,
                             matvec=lambda v: v - product(v) + pi * v.sum())
     w = np.zeros(n)
-    rtol = tol
-    res = np.inf
-    for attempt in range(6):
-        solver = spla.bicgstab if attempt % 2 == 0 else spla.gmres
-        w, _ = solver(A, h, x0=w, rtol=rtol, atol=0.0, maxiter=maxiter)
-        if not np.all(np.isfinite(w)):
-            w = np.zeros(n)
-            continue
-        w -= pi * w.sum()
-        res = float(np.abs(w - product(w) - h).sum()) / scale
-        if res <= tol:
-            return w
-        rtol *= 0.1
+    with one_blas_thread():
+        rtol = tol
+        res = np.inf
+        for attempt in range(6):
+            solver = spla.bicgstab if attempt % 2 == 0 else spla.gmres
+            w, _ = solver(A, h, x0=w, rtol=rtol, atol=0.0, maxiter=maxiter)
+            if not np.all(np.isfinite(w)):
+                w = np.zeros(n)
+                continue
+            w -= pi * w.sum()
+            res = float(np.abs(w - product(w) - h).sum()) / scale
+            if res <= tol:
+                return w
+            rtol *= 0.1
     raise ConvergenceError(f"w (I - P) = h: relative residual {res:.2e}, not {tol:g}",
                            maxiter, res, w)

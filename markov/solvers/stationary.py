@@ -42,6 +42,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
+from markov._blas import one_blas_thread
 from markov.choices import DEFAULT_MAXITER, DEFAULT_TOL, GMRES_RESTART, METHODS, PRODUCT_METHODS
 from markov.errors import ConvergenceError, InvalidParameterError, NoUniqueStationaryStateError
 
@@ -170,8 +171,9 @@ def _eigs(P, tol, maxiter):
             return A @ x
 
         op = spla.LinearOperator(A.shape, matvec=counted, dtype=A.dtype)
-        _, vecs = spla.eigs(op, k=1, which="LM", v0=np.full(n, 1.0 / n), tol=tol * 1e-3,
-                            maxiter=maxiter)
+        with one_blas_thread():
+            _, vecs = spla.eigs(op, k=1, which="LM", v0=np.full(n, 1.0 / n), tol=tol * 1e-3,
+                                maxiter=maxiter)
     return vecs[:, 0], 0
 
 
@@ -374,21 +376,8 @@ def _iterate(product, n: int, method: str, tol: float, maxiter: int,
         return product(v)
 
     stages = ("bicgstab", "gmres", "power") if method == "iterative" else (method,)
-    with _one_blas_thread():
+    with one_blas_thread():
         return _stages(counted, n, stages, x, tol, maxiter, count, aggregates)
-
-
-def _one_blas_thread():
-    """Vector operations on one BLAS thread while the products run.
-
-    The matrix-free products are numba-parallel; OpenBLAS threads left spinning
-    after a dot product take their cores (vmax 2 road L = 16 on 2 cores: 60 ms
-    a product inside BiCGSTAB against 35 ms alone), and a level-1 operation
-    gains nothing from a second thread at these sizes.
-    """
-    from threadpoolctl import threadpool_limits
-
-    return threadpool_limits(limits=1, user_api="blas")
 
 
 def _stages(counted, n, stages, x, tol, maxiter, count, aggregates):
