@@ -20,6 +20,7 @@ import naive
 from markov import Ring, load_model, load_solution
 from markov import RingChain as _RingChain
 from markov import solve as _solve
+from markov.solvers import storage
 from markov.solvers.ring_chain import solve_classes, velocity_lumping
 
 
@@ -89,6 +90,13 @@ def _compare(a, b) -> None:
     np.testing.assert_array_equal(back.keys, b.keys)
     np.testing.assert_allclose(back.pi, b.pi, rtol=0, atol=TOL)
     assert back.flux == pytest.approx(b.flux, abs=TOL)
+    # the storage module's own functions read configurations too, not velocity classes
+    np.testing.assert_allclose([r["probability"] for r in storage.top_configurations(a, 4)],
+                               [r["probability"] for r in tb], rtol=0, atol=TOL)
+    np.testing.assert_array_equal(storage.unlumped(a).keys, b.unlumped().keys)
+    with tempfile.TemporaryDirectory() as tmp:
+        back = load_solution(storage.save_solution(a, Path(tmp) / "s.npz"))
+    np.testing.assert_array_equal(back.keys, b.keys)
 
 
 NASCH = [(L, N, vmax, p) for vmax in (1, 2, 3)
