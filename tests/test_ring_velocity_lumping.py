@@ -225,3 +225,19 @@ def test_cli_says_the_convention_and_no_lump_turns_both_off():
     out = CliRunner().invoke(main, ["solve", "-L", "10", "-N", "5", "--p", "0.5", "--no-lump"])
     assert out.exit_code == 0 and "rotation classes" not in out.output
     assert f"states {_solve(Ring(10, 5, 2, 0.5), lump=False).n_states:,}," in out.output
+
+
+@pytest.mark.parametrize("ring", [
+    Ring(10, 5, 2, 0.0), Ring(9, 4, 2, 1.0), Ring(10, 4, 3, 0.0, "ordered-sequential"),
+    Ring(8, 3, model=load_model("fi", {"vmax": 2, "p": 0.3}))], ids=repr)
+def test_class_representatives_are_configurations_as_with_every_velocity(ring):
+    """A class's representative is its smallest configuration, velocities and all, not
+    the key of a velocity class (``1.1.1..`` for ``2.1.1..``); the classes come in the
+    same order as with every velocity kept."""
+    a = solve_classes(ring, every=True, lump_velocities=True)
+    b = solve_classes(ring, every=True, lump_velocities=False)
+    assert all(c.solution.lumping is not None for c in a)
+    assert [c.representative for c in a] == [c.representative for c in b]
+    assert [c.from_start for c in a] == [c.from_start for c in b]
+    for x, y in zip(a, b):
+        _compare(x.solution, y.solution)

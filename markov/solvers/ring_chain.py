@@ -601,10 +601,13 @@ class RingChain:
             sol = RingChain.on_class(self.ring, keys, self.lump, self.max_memory,
                                      self.operator, census=self.census,
                                      lump_velocities=self.lumping is not None).solution(tol=tol)
-            out.append(ClassSolution(to_text(decode(int(keys[0]), self.ring.length,
-                                                    self.ring.vmax)),
-                                     int(keys[0]) in firsts, sol))
-        return ClassSolutions(self.ring, tuple(out), self.census,
+            # a configuration, not a velocity class's key: the same as with every velocity
+            first = _smallest_configuration(sol)
+            out.append((first, ClassSolution(to_text(decode(first, self.ring.length,
+                                                            self.ring.vmax)),
+                                             int(keys[0]) in firsts, sol)))
+        out.sort(key=lambda pair: pair[0])
+        return ClassSolutions(self.ring, tuple(c for _, c in out), self.census,
                               "start" if self.start is not None else "compact jam")
 
     @property
@@ -840,6 +843,30 @@ class RingChain:
         levels = tuple(P.level_sizes) if parallel_free else None
         return Solution(self.ring, self.keys, result, None, self.build_seconds, self.lump,
                         "matrix-free", levels, census=self.census, lumping=self.lumping)
+
+
+def _smallest_configuration(sol: "Solution") -> int:
+    """The smallest key of a solution's class with every velocity kept (its canonical
+    rotation when lumped by rotations): the first key where nothing is merged, else
+    the smallest successor of the states, since one step of the full chain from the
+    velocity classes reaches every configuration of the class (merged states have
+    the same row, and each state of a closed class has a predecessor in it)."""
+    if sol.lumping is None:
+        return int(sol.keys[0])
+    from markov.chain.transition import successor_counts, successors
+
+    ends = np.cumsum(successor_counts(sol.ring, sol.keys))
+    best, lo = None, 0
+    while lo < len(sol.keys):
+        before = int(ends[lo - 1]) if lo else 0
+        hi = max(lo + 1, int(np.searchsorted(ends, before + _STEP_CHUNK, side="right")))
+        rows = successors(sol.ring, sol.keys[lo:hi], sol.lumped)
+        reached = rows.keys[rows.weight > 0]
+        if len(reached):
+            low = int(reached.min())
+            best = low if best is None else min(best, low)
+        lo = hi
+    return best
 
 
 @dataclass(frozen=True)
@@ -1220,8 +1247,8 @@ def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
     -------
     ClassSolutions
         A sequence of :class:`ClassSolution`, ordered by the classes' smallest
-        keys; ``.census`` and ``.common()`` say how many there are and what
-        they share.
+        configurations (every velocity kept); ``.census`` and ``.common()`` say
+        how many there are and what they share.
 
     Examples
     --------
