@@ -4,7 +4,9 @@ Every observable of the lumped solve equals the solve with every velocity kept
 (``lump_velocities=False``) to 1e-12, on the matrix and the matrix-free
 (factored) paths, under parallel and ordered-sequential update; the NaSch
 vmax = 1 ring lumps to its occupation necklaces; the naive oracle of
-``tests/naive.py`` agrees independently.
+``tests/naive.py`` agrees independently.  The API lumps by default (as
+``nasch solve``); the tests below pass ``lump_velocities=True`` explicitly
+through the wrappers, and one checks the default itself.
 """
 from __future__ import annotations
 
@@ -216,15 +218,57 @@ def test_cli_says_the_convention_and_no_lump_turns_both_off():
 
     from nasch.cli import main
 
-    # the command line lumps both (the API keeps every velocity unless asked, for now)
+    # the command line lumps both, as the API does by default
     out = CliRunner().invoke(main, ["solve", "-L", "10", "-N", "5", "--p", "0.5"])
     assert out.exit_code == 0, out.output
     assert "(rotation classes, velocities lumped: v1 = v2)," in out.output
-    lumped = _solve(Ring(10, 5, 2, 0.5), lump_velocities=True)
+    lumped = _solve(Ring(10, 5, 2, 0.5))
+    assert lumped.lumping is not None
     assert f"states {lumped.n_states:,}" in out.output
     out = CliRunner().invoke(main, ["solve", "-L", "10", "-N", "5", "--p", "0.5", "--no-lump"])
     assert out.exit_code == 0 and "rotation classes" not in out.output
     assert f"states {_solve(Ring(10, 5, 2, 0.5), lump=False).n_states:,}," in out.output
+
+
+DEFAULTS = [("nasch", {"vmax": 2, "p": 0.5}), ("vdr", {"vmax": 2, "p": 0.2, "p0": 0.6}),
+            ("kkw", {"vmax": 3, "d": 2, "k": 1})]
+
+
+@pytest.mark.parametrize("name, params", DEFAULTS)
+@pytest.mark.parametrize("update", ["parallel", "ordered-sequential", "random-sequential"])
+def test_the_api_default_lumps_where_exact_and_equals_every_velocity(name, params, update):
+    """``solve``, ``RingChain`` and ``solve_classes`` without the argument: velocities
+    merged under parallel and ordered-sequential update (kkw merges none), every one
+    kept under random-sequential; every number the same as with every velocity."""
+    ring = Ring(9, 4, update=update, model=load_model(name, params))
+    full = _solve(ring, lump_velocities=False)
+    assert full.lumping is None
+    lumping = velocity_lumping(ring)
+    assert (lumping is not None) == (name != "kkw" and update != "random-sequential")
+    for a in (_solve(ring), _RingChain(ring).solution(),
+              solve_classes(ring)[0].solution):
+        assert a.lumping == lumping
+        if lumping is None:
+            np.testing.assert_array_equal(a.keys, full.keys)
+        else:
+            assert a.n_states < full.n_states and a.velocities.startswith("lumped: ")
+        _compare(a, full)
+    # lump=False keeps every configuration, velocities too (nasch solve --no-lump)
+    assert _solve(ring, lump=False).lumping is None
+    assert _solve(ring, lump=False, lump_velocities=True).lumping == lumping
+
+
+def test_the_api_default_with_the_matrix_free_path_and_the_analyses():
+    from markov.analysis.correlations import autocorrelation
+
+    ring = Ring(11, 4, 2, 0.25)
+    chain = _RingChain(ring, operator="matrix-free")
+    assert chain.lumping is not None
+    full = _RingChain(ring, operator="matrix", lump_velocities=False)
+    _compare(chain.solution(tol=1e-14), full.solution(method="direct"))
+    # the analyses take the default chain and read every velocity (solved again)
+    np.testing.assert_allclose(autocorrelation(chain, "flux", 6),
+                               autocorrelation(full, "flux", 6), rtol=1e-9, atol=1e-15)
 
 
 @pytest.mark.parametrize("ring", [

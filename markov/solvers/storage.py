@@ -304,11 +304,11 @@ def save_solution(sol, path) -> Path:
     --------
     >>> import pathlib, tempfile
     >>> from markov import Ring, load_solution, solve
-    >>> sol = solve(Ring(6, 3, 2, 0.5))
+    >>> sol = solve(Ring(6, 3, 2, 0.5))       # velocities lumped: 14 states
     >>> with tempfile.TemporaryDirectory() as tmp:
     ...     back = load_solution(save_solution(sol, pathlib.Path(tmp) / "pi.npz"))
-    >>> back.flux == sol.flux and back.ring == sol.ring
-    True
+    >>> back.n_states, abs(back.flux - sol.flux) < 1e-15 and back.ring == sol.ring
+    (16, True)
     """
     sol = _every_velocity(sol)
     ring = sol.ring
