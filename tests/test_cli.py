@@ -30,11 +30,12 @@ def test_solve_json_has_the_documented_fields_and_the_solver_values():
     for key in ("length", "cars", "vmax", "p", "update", "states", "nonzeros", "method",
                 "residual", "flux", "mean_velocity", "c_v", "seconds"):
         assert key in data
-    sol = solve(Ring(8, 4, 2, 0.25))          # every velocity (the command lumps them)
+    sol = solve(Ring(8, 4, 2, 0.25), lump_velocities=False)   # every velocity
     assert data["flux"] == pytest.approx(sol.flux, abs=1e-14)
     assert data["c_v"] == pytest.approx(sol.c_v.tolist(), abs=1e-14)
     assert data["mean_velocity"] == pytest.approx(sol.flux / 0.5, abs=1e-14)
-    lumped = solve(Ring(8, 4, 2, 0.25), lump_velocities=True)
+    lumped = solve(Ring(8, 4, 2, 0.25))       # the API's default lumps, as the command does
+    assert lumped.lumping is not None
     assert data["residual"] < 1e-12 and data["states"] == lumped.n_states < sol.n_states
     assert data["velocity_classes"]["merged"] == "v1 = v2"
 
@@ -102,7 +103,7 @@ def test_solve_any_model_records_it_and_matches_the_api():
     assert data["model"] == {"name": "vdr", "params": {"vmax": 2, "p": 0.1, "p0": 0.75},
                              "source": "vdr"}
     ring = Ring(9, 4, model=load_model("vdr", {"p": 0.1, "p0": 0.75}))
-    assert data["flux"] == solve(ring, lump_velocities=True).flux    # the command lumps
+    assert data["flux"] == solve(ring).flux    # both lump by default
     kkw = CliRunner().invoke(main, ["solve", "-L", "8", "-N", "3", "--model", "kkw", "--json"])
     assert kkw.exit_code == 0 and json.loads(kkw.output)["p"] is None
 

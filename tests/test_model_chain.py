@@ -84,8 +84,9 @@ def test_nasch_shortcut_is_one_closed_class():
     for L, N, vmax, update in ((8, 3, 2, "parallel"), (9, 4, 3, "parallel"),
                                (8, 5, 2, "random-sequential")):
         ring = Ring(L, N, vmax, 0.4, update)
-        keys = RingChain(ring).reachable
-        classes = closed_classes(ring, keys, lump=True)
+        chain = RingChain(ring)
+        keys = chain.reachable
+        classes = closed_classes(ring, keys, lump=True, velocities=chain.velocities)
         assert len(classes) == 1 and np.array_equal(classes[0], keys)
 
 

@@ -4,7 +4,9 @@ Every observable of the lumped solve equals the solve with every velocity kept
 (``lump_velocities=False``) to 1e-12, on the matrix and the matrix-free
 (factored) paths, under parallel and ordered-sequential update; the NaSch
 vmax = 1 ring lumps to its occupation necklaces; the naive oracle of
-``tests/naive.py`` agrees independently.
+``tests/naive.py`` agrees independently.  The API lumps by default (as
+``nasch solve``); the tests below pass ``lump_velocities=True`` explicitly
+through the wrappers, and one checks the default itself.
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ import naive
 from markov import Ring, load_model, load_solution
 from markov import RingChain as _RingChain
 from markov import solve as _solve
+from markov.solvers import storage
 from markov.solvers.ring_chain import solve_classes, velocity_lumping
 
 
@@ -89,6 +92,13 @@ def _compare(a, b) -> None:
     np.testing.assert_array_equal(back.keys, b.keys)
     np.testing.assert_allclose(back.pi, b.pi, rtol=0, atol=TOL)
     assert back.flux == pytest.approx(b.flux, abs=TOL)
+    # the storage module's own functions read configurations too, not velocity classes
+    np.testing.assert_allclose([r["probability"] for r in storage.top_configurations(a, 4)],
+                               [r["probability"] for r in tb], rtol=0, atol=TOL)
+    np.testing.assert_array_equal(storage.unlumped(a).keys, b.unlumped().keys)
+    with tempfile.TemporaryDirectory() as tmp:
+        back = load_solution(storage.save_solution(a, Path(tmp) / "s.npz"))
+    np.testing.assert_array_equal(back.keys, b.keys)
 
 
 NASCH = [(L, N, vmax, p) for vmax in (1, 2, 3)
@@ -208,12 +218,70 @@ def test_cli_says_the_convention_and_no_lump_turns_both_off():
 
     from nasch.cli import main
 
-    # the command line lumps both (the API keeps every velocity unless asked, for now)
+    # the command line lumps both, as the API does by default
     out = CliRunner().invoke(main, ["solve", "-L", "10", "-N", "5", "--p", "0.5"])
     assert out.exit_code == 0, out.output
     assert "(rotation classes, velocities lumped: v1 = v2)," in out.output
-    lumped = _solve(Ring(10, 5, 2, 0.5), lump_velocities=True)
+    lumped = _solve(Ring(10, 5, 2, 0.5))
+    assert lumped.lumping is not None
     assert f"states {lumped.n_states:,}" in out.output
     out = CliRunner().invoke(main, ["solve", "-L", "10", "-N", "5", "--p", "0.5", "--no-lump"])
     assert out.exit_code == 0 and "rotation classes" not in out.output
     assert f"states {_solve(Ring(10, 5, 2, 0.5), lump=False).n_states:,}," in out.output
+
+
+DEFAULTS = [("nasch", {"vmax": 2, "p": 0.5}), ("vdr", {"vmax": 2, "p": 0.2, "p0": 0.6}),
+            ("kkw", {"vmax": 3, "d": 2, "k": 1})]
+
+
+@pytest.mark.parametrize("name, params", DEFAULTS)
+@pytest.mark.parametrize("update", ["parallel", "ordered-sequential", "random-sequential"])
+def test_the_api_default_lumps_where_exact_and_equals_every_velocity(name, params, update):
+    """``solve``, ``RingChain`` and ``solve_classes`` without the argument: velocities
+    merged under parallel and ordered-sequential update (kkw merges none), every one
+    kept under random-sequential; every number the same as with every velocity."""
+    ring = Ring(9, 4, update=update, model=load_model(name, params))
+    full = _solve(ring, lump_velocities=False)
+    assert full.lumping is None
+    lumping = velocity_lumping(ring)
+    assert (lumping is not None) == (name != "kkw" and update != "random-sequential")
+    for a in (_solve(ring), _RingChain(ring).solution(),
+              solve_classes(ring)[0].solution):
+        assert a.lumping == lumping
+        if lumping is None:
+            np.testing.assert_array_equal(a.keys, full.keys)
+        else:
+            assert a.n_states < full.n_states and a.velocities.startswith("lumped: ")
+        _compare(a, full)
+    # lump=False keeps every configuration, velocities too (nasch solve --no-lump)
+    assert _solve(ring, lump=False).lumping is None
+    assert _solve(ring, lump=False, lump_velocities=True).lumping == lumping
+
+
+def test_the_api_default_with_the_matrix_free_path_and_the_analyses():
+    from markov.analysis.correlations import autocorrelation
+
+    ring = Ring(11, 4, 2, 0.25)
+    chain = _RingChain(ring, operator="matrix-free")
+    assert chain.lumping is not None
+    full = _RingChain(ring, operator="matrix", lump_velocities=False)
+    _compare(chain.solution(tol=1e-14), full.solution(method="direct"))
+    # the analyses take the default chain and read every velocity (solved again)
+    np.testing.assert_allclose(autocorrelation(chain, "flux", 6),
+                               autocorrelation(full, "flux", 6), rtol=1e-9, atol=1e-15)
+
+
+@pytest.mark.parametrize("ring", [
+    Ring(10, 5, 2, 0.0), Ring(9, 4, 2, 1.0), Ring(10, 4, 3, 0.0, "ordered-sequential"),
+    Ring(8, 3, model=load_model("fi", {"vmax": 2, "p": 0.3}))], ids=repr)
+def test_class_representatives_are_configurations_as_with_every_velocity(ring):
+    """A class's representative is its smallest configuration, velocities and all, not
+    the key of a velocity class (``1.1.1..`` for ``2.1.1..``); the classes come in the
+    same order as with every velocity kept."""
+    a = solve_classes(ring, every=True, lump_velocities=True)
+    b = solve_classes(ring, every=True, lump_velocities=False)
+    assert all(c.solution.lumping is not None for c in a)
+    assert [c.representative for c in a] == [c.representative for c in b]
+    assert [c.from_start for c in a] == [c.from_start for c in b]
+    for x, y in zip(a, b):
+        _compare(x.solution, y.solution)

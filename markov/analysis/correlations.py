@@ -98,11 +98,14 @@ def prepare(ring_or_chain, pi: np.ndarray | None = None) -> StationaryChain:
     Parameters
     ----------
     ring_or_chain : Ring or RingChain
-        A ring gets ``RingChain(ring)`` (lumped, ``operator="auto"``).
+        A ring gets ``RingChain(ring, lump_velocities=False)`` (rotations lumped,
+        every velocity kept, ``operator="auto"``); a chain with its velocities
+        lumped (the default) is replaced by :meth:`RingChain.with_every_velocity`.
     pi : (n,) array, optional
         The stationary vector over ``chain.keys`` if already solved (a
         :class:`markov.solvers.ring_chain.Solution`'s ``pi`` for the same chain); default
-        ``chain.solution().pi``.
+        ``chain.solution().pi``, and always for a chain with its velocities
+        lumped (a vector over velocity classes is solved again).
 
     Returns
     -------

@@ -286,7 +286,8 @@ def current_fluctuations(ring_or_chain, pi: np.ndarray | None = None) -> Current
         Any model and update; the matrix or the matrix-free operator, as the
         chain chose (:func:`markov.analysis.correlations.prepare`).
     pi : (n,) array, optional
-        Stationary vector, if already solved.
+        Stationary vector, if already solved (over the states with every
+        velocity: :func:`markov.analysis.correlations.prepare`).
 
     Returns
     -------

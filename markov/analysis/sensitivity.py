@@ -357,7 +357,7 @@ def derivative_product(chain: RingChain, x: np.ndarray, derivatives: WeightDeriv
     goes to v' = 1 with ``q``, to v' = 0 with ``p``.
 
     >>> from markov import load_model
-    >>> chain = RingChain(Ring(3, 1, 1, 0.5))
+    >>> chain = RingChain(Ring(3, 1, 1, 0.5), lump_velocities=False)
     >>> d = weight_derivatives(chain.ring.model, "p")
     >>> derivative_product(chain, np.array([1.0, 0.0]), d).tolist()
     [1.0, -1.0]

@@ -446,8 +446,11 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
     tol : float
         ARPACK's relative accuracy of the eigenvalues.
     keys : (n,) int64 array, optional
-        The canonical keys of the recurrent class, if already found (one
-        closed class: the caller vouches for it).
+        The canonical keys of the recurrent class with every velocity, if
+        already found (one closed class: the caller vouches for it), e.g.
+        ``RingChain(ring, lump_velocities=False).keys``; not the keys of a
+        chain with its velocities lumped (the default), whose successors lie
+        outside them.
     operator : {"auto", "matrix", "matrix-free"}
         ``auto``: sector matrices, but matrix-free for parallel rings above
         :data:`FACTORED_SECTOR_STATES` states and for random-sequential rings

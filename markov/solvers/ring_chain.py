@@ -260,7 +260,9 @@ class RingChain:
         The system.
     lump : bool, default True
         Lump configurations related by a rotation of the ring (about ``L`` times
-        fewer states; exact for every translation-invariant observable).
+        fewer states; exact for every translation-invariant observable).  False
+        keeps every configuration: velocities too, unless ``lump_velocities``
+        says otherwise.
     max_memory : float, optional
         Memory allowed, in bytes (the command line's ``--max-memory`` is in
         GiB, 2**30 bytes); default 75 % of physical memory.
@@ -280,23 +282,35 @@ class RingChain:
     start : str, optional
         A start configuration in text notation: the classes it reaches.
     lump_velocities : bool, optional
-        Default False in the API for now (``nasch solve`` lumps unless
-        ``--no-lump``).  Merge the velocities the rule cannot tell apart
-        (:func:`velocity_lumping`; exact under parallel and ordered-sequential
-        update, :mod:`markov.model.lumping`): a state is then a class of
-        configurations with the same positions and velocity classes, and
-        :class:`Solution` recovers every observable, and the full vector, by
-        one step of the full chain.  False keeps every velocity (the analyses
-        of :mod:`markov.analysis` read stored velocities along time and do).
+        Merge the velocities the rule cannot tell apart (:func:`velocity_lumping`;
+        exact under parallel and ordered-sequential update,
+        :mod:`markov.model.lumping`): a state is then a class of configurations
+        with the same positions and velocity classes, and :class:`Solution`
+        recovers every observable, and the full vector (:meth:`Solution.expanded`),
+        by one step of the full chain.  Default (``None``): as ``lump``, the
+        command line's convention (``nasch solve`` lumps both, ``--no-lump``
+        neither); random-sequential update keeps every velocity either way
+        (a sub-step moves one car).  False keeps every velocity: a state's key
+        is then a full configuration (the analyses of :mod:`markov.analysis`
+        read stored velocities along time and build their chain so,
+        :meth:`with_every_velocity`).
 
     Examples
     --------
     Two cars on three cells, vmax = 1: the follower is always blocked, the
     leader moves with ``q = 1 - p``; two rotation classes, flux ``q / 3``.
 
-    >>> chain = RingChain(Ring(3, 2, 1, 0.5))
+    >>> chain = RingChain(Ring(3, 2, 1, 0.5), lump_velocities=False)
     >>> chain.n_states, round(chain.solution().flux, 12)
     (2, 0.166666666667)
+
+    By default the velocities the rule cannot tell apart are merged too: at
+    vmax = 1 a state is an occupation necklace, here just one, and the flux
+    is the same.
+
+    >>> chain = RingChain(Ring(3, 2, 1, 0.5))
+    >>> chain.lumping.describe(), chain.n_states, round(chain.solution().flux, 12)
+    ('v0 = v1', 1, 0.166666666667)
 
     A sweep over ``p`` reuses the states and the operator (they do not depend
     on ``p``): ``chain.with_p(0.25).solution(x0=previous.pi)``.
@@ -314,9 +328,10 @@ class RingChain:
         self.ring = ring
         #: The velocity classes merged (:func:`velocity_lumping`), or None
         if lump_velocities is None:
-            # opt-in for the Python API until the tests written against the
-            # rotation-only states are moved over (the command line lumps)
-            lump_velocities = False
+            # as the command line: both lumpings, or (lump=False, --no-lump) neither
+            lump_velocities = lump
+        # the request, kept for with_p: whether anything merges may change with p
+        self._lump_velocities = bool(lump_velocities)
         self.lumping = velocity_lumping(ring) if lump_velocities else None
         #: Their digit map, as the chain's kernels take it, or None
         self.velocities = None if self.lumping is None else self.lumping.digit_map()
@@ -355,7 +370,8 @@ class RingChain:
             How the class was found (its solution reports it).
         lump_velocities : bool, optional
             Whether the keys have their velocities merged (:class:`RingChain`;
-            default False).
+            default as ``lump``, as the keys of a chain built with the
+            defaults are).
 
         Returns
         -------
@@ -390,7 +406,7 @@ class RingChain:
         RingChain
         """
         other = RingChain(self.ring.with_p(p), self.lump, self.max_memory, self.operator,
-                          self.state_bound, lump_velocities=self.lumping is not None)
+                          self.state_bound, lump_velocities=self._lump_velocities)
         other.start = self.start
         shared = ("keys", "transitions", "operator_kind", "aggregates", "reachable", "classes")
         if known_irreducible(other.ring) != known_irreducible(self.ring) or \
@@ -540,7 +556,9 @@ class RingChain:
 
     @cached_property
     def keys(self) -> np.ndarray:
-        """Sorted keys of the recurrent class (canonical rotations when lumped).
+        """Sorted keys of the recurrent class (canonical rotations when lumped;
+        velocity classes, each velocity written as the smallest of its class,
+        when :attr:`lumping` is set).
 
         Raises
         ------
@@ -601,10 +619,13 @@ class RingChain:
             sol = RingChain.on_class(self.ring, keys, self.lump, self.max_memory,
                                      self.operator, census=self.census,
                                      lump_velocities=self.lumping is not None).solution(tol=tol)
-            out.append(ClassSolution(to_text(decode(int(keys[0]), self.ring.length,
-                                                    self.ring.vmax)),
-                                     int(keys[0]) in firsts, sol))
-        return ClassSolutions(self.ring, tuple(out), self.census,
+            # a configuration, not a velocity class's key: the same as with every velocity
+            first = _smallest_configuration(sol)
+            out.append((first, ClassSolution(to_text(decode(first, self.ring.length,
+                                                            self.ring.vmax)),
+                                             int(keys[0]) in firsts, sol)))
+        out.sort(key=lambda pair: pair[0])
+        return ClassSolutions(self.ring, tuple(c for _, c in out), self.census,
                               "start" if self.start is not None else "compact jam")
 
     @property
@@ -842,6 +863,30 @@ class RingChain:
                         "matrix-free", levels, census=self.census, lumping=self.lumping)
 
 
+def _smallest_configuration(sol: "Solution") -> int:
+    """The smallest key of a solution's class with every velocity kept (its canonical
+    rotation when lumped by rotations): the first key where nothing is merged, else
+    the smallest successor of the states, since one step of the full chain from the
+    velocity classes reaches every configuration of the class (merged states have
+    the same row, and each state of a closed class has a predecessor in it)."""
+    if sol.lumping is None:
+        return int(sol.keys[0])
+    from markov.chain.transition import successor_counts, successors
+
+    ends = np.cumsum(successor_counts(sol.ring, sol.keys))
+    best, lo = None, 0
+    while lo < len(sol.keys):
+        before = int(ends[lo - 1]) if lo else 0
+        hi = max(lo + 1, int(np.searchsorted(ends, before + _STEP_CHUNK, side="right")))
+        rows = successors(sol.ring, sol.keys[lo:hi], sol.lumped)
+        reached = rows.keys[rows.weight > 0]
+        if len(reached):
+            low = int(reached.min())
+            best = low if best is None else min(best, low)
+        lo = hi
+    return best
+
+
 @dataclass(frozen=True)
 class Solution:
     """Exact stationary state of a ring and its observables.
@@ -850,7 +895,8 @@ class Solution:
     ----------
     ring : Ring
     keys : (n,) int64 array
-        State keys (canonical rotations when ``lumped``).
+        State keys (canonical rotations when ``lumped``; velocity classes when
+        ``lumping`` is set: :meth:`expanded` has the full configurations).
     result : StationaryResult
         The vector ``pi`` over ``keys`` and the solver diagnostics.
     nonzeros : int or None
@@ -1135,7 +1181,8 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
         Stationary solver (:func:`markov.solvers.stationary.stationary`).
     lump : bool
         Lump rotations of the ring (default; exact for all reported observables);
-        False keeps every configuration.
+        False keeps every configuration (every velocity too, unless
+        ``lump_velocities=True``).
     tol : float
         Residual target of iterative solvers.
     max_memory : float, optional
@@ -1149,9 +1196,12 @@ def solve(ring: Ring, method: str = "auto", lump: bool = True, tol: float = DEFA
         (see :class:`RingChain`), e.g.
         :func:`markov.goe.census.recurrent_class_bound`.
     lump_velocities : bool, optional
-        Merge the velocities the rule cannot tell apart (default False;
-        exact under parallel and ordered-sequential update, see
-        :class:`RingChain`); False keeps every velocity.
+        Merge the velocities the rule cannot tell apart (exact under parallel
+        and ordered-sequential update, see :class:`RingChain`; random-sequential
+        keeps every velocity).  Default as ``lump``: lumped, as ``nasch solve``
+        does; the solution's observables are those of the full chain, its
+        ``keys`` velocity classes (:meth:`Solution.expanded` gives the full
+        vector).  False keeps every velocity.
 
     Returns
     -------
@@ -1214,14 +1264,14 @@ def solve_classes(ring: Ring, every: bool = False, start: str | None = None,
         Bytes allowed.
     lump_velocities : bool, optional
         Merge the velocities the rule cannot tell apart (:class:`RingChain`;
-        default False).
+        default as ``lump``); False keeps every velocity.
 
     Returns
     -------
     ClassSolutions
         A sequence of :class:`ClassSolution`, ordered by the classes' smallest
-        keys; ``.census`` and ``.common()`` say how many there are and what
-        they share.
+        configurations (every velocity kept); ``.census`` and ``.common()`` say
+        how many there are and what they share.
 
     Examples
     --------
