@@ -152,10 +152,11 @@ def test_refusals():
         RoadFactoredOperator(ring, RoadChain(ring).keys)
 
 
+@pytest.mark.parametrize("update", UPDATES)
 @pytest.mark.parametrize("entry,exit_", ENDS)
-def test_unfolded_sweep_agrees(entry, exit_):
+def test_unfolded_sweep_agrees(entry, exit_, update):
     """fold=False (every car its own stage, no folded sure moves) gives the same operator."""
-    road = Road(6, load_model("nasch", {"vmax": 2, "p": 0.3}), "parallel", 0.4, 0.6, entry, exit_,
+    road = Road(6, load_model("nasch", {"vmax": 2, "p": 0.3}), update, 0.4, 0.6, entry, exit_,
                 stretches=[Stretch(2, 3, {"vmax": 1})], ramps=[OnRamp(4, 0.3, 1)])
     chain = RoadChain(road)
     folded = RoadFactoredOperator.from_chain(chain)

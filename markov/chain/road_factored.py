@@ -213,58 +213,82 @@ def _top_stage(w, y_from, L, W, K, pw):
     return L
 
 
+@njit(cache=True)
+def _car_ordered(w, y, L, W, K, pw, off_ahead, cnt_ahead, off_last, cnt_last, off_open,
+                 cnt_open):
+    """Ordered sweep: the rows ``(off, n)`` of the old car on cell index ``y`` of word
+    ``w`` (the new car ahead, or the exit), and the marker digit (0: none)."""
+    x = y + 1
+    k = (w // pw[y]) % W - 1
+    marker = np.int64(0)
+    if y + 1 < L:
+        rest = w // pw[y + 1]
+        for yy in range(y + 1, L):
+            d = rest % W
+            if d > K:
+                g = min(yy - y - 1, off_ahead.shape[2] - 1)
+                ka = d - 1 - K
+                return off_ahead[x, k, g, ka], cnt_ahead[x, k, g, ka], marker
+            if d > 0:              # the marker, on the top cell
+                marker = d
+            rest //= W
+    if marker > 0:
+        return off_open[x, k], cnt_open[x, k], marker
+    return off_last[x, k], cnt_last[x, k], marker
+
+
+@njit(cache=True)
+def _fold_ordered(c, t, L, W, K, pw, off_ahead, cnt_ahead, off_last, cnt_last, off_open,
+                  cnt_open, row_nd, transparent):
+    """Ordered sweep: apply the cars from stage ``t`` down whose only move is a
+    transparent one (stay with velocity 0, weight 1, no counts): ``(word, stage)``."""
+    while t < L:
+        y = L - 1 - t
+        off, n, marker = _car_ordered(c, y, L, W, K, pw, off_ahead, cnt_ahead, off_last,
+                                      cnt_last, off_open, cnt_open)
+        if n != 1 or not transparent[off]:
+            break
+        od = (c // pw[y]) % W
+        c += (row_nd[off] - od) * pw[y] - marker * pw[L - 1]
+        t = _top_stage(c, y - 1, L, W, K, pw)
+    return c, t
+
+
 @njit(cache=True, parallel=True)
-def _expand_pre_ordered(words, L, W, K, pw, id_row, out_child, out_code, out_stage):
+def _expand_pre_ordered(words, L, W, K, pw, id_row, off_ahead, cnt_ahead, off_last, cnt_last,
+                        off_open, cnt_open, row_nd, transparent, fold, out_child, out_code,
+                        out_stage):
     """Ordered sweep: the states enter the stage of their highest car (nothing acts first)."""
     for i in prange(words.shape[0]):
         w = words[i]
+        t = _top_stage(w, L - 1, L, W, K, pw)
+        if fold:
+            w, t = _fold_ordered(w, t, L, W, K, pw, off_ahead, cnt_ahead, off_last, cnt_last,
+                                 off_open, cnt_open, row_nd, transparent)
         out_child[i, 0] = w
         out_code[i, 0] = id_row
-        out_stage[i, 0] = _top_stage(w, L - 1, L, W, K, pw)
+        out_stage[i, 0] = t
         for j in range(1, out_code.shape[1]):
             out_code[i, j] = -1
 
 
 @njit(cache=True, parallel=True)
 def _expand_stage_ordered(words, y, L, W, K, pw, off_ahead, cnt_ahead, off_last, cnt_last,
-                          off_open, cnt_open, wall, row_d, row_nd, out_child, out_code,
-                          out_stage):
+                          off_open, cnt_open, wall, row_d, row_nd, transparent, fold,
+                          out_child, out_code, out_stage):
     """Ordered sweep, stage ``L - 1 - y``: the car on cell ``y + 1`` (the highest old car)
     draws from the NEW car ahead (gap to its new position, its new class) or the exit:
     the mixture of the open and shut exit when no car of this step has left, the open
     exit when one has (the marker: old digit 1 on the top cell; under ``wall`` only an
-    open exit lets a car leave).  A car that stays clears the marker."""
-    x = y + 1
+    open exit lets a car leave).  A car that stays clears the marker.  ``fold``: the
+    cars below whose move is then sure and transparent are applied in the same link."""
     top = pw[L - 1]
     for i in prange(words.shape[0]):
         w = words[i]
         od = (w // pw[y]) % W
-        k = od - 1
         base = w - od * pw[y]
-        marker = np.int64(0)
-        y1 = L
-        ka = 0
-        if y + 1 < L:
-            rest = w // pw[y + 1]
-            for yy in range(y + 1, L):
-                d = rest % W
-                if d > K:
-                    y1 = yy
-                    ka = d - 1 - K
-                    break
-                if d > 0:          # the marker, on the top cell
-                    marker = d
-                rest //= W
-        if y1 < L:
-            g = min(y1 - y - 1, off_ahead.shape[2] - 1)
-            off = off_ahead[x, k, g, ka]
-            n = cnt_ahead[x, k, g, ka]
-        elif marker > 0:
-            off = off_open[x, k]
-            n = cnt_open[x, k]
-        else:
-            off = off_last[x, k]
-            n = cnt_last[x, k]
+        off, n, marker = _car_ordered(w, y, L, W, K, pw, off_ahead, cnt_ahead, off_last,
+                                      cnt_last, off_open, cnt_open)
         stage = _top_stage(w, y - 1, L, W, K, pw)
         for j in range(n):
             r = off + j
@@ -275,9 +299,13 @@ def _expand_stage_ordered(words, y, L, W, K, pw, off_ahead, cnt_ahead, off_last,
                 c = base + top
             else:
                 c = base
+            t = stage
+            if fold:
+                c, t = _fold_ordered(c, t, L, W, K, pw, off_ahead, cnt_ahead, off_last,
+                                     cnt_last, off_open, cnt_open, row_nd, transparent)
             out_child[i, j] = c
             out_code[i, j] = r
-            out_stage[i, j] = stage
+            out_stage[i, j] = t
         for j in range(n, out_code.shape[1]):
             out_code[i, j] = -1
 
@@ -703,12 +731,14 @@ def _expand(tab: _Tables, words: np.ndarray, f: int, pw: np.ndarray, fold: bool)
     stage = np.empty((len(words), M), np.int64)
     if tab.ordered:
         if f < 0:
-            _expand_pre_ordered(words, L, W, K, pw, tab.id_row, child, code, stage)
+            _expand_pre_ordered(words, L, W, K, pw, tab.id_row, tab.off_ahead, tab.cnt_ahead,
+                                tab.off_last, tab.cnt_last, tab.off_open, tab.cnt_open,
+                                tab.row_nd, tab.transparent, fold, child, code, stage)
         else:
             _expand_stage_ordered(words, L - 1 - f, L, W, K, pw, tab.off_ahead, tab.cnt_ahead,
                                   tab.off_last, tab.cnt_last, tab.off_open, tab.cnt_open,
                                   tab.exit == EXIT_CODES["wall"], tab.row_d, tab.row_nd,
-                                  child, code, stage)
+                                  tab.transparent, fold, child, code, stage)
     elif f < 0:
         _expand_pre(words, tab.entry, L, W, K, H, pw, tab.pre_off, tab.pre_cnt, tab.row_d,
                     tab.row_nd, tab.off_ahead, tab.cnt_ahead, tab.off_last, tab.cnt_last,
