@@ -1,4 +1,8 @@
-"""The parallel step of an open road factored car by car: ``x -> x P`` without rows.
+"""The step of an open road factored car by car: ``x -> x P`` without rows.
+
+One sweep with two orders: parallel update (from the entry, each car reading
+the old road ahead) and ordered-sequential update (from the exit, each car
+reading the new road ahead; below).
 
 Under parallel update a road state with ``k`` cars free to move has about
 ``2^k`` successors, and the CSR matrix of :mod:`markov.solvers.road_chain`
@@ -51,7 +55,44 @@ expected counts of a step from ``x`` in the same sweep, and a link costs an
 int32 parent and a uint16 code.  A product is one segmented sum per stage
 (each word pulls from its parents; parallel over the words of a stage) and
 one into the states.
+
+Ordered-sequential update
+-------------------------
+The cars are processed from the exit upstream, each reading the car ahead
+*already moved* (the gap to its new position, its new velocity), so the same
+words serve read the other way: the new configuration above the highest old
+car, the old one from there down.  The stage of a word is ``L - 1 - y``
+(``y`` the 0-based cell of its highest old car; ``L``: none left), so the
+stages are again processed in increasing order and everything after the
+expansion (merging per stage, links and codes, the counts, :func:`_sweep`,
+:func:`_flows`) is shared.  A car's law is the rule's row at the new car ahead
+(its class: the lumping's classes are exact for the follower's view too); with
+no new car ahead it is the exit's:
+
+* ``sink``: the wall (the car on cell ``L``: leave with ``beta``, as before);
+* ``wall``: the one exit coin of the step.  It is read by the cars that see
+  the exit in this step and by the reservoir's virtual car on an empty road.
+  The first of them (no car of this step has left) draws from the mixture
+  ``beta`` open + ``1 - beta`` shut, the parallel sweep's last-car row; a car
+  that stays ends the coin's role (every car upstream sees it).  A car leaves
+  only through an open exit, so after one has left the coin is known: open.
+  That is one bit, carried only in words whose new part is empty: the
+  *marker*, an old digit 1 on the top cell (above every old car, never a car
+  there), set by a car that leaves and cleared by one that stays; the next car
+  then draws from the open exit's row (``off_open``).  Cheaper than two sweeps
+  weighted ``beta``, ``1 - beta`` (every word twice): the marker doubles only
+  the words with no new car.
+
+Nothing acts before the cars (a state enters the stage of its highest car
+through one identity link).  After them, on the new road: the ramps from the
+exit upstream, then the entry (``site1``: on cell 1 if empty now; ``insert``:
+on the updated road), or the ``reservoir``'s virtual car reading the updated
+road: the first car, or on an empty road the exit (mixture; open behind the
+marker; wall under ``sink``), its rows the parallel pre-stage's contexts plus
+one for the marker.  Folding (a car blocked behind the new car ahead staying
+at 0 for sure) works the same, downwards.
 """
+
 from __future__ import annotations
 
 import time
@@ -776,7 +817,8 @@ def _final(tab: _Tables, final_words: np.ndarray):
 # ------------------------------------------------------------------ the operator
 
 class RoadFactoredOperator(ProductOperator):
-    """``x -> x P`` of an open road under parallel update, swept car by car.
+    """``x -> x P`` of an open road under parallel or ordered-sequential update, swept
+    car by car.
 
     A ``LinearOperator`` ``A = P^T`` (scipy's column convention: ``A @ x`` is
     ``x P`` as a column), so :func:`markov.solvers.stationary.stationary`
@@ -786,7 +828,7 @@ class RoadFactoredOperator(ProductOperator):
     Parameters
     ----------
     road : Road
-        An open road with ``update="parallel"``.
+        An open road with ``update="parallel"`` or ``"ordered-sequential"``.
     keys : (n,) int64 array, sorted
         A closed set of state keys, lumped as ``lump`` says, e.g.
         ``RoadChain(road, lump=lump).keys``.
@@ -807,7 +849,7 @@ class RoadFactoredOperator(ProductOperator):
     words : int
         Words over all stages (the sweep's intermediate vectors).
     stage_sizes : list of int
-        Words per stage ``0..L``.
+        Words per stage ``0..L`` (ordered: stage ``s`` is cell ``L - s``).
     links : int
         Links stored (stage links and final links).
     nbytes : int
@@ -1046,7 +1088,7 @@ def factored_successor_set(lattice: Lattice, keys: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     lattice : Lattice
-        An open road under parallel update (lumped or not).
+        An open road under parallel or ordered-sequential update (lumped or not).
     keys : (n,) int64 array
 
     Returns
