@@ -25,15 +25,16 @@ MODELS = {
 }
 ENDS = [(e, x) for e in ("site1", "reservoir", "insert") for x in ("sink", "wall")]
 RATES = [(0.3, 0.6), (0.0, 0.5), (1.0, 0.0), (1.0, 1.0), (0.7, 1.0), (0.0, 0.0)]
+UPDATES = ("parallel", "ordered-sequential")
 
 
-def _roads(name, entry, exit_):
+def _roads(name, entry, exit_, update="parallel"):
     """Roads of L = 1..6 with this model and these ends: rates, stretches, on-ramps."""
     model = load_model(*MODELS[name])
     has_p = "p" in model.params
     for L in range(1, 7):
         def road(alpha=0.3, beta=0.6, stretches=(), ramps=()):
-            return Road(L, model, "parallel", alpha, beta, entry, exit_, 0, stretches, ramps)
+            return Road(L, model, update, alpha, beta, entry, exit_, 0, stretches, ramps)
 
         for alpha, beta in RATES if L in (1, 3) else RATES[:1]:
             yield lambda a=alpha, b=beta: road(a, b)
@@ -76,12 +77,13 @@ def _check(chain, rng):
     return op
 
 
+@pytest.mark.parametrize("update", UPDATES)
 @pytest.mark.parametrize("entry,exit_", ENDS)
 @pytest.mark.parametrize("name", list(MODELS))
-def test_product_and_counts_equal_the_row_generator(name, entry, exit_):
+def test_product_and_counts_equal_the_row_generator(name, entry, exit_, update):
     rng = np.random.default_rng(hash((name, entry, exit_)) % 2**32)
     checked = 0
-    for make in _roads(name, entry, exit_):
+    for make in _roads(name, entry, exit_, update):
         for lump in (True, False):
             chain = _chain(make, lump)
             if chain is None:
@@ -143,17 +145,18 @@ def test_stationary_flux(road, lump):
 def test_refusals():
     model = load_model("nasch", {"vmax": 1, "p": 0.25})
     road = Road(4, model, "random-sequential", 0.3, 0.5, "site1", "sink")
-    with pytest.raises(InvalidParameterError, match="parallel"):
+    with pytest.raises(InvalidParameterError, match="parallel or ordered-sequential"):
         RoadFactoredOperator(road, np.array([0], np.int64), lump=False)
     ring = Ring(6, 3, 1, 0.25, stretches=(Stretch(2, 3, {"p": 0.75}),))
     with pytest.raises(InvalidParameterError, match="periodic"):
         RoadFactoredOperator(ring, RoadChain(ring).keys)
 
 
+@pytest.mark.parametrize("update", UPDATES)
 @pytest.mark.parametrize("entry,exit_", ENDS)
-def test_unfolded_sweep_agrees(entry, exit_):
+def test_unfolded_sweep_agrees(entry, exit_, update):
     """fold=False (every car its own stage, no folded sure moves) gives the same operator."""
-    road = Road(6, load_model("nasch", {"vmax": 2, "p": 0.3}), "parallel", 0.4, 0.6, entry, exit_,
+    road = Road(6, load_model("nasch", {"vmax": 2, "p": 0.3}), update, 0.4, 0.6, entry, exit_,
                 stretches=[Stretch(2, 3, {"vmax": 1})], ramps=[OnRamp(4, 0.3, 1)])
     chain = RoadChain(road)
     folded = RoadFactoredOperator.from_chain(chain)
@@ -168,8 +171,9 @@ def test_unfolded_sweep_agrees(entry, exit_):
 
 # ------------------------------------------------ the search and the chain on the sweep
 
+@pytest.mark.parametrize("update", UPDATES)
 @pytest.mark.parametrize("name, vmax", [("nasch", 1), ("nasch", 2), ("bjh", 2), ("kkw", 2)])
-def test_factored_successor_set_is_the_row_generators(name, vmax):
+def test_factored_successor_set_is_the_row_generators(name, vmax, update):
     from markov.chain.lattice import all_lattice_keys, successor_set
     from markov.chain.road_factored import factored_successor_set
 
@@ -178,7 +182,7 @@ def test_factored_successor_set_is_the_row_generators(name, vmax):
         for a, b in ((0.3, 0.6), (0.0, 0.5), (1.0, 1.0), (0.4, 0.0)):
             for lump in (True, False):
                 stretches = (Stretch(2, 3, {"p": 0.8}),) if name != "kkw" else ()
-                road = Road(5, load_model(name, {"vmax": vmax}), "parallel", a, b, entry, exit_,
+                road = Road(5, load_model(name, {"vmax": vmax}), update, a, b, entry, exit_,
                             0, stretches, (OnRamp(4, 0.3, 1),))
                 lat = lattice_of(road, lump=lump)
                 keys = all_lattice_keys(lat)
@@ -192,6 +196,13 @@ def test_factored_successor_set_is_the_row_generators(name, vmax):
          0, (Stretch(3, 4, {"p": 0.7}),), (OnRamp(6, 0.2, 1),)),
     Road(11, load_model("nasch", {"vmax": 1, "p": 0.25}), "parallel", 0.3, 0.5, "site1", "sink"),
     Road(7, load_model("vdr", {"vmax": 3}), "parallel", 0.5, 0.5, "insert", "sink"),
+    Road(9, load_model("nasch", {"vmax": 2, "p": 0.3}), "ordered-sequential", 0.6, 0.4,
+         "reservoir", "wall", 0, (Stretch(3, 4, {"p": 0.7}),), (OnRamp(6, 0.2, 1),)),
+    Road(10, load_model("nasch", {"vmax": 1, "p": 0.25}), "ordered-sequential", 0.3, 0.5,
+         "site1", "sink", 0, (), (OnRamp(7, 0.3, 0),)),
+    Road(7, load_model("kkw", {"vmax": 3}), "ordered-sequential", 0.5, 0.7, "insert", "wall"),
+    Road(8, load_model("vdr", {"vmax": 2}), "ordered-sequential", 0.4, 0.6, "site1", "wall",
+         0, (Stretch(2, 3, {"vmax": 1}),)),
 ])
 def test_a_road_solved_on_the_sweep_is_the_matrix_solve(road):
     a = RoadChain(road, operator="matrix").solution(tol=1e-13)
@@ -206,7 +217,7 @@ def test_a_road_solved_on_the_sweep_is_the_matrix_solve(road):
 
 
 def test_the_sweep_is_refused_where_it_does_not_apply():
-    road = Road(5, load_model("nasch", {"vmax": 2}), "ordered-sequential")
+    road = Road(5, load_model("nasch", {"vmax": 2}), "random-sequential")
     with pytest.raises(InvalidParameterError, match="parallel"):
         RoadChain(road, operator="matrix-free")
 

@@ -212,7 +212,7 @@ def test_cli_solve_road_json_and_text():
     (["--road", "--on-ramp", "9:0.3"], "outside the cells 1..6"),
     (["--road", "--on-ramp", "3:x"], "CELL:ALPHA_R"),
     (["--road", "--operator", "matrix-free", "--update", "random-sequential"],
-     "matrix-free is for rings and parallel roads"),
+     "matrix-free is for rings and parallel and ordered-sequential roads"),
     (["--road", "--v-in", "5"], "v_in"),
 ])
 def test_cli_bad_road_input_is_one_line(args, words):

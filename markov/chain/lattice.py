@@ -1163,7 +1163,8 @@ def reachable_keys(lattice: Lattice, start: int | None = None, max_memory: float
         Bytes per state the caller will need; at least the search's own.
     successors : callable, optional
         ``successors(lattice, keys) -> sorted distinct successor keys`` (default
-        :func:`successor_set`; an open parallel road passes the factored sweep's).
+        :func:`successor_set`; an open parallel or ordered-sequential road passes the
+        factored sweep's).
 
     Returns
     -------

@@ -1,4 +1,8 @@
-"""The parallel step of an open road factored car by car: ``x -> x P`` without rows.
+"""The step of an open road factored car by car: ``x -> x P`` without rows.
+
+One sweep with two orders: parallel update (from the entry, each car reading
+the old road ahead) and ordered-sequential update (from the exit, each car
+reading the new road ahead; below).
 
 Under parallel update a road state with ``k`` cars free to move has about
 ``2^k`` successors, and the CSR matrix of :mod:`markov.solvers.road_chain`
@@ -51,7 +55,44 @@ expected counts of a step from ``x`` in the same sweep, and a link costs an
 int32 parent and a uint16 code.  A product is one segmented sum per stage
 (each word pulls from its parents; parallel over the words of a stage) and
 one into the states.
+
+Ordered-sequential update
+-------------------------
+The cars are processed from the exit upstream, each reading the car ahead
+*already moved* (the gap to its new position, its new velocity), so the same
+words serve read the other way: the new configuration above the highest old
+car, the old one from there down.  The stage of a word is ``L - 1 - y``
+(``y`` the 0-based cell of its highest old car; ``L``: none left), so the
+stages are again processed in increasing order and everything after the
+expansion (merging per stage, links and codes, the counts, :func:`_sweep`,
+:func:`_flows`) is shared.  A car's law is the rule's row at the new car ahead
+(its class: the lumping's classes are exact for the follower's view too); with
+no new car ahead it is the exit's:
+
+* ``sink``: the wall (the car on cell ``L``: leave with ``beta``, as before);
+* ``wall``: the one exit coin of the step.  It is read by the cars that see
+  the exit in this step and by the reservoir's virtual car on an empty road.
+  The first of them (no car of this step has left) draws from the mixture
+  ``beta`` open + ``1 - beta`` shut, the parallel sweep's last-car row; a car
+  that stays ends the coin's role (every car upstream sees it).  A car leaves
+  only through an open exit, so after one has left the coin is known: open.
+  That is one bit, carried only in words whose new part is empty: the
+  *marker*, an old digit 1 on the top cell (above every old car, never a car
+  there), set by a car that leaves and cleared by one that stays; the next car
+  then draws from the open exit's row (``off_open``).  Cheaper than two sweeps
+  weighted ``beta``, ``1 - beta`` (every word twice): the marker doubles only
+  the words with no new car.
+
+Nothing acts before the cars (a state enters the stage of its highest car
+through one identity link).  After them, on the new road: the ramps from the
+exit upstream, then the entry (``site1``: on cell 1 if empty now; ``insert``:
+on the updated road), or the ``reservoir``'s virtual car reading the updated
+road: the first car, or on an empty road the exit (mixture; open behind the
+marker; wall under ``sink``), its rows the parallel pre-stage's contexts plus
+one for the marker.  Folding (a car blocked behind the new car ahead staying
+at 0 for sure) works the same, downwards.
 """
+
 from __future__ import annotations
 
 import time
@@ -62,7 +103,7 @@ from markov._jit import njit, prange
 from markov.chain.lattice import _DIGIT, ENTRY_CODES, EXIT_CODES, Lattice, lattice_of
 from markov.chain.operator import ProductOperator
 from markov.errors import InvalidParameterError
-from markov.model.ring import PARALLEL
+from markov.model.ring import ORDERED_SEQUENTIAL, PARALLEL
 
 __all__ = ["RoadFactoredOperator", "factored_successor_set"]
 
@@ -203,6 +244,114 @@ def _expand_stage(words, f, L, W, K, H, pw, off_ahead, cnt_ahead, off_last, cnt_
 
 
 @njit(cache=True)
+def _top_stage(w, y_from, L, W, K, pw):
+    """Ordered sweep: the stage ``L - 1 - y`` of the highest old car at or below cell
+    index ``y_from`` (``L``: none left)."""
+    for y in range(y_from, -1, -1):
+        d = (w // pw[y]) % W
+        if d >= 1 and d <= K:
+            return L - 1 - y
+    return L
+
+
+@njit(cache=True)
+def _car_ordered(w, y, L, W, K, pw, off_ahead, cnt_ahead, off_last, cnt_last, off_open,
+                 cnt_open):
+    """Ordered sweep: the rows ``(off, n)`` of the old car on cell index ``y`` of word
+    ``w`` (the new car ahead, or the exit), and the marker digit (0: none)."""
+    x = y + 1
+    k = (w // pw[y]) % W - 1
+    marker = np.int64(0)
+    if y + 1 < L:
+        rest = w // pw[y + 1]
+        for yy in range(y + 1, L):
+            d = rest % W
+            if d > K:
+                g = min(yy - y - 1, off_ahead.shape[2] - 1)
+                ka = d - 1 - K
+                return off_ahead[x, k, g, ka], cnt_ahead[x, k, g, ka], marker
+            if d > 0:              # the marker, on the top cell
+                marker = d
+            rest //= W
+    if marker > 0:
+        return off_open[x, k], cnt_open[x, k], marker
+    return off_last[x, k], cnt_last[x, k], marker
+
+
+@njit(cache=True)
+def _fold_ordered(c, t, L, W, K, pw, off_ahead, cnt_ahead, off_last, cnt_last, off_open,
+                  cnt_open, row_nd, transparent):
+    """Ordered sweep: apply the cars from stage ``t`` down whose only move is a
+    transparent one (stay with velocity 0, weight 1, no counts): ``(word, stage)``."""
+    while t < L:
+        y = L - 1 - t
+        off, n, marker = _car_ordered(c, y, L, W, K, pw, off_ahead, cnt_ahead, off_last,
+                                      cnt_last, off_open, cnt_open)
+        if n != 1 or not transparent[off]:
+            break
+        od = (c // pw[y]) % W
+        c += (row_nd[off] - od) * pw[y] - marker * pw[L - 1]
+        t = _top_stage(c, y - 1, L, W, K, pw)
+    return c, t
+
+
+@njit(cache=True, parallel=True)
+def _expand_pre_ordered(words, L, W, K, pw, id_row, off_ahead, cnt_ahead, off_last, cnt_last,
+                        off_open, cnt_open, row_nd, transparent, fold, out_child, out_code,
+                        out_stage):
+    """Ordered sweep: the states enter the stage of their highest car (nothing acts first)."""
+    for i in prange(words.shape[0]):
+        w = words[i]
+        t = _top_stage(w, L - 1, L, W, K, pw)
+        if fold:
+            w, t = _fold_ordered(w, t, L, W, K, pw, off_ahead, cnt_ahead, off_last, cnt_last,
+                                 off_open, cnt_open, row_nd, transparent)
+        out_child[i, 0] = w
+        out_code[i, 0] = id_row
+        out_stage[i, 0] = t
+        for j in range(1, out_code.shape[1]):
+            out_code[i, j] = -1
+
+
+@njit(cache=True, parallel=True)
+def _expand_stage_ordered(words, y, L, W, K, pw, off_ahead, cnt_ahead, off_last, cnt_last,
+                          off_open, cnt_open, wall, row_d, row_nd, transparent, fold,
+                          out_child, out_code, out_stage):
+    """Ordered sweep, stage ``L - 1 - y``: the car on cell ``y + 1`` (the highest old car)
+    draws from the NEW car ahead (gap to its new position, its new class) or the exit:
+    the mixture of the open and shut exit when no car of this step has left, the open
+    exit when one has (the marker: old digit 1 on the top cell; under ``wall`` only an
+    open exit lets a car leave).  A car that stays clears the marker.  ``fold``: the
+    cars below whose move is then sure and transparent are applied in the same link."""
+    top = pw[L - 1]
+    for i in prange(words.shape[0]):
+        w = words[i]
+        od = (w // pw[y]) % W
+        base = w - od * pw[y]
+        off, n, marker = _car_ordered(w, y, L, W, K, pw, off_ahead, cnt_ahead, off_last,
+                                      cnt_last, off_open, cnt_open)
+        stage = _top_stage(w, y - 1, L, W, K, pw)
+        for j in range(n):
+            r = off + j
+            dd = row_d[r]
+            if dd <= L:
+                c = base - marker * top + row_nd[r] * pw[dd - 1]
+            elif wall and marker == 0:
+                c = base + top
+            else:
+                c = base
+            t = stage
+            if fold:
+                c, t = _fold_ordered(c, t, L, W, K, pw, off_ahead, cnt_ahead, off_last,
+                                     cnt_last, off_open, cnt_open, row_nd, transparent)
+            out_child[i, j] = c
+            out_code[i, j] = r
+            out_stage[i, j] = t
+        for j in range(n, out_code.shape[1]):
+            out_code[i, j] = -1
+
+
+@njit(cache=True)
 def _first_insert_cell(work, L, vbulk):
     for y in range(L):
         if work[y]:
@@ -212,22 +361,37 @@ def _first_insert_cell(work, L, vbulk):
 
 
 @njit(cache=True, parallel=True)
-def _post(words, L, W, K, keydig_of, pw_key, insert, alpha, vbulk, keydig_vbulk, order,
-          ramp_cell, ramp_a, ramp_keydig, out_key, out_raw):
+def _post(words, L, W, K, keydig_of, pw_key, entry_kind, alpha, vbulk, keydig_entry, order,
+          ramp_cell, ramp_a, ramp_keydig, ramp_cls, virt, wall, H, vir_off, vir_cnt, row_d,
+          row_nd, out_key, out_raw):
     """Each new configuration's successors through the coins after the move: the
-    key (lumped digits) and a raw code ``placed | applicable << C | cell << 2C``."""
+    key (lumped digits) and a raw code ``placed | applicable << C | cell << 2C |
+    (virtual row + 1) << (2C + 8)``.
+
+    ``order`` lists the coins: ``-1`` the entry (``entry_kind`` 1 ``insert``, 2
+    ``site1`` on an empty cell 1), ``i >= 0`` ramp ``i``.  ``virt``: then the
+    reservoir's virtual car reads the road so made (ordered update; its rows
+    ``vir_off[ctx] ..``, the context as the parallel pre-stage's, the last one the
+    empty road behind a car that left, whose exit is open).  Old digits ``1..K``
+    in a final word are the ordered sweep's marker, not cars."""
     C = order.shape[0]
+    MV = out_key.shape[1] >> C
     for i in prange(words.shape[0]):
         occ = np.zeros(L, np.bool_)
         work = np.zeros(L, np.bool_)
+        wcls = np.zeros(L, np.int64)
         w = words[i]
         key = np.int64(0)
+        marker = False
         for y in range(L):
             d = w % W
             w //= W
-            if d > 0:
+            if d > K:
                 occ[y] = True
+                wcls[y] = d - 1 - K
                 key += keydig_of[d] * pw_key[y]
+            elif d > 0:
+                marker = True
         for mask in range(1 << C):
             for y in range(L):
                 work[y] = occ[y]
@@ -240,9 +404,14 @@ def _post(words, L, W, K, keydig_of, pw_key, insert, alpha, vbulk, keydig_vbulk,
                 bit = (mask >> j) & 1
                 c = order[j]
                 if c == -1:
-                    cell = _first_insert_cell(work, L, vbulk) if insert else -1
+                    if entry_kind == 1:
+                        cell = _first_insert_cell(work, L, vbulk)
+                    elif entry_kind == 2:
+                        cell = 1 if not work[0] else -1
+                    else:
+                        cell = -1
                     a = alpha
-                    kd = keydig_vbulk
+                    kd = keydig_entry
                 else:
                     cell = ramp_cell[c] if not work[ramp_cell[c] - 1] else -1
                     a = ramp_a[c]
@@ -256,6 +425,8 @@ def _post(words, L, W, K, keydig_of, pw_key, insert, alpha, vbulk, keydig_vbulk,
                 if bit == 1:
                     w2 *= a
                     work[cell - 1] = True
+                    if c >= 0:
+                        wcls[cell - 1] = ramp_cls[c]
                     k2 += kd * pw_key[cell - 1]
                     if c == -1:
                         ins = cell
@@ -264,11 +435,34 @@ def _post(words, L, W, K, keydig_of, pw_key, insert, alpha, vbulk, keydig_vbulk,
                 if w2 == 0.0:
                     ok = False
                     break
-            if ok:
-                out_key[i, mask] = k2
-                out_raw[i, mask] = mask | (appl << C) | (ins << (2 * C))
+            raw = mask | (appl << C) | (ins << (2 * C))
+            for m in range(MV):
+                out_raw[i, mask * MV + m] = -1
+            if not ok:
+                continue
+            if not virt:
+                out_key[i, mask * MV] = k2
+                out_raw[i, mask * MV] = raw
+                continue
+            y0 = L
+            for y in range(L):
+                if work[y]:
+                    y0 = y
+                    break
+            if y0 < L:
+                ctx = 1 + min(y0, H) * K + wcls[y0]
+            elif marker and wall:
+                ctx = vir_off.shape[0] - 1
             else:
-                out_raw[i, mask] = -1
+                ctx = 0
+            for m in range(vir_cnt[ctx]):
+                r = vir_off[ctx] + m
+                k3 = k2
+                dd = row_d[r]
+                if dd >= 1 and dd <= L:
+                    k3 += keydig_of[row_nd[r]] * pw_key[dd - 1]
+                out_key[i, mask * MV + m] = k3
+                out_raw[i, mask * MV + m] = raw | ((r + 1) << (2 * C + 8))
 
 
 @njit(cache=True, parallel=True)
@@ -346,6 +540,7 @@ class _Tables:
         self.alpha, self.beta = float(lat.floats[0]), float(lat.floats[1])
         self.v_in = int(ints[8])
         self.vbulk = int(ints[10])
+        self.ordered = getattr(lat.system, "update", None) == ORDERED_SEQUENTIAL
         R = lat.n_ramps
         layout = lat.layout
         self.size = layout["size"]
@@ -377,6 +572,9 @@ class _Tables:
         self.cnt_ahead = np.zeros((L + 1, K, H + 1, K), np.int64)
         self.off_last = np.zeros((L + 1, K), np.int64)
         self.cnt_last = np.zeros((L + 1, K), np.int64)
+        # ordered, wall: a car behind one that left this step sees the exit open
+        self.off_open = np.zeros((L + 1, K), np.int64)
+        self.cnt_open = np.zeros((L + 1, K), np.int64)
         wall = self.exit == EXIT_CODES["wall"]
         beta = self.beta
         for x in range(1, L + 1):
@@ -405,6 +603,10 @@ class _Tables:
                 else:
                     rows = [[d, u, w] for d, u, w in outs(z, v, min(L - x, H), 0, x) if w != 0.0]
                 self.off_last[x, k], self.cnt_last[x, k] = emit_car(x, rows)
+                if self.ordered and wall:
+                    rows = [[d, u, w] for d, u, w in outs(z, v, H, int(zone_vmax[z]), x)
+                            if w != 0.0]
+                    self.off_open[x, k], self.cnt_open[x, k] = emit_car(x, rows)
         # the pre-stage
         alpha = self.alpha
         self.pre_off: list = []
@@ -417,6 +619,10 @@ class _Tables:
             self.pre_off.append(first)
             self.pre_cnt.append(len(self.rows_d) - first)
 
+        if self.ordered:
+            # nothing acts before the cars: one identity row (the link of a state to
+            # its first word); the reservoir's virtual car acts last (vir_off below)
+            emit_pre([[-1, 0, 1.0]], lambda d, u: np.zeros(self.size))
         if self.entry == ENTRY_CODES["reservoir"]:
             z = int(zone_of[0])
             v = int(zone_vmax[z])
@@ -445,6 +651,12 @@ class _Tables:
                     rows = start()
                     _add(rows, virtual(g, int(self.rep[ka])), alpha)
                     emit_pre(rows, entered)
+            if self.ordered:                     # the last context: behind a car that left
+                rows = start()
+                _add(rows, virtual(H, int(zone_vmax[z])), alpha)
+                emit_pre(rows, entered)
+        elif self.ordered:
+            pass
         elif self.entry == ENTRY_CODES["site1"]:
             rows = []                            # context 0: old cell 1 empty
             if alpha > 0.0:
@@ -457,9 +669,16 @@ class _Tables:
             emit_pre([[-1, 0, 1.0]], lambda d, u: np.zeros(self.size))
         self.pre_off = np.array(self.pre_off, np.int64)
         self.pre_cnt = np.array(self.pre_cnt, np.int64)
+        # ordered: the identity row, and the virtual car's rows (the reservoir's, last)
+        self.id_row = int(self.pre_off[0])
+        self.virt = self.ordered and self.entry == ENTRY_CODES["reservoir"]
+        self.vir_off = self.pre_off[1:] if self.virt else np.zeros(1, np.int64)
+        self.vir_cnt = self.pre_cnt[1:] if self.virt else np.ones(1, np.int64)
+        self.MV = int(self.vir_cnt.max(initial=1)) if self.virt else 1
         self.n_moves = len(self.rows_d)
         self.M = int(max(self.cnt_ahead.max(initial=0), self.cnt_last.max(initial=0),
-                         self.pre_cnt.max(initial=0), 1))
+                         self.cnt_open.max(initial=0),
+                         1 if self.ordered else self.pre_cnt.max(initial=0), 1))
         self.row_d = np.array(self.rows_d, np.int64)
         self.row_nd = np.array([0 if d < 1 or d > L else 1 + K + int(self.cls[u])
                                 for d, u in zip(self.rows_d, self.rows_u)], np.int64)
@@ -472,11 +691,19 @@ class _Tables:
                     self.transparent[r] = (self.rows_w[r] == 1.0 and self.rows_d[r] == x
                                            and self.rows_u[r] == 0
                                            and not np.any(self.rows_inc[r]))
-        # the coins after the move: insert first, then the ramps from the entry down
-        order = ([-1] if self.entry == ENTRY_CODES["insert"] else []) + \
-            [int(c) for c in lat.ramp_down]
+        # the coins after the move: parallel: insert first, then the ramps from the entry
+        # down; ordered: the ramps from the exit upstream, then the entry (site1, insert)
+        if self.ordered:
+            order = [int(c) for c in lat.ramp_up] + \
+                ([-1] if self.entry in (ENTRY_CODES["insert"], ENTRY_CODES["site1"]) else [])
+        else:
+            order = ([-1] if self.entry == ENTRY_CODES["insert"] else []) + \
+                [int(c) for c in lat.ramp_down]
         self.order = np.array(order, np.int64)
         self.C = len(order)
+        self.entry_kind = {ENTRY_CODES["insert"]: 1, ENTRY_CODES["site1"]: 2}.get(self.entry, 0) \
+            if -1 in order else 0
+        self.post_v = self.v_in if self.entry == ENTRY_CODES["site1"] else self.vbulk
 
     def _row(self, d, u, w, inc):
         self.rows_d.append(int(d))
@@ -514,7 +741,8 @@ class _Tables:
         for i, r in enumerate(raw.tolist()):
             placed = r & ((1 << C) - 1)
             appl = (r >> C) & ((1 << C) - 1)
-            cell = r >> (2 * C)
+            cell = (r >> (2 * C)) & 255
+            vrow = (r >> (2 * C + 8)) - 1
             w = 1.0
             for j in range(C):
                 if not (appl >> j) & 1:
@@ -527,15 +755,70 @@ class _Tables:
                     incs[i, self.ramp0 + c] += 1.0
                     incs[i, self.vel0 + int(lat.ramp_cell[c]) - 1] += int(lat.ramp_velocity[c])
             if cell > 0:
-                incs[i] += self._enter_inc(cell, self.vbulk)
+                incs[i] += self._enter_inc(cell, self.post_v)
+            if vrow >= 0:
+                w *= self.rows_w[vrow]
+                incs[i] += self.rows_inc[vrow]
             ws[i] = w
         return ws, incs
+
+
+def _expand(tab: _Tables, words: np.ndarray, f: int, pw: np.ndarray, fold: bool):
+    """The children of the words of stage ``f`` (``-1``: of the states' words):
+    ``(child, code, stage)``, each ``(len(words), M)``, code ``-1`` where no link."""
+    L, W, K, H, M = tab.L, tab.W, tab.K, tab.H, tab.M
+    child = np.empty((len(words), M), np.int64)
+    code = np.empty((len(words), M), np.int64)
+    stage = np.empty((len(words), M), np.int64)
+    if tab.ordered:
+        if f < 0:
+            _expand_pre_ordered(words, L, W, K, pw, tab.id_row, tab.off_ahead, tab.cnt_ahead,
+                                tab.off_last, tab.cnt_last, tab.off_open, tab.cnt_open,
+                                tab.row_nd, tab.transparent, fold, child, code, stage)
+        else:
+            _expand_stage_ordered(words, L - 1 - f, L, W, K, pw, tab.off_ahead, tab.cnt_ahead,
+                                  tab.off_last, tab.cnt_last, tab.off_open, tab.cnt_open,
+                                  tab.exit == EXIT_CODES["wall"], tab.row_d, tab.row_nd,
+                                  tab.transparent, fold, child, code, stage)
+    elif f < 0:
+        _expand_pre(words, tab.entry, L, W, K, H, pw, tab.pre_off, tab.pre_cnt, tab.row_d,
+                    tab.row_nd, tab.off_ahead, tab.cnt_ahead, tab.off_last, tab.cnt_last,
+                    tab.transparent, fold, child, code, stage)
+    else:
+        _expand_stage(words, f, L, W, K, H, pw, tab.off_ahead, tab.cnt_ahead,
+                      tab.off_last, tab.cnt_last, tab.row_d, tab.row_nd,
+                      tab.transparent, fold, child, code, stage)
+    return child, code, stage
+
+
+def _final(tab: _Tables, final_words: np.ndarray):
+    """The coins after the cars on the new configurations: ``(keys, raw codes)``,
+    each ``(len(final_words), 2^C MV)``, raw ``-1`` where no branch."""
+    lat = tab.lat
+    W, K = tab.W, tab.K
+    keydig_of = np.zeros(W, np.int64)                # new word digit -> key digit
+    for k in range(K):
+        keydig_of[1 + K + k] = tab.rep[k] + 1
+    width = (1 << tab.C) * tab.MV
+    fk = np.empty((len(final_words), width), np.int64)
+    fraw = np.empty((len(final_words), width), np.int64)
+    if lat.n_ramps:
+        ramp_keydig = np.array([tab.digit_map[v + 1] for v in lat.ramp_velocity], np.int64)
+        ramp_cls = np.array([tab.cls[v] for v in lat.ramp_velocity], np.int64)
+    else:
+        ramp_keydig = ramp_cls = np.zeros(0, np.int64)
+    _post(final_words, tab.L, W, K, keydig_of, lat.pw, tab.entry_kind, tab.alpha, tab.vbulk,
+          int(tab.digit_map[tab.post_v + 1]), tab.order, lat.ramp_cell, lat.ramp_alpha,
+          ramp_keydig, ramp_cls, tab.virt, tab.exit == EXIT_CODES["wall"], tab.H, tab.vir_off,
+          tab.vir_cnt, tab.row_d, tab.row_nd, fk, fraw)
+    return fk, fraw
 
 
 # ------------------------------------------------------------------ the operator
 
 class RoadFactoredOperator(ProductOperator):
-    """``x -> x P`` of an open road under parallel update, swept car by car.
+    """``x -> x P`` of an open road under parallel or ordered-sequential update, swept
+    car by car.
 
     A ``LinearOperator`` ``A = P^T`` (scipy's column convention: ``A @ x`` is
     ``x P`` as a column), so :func:`markov.solvers.stationary.stationary`
@@ -545,7 +828,7 @@ class RoadFactoredOperator(ProductOperator):
     Parameters
     ----------
     road : Road
-        An open road with ``update="parallel"``.
+        An open road with ``update="parallel"`` or ``"ordered-sequential"``.
     keys : (n,) int64 array, sorted
         A closed set of state keys, lumped as ``lump`` says, e.g.
         ``RoadChain(road, lump=lump).keys``.
@@ -566,7 +849,7 @@ class RoadFactoredOperator(ProductOperator):
     words : int
         Words over all stages (the sweep's intermediate vectors).
     stage_sizes : list of int
-        Words per stage ``0..L``.
+        Words per stage ``0..L`` (ordered: stage ``s`` is cell ``L - s``).
     links : int
         Links stored (stage links and final links).
     nbytes : int
@@ -600,9 +883,9 @@ class RoadFactoredOperator(ProductOperator):
             raise InvalidParameterError(
                 "the factored road operator is for open roads; a periodic lattice (a ring"
                 " with stretches) is not supported")
-        if getattr(road, "update", None) != PARALLEL:
+        if getattr(road, "update", None) not in (PARALLEL, ORDERED_SEQUENTIAL):
             raise InvalidParameterError(
-                f"the factored road operator is for parallel update, got"
+                f"the factored road operator is for parallel or ordered-sequential update, got"
                 f" {getattr(road, 'update', None)!r}")
         t0 = time.perf_counter()
         self.road = road
@@ -670,12 +953,7 @@ class RoadFactoredOperator(ProductOperator):
                     sel = order[lo:hi]
                     pending[s].append((child[sel], par[sel], code[sel]))
 
-        child = np.empty((n, M), np.int64)
-        code = np.empty((n, M), np.int64)
-        stage = np.empty((n, M), np.int64)
-        _expand_pre(words0, tab.entry, L, W, K, H, pw, tab.pre_off, tab.pre_cnt, tab.row_d,
-                    tab.row_nd, tab.off_ahead, tab.cnt_ahead, tab.off_last, tab.cnt_last,
-                    tab.transparent, self.fold, child, code, stage)
+        child, code, stage = _expand(tab, words0, -1, pw, self.fold)
         scatter(child, code, stage, np.arange(n, dtype=np.int64))
         del words0, child, code, stage
         stage_lo = [n]
@@ -714,12 +992,7 @@ class RoadFactoredOperator(ProductOperator):
             if f == L:
                 final_words = words
             elif len(words):
-                child = np.empty((len(words), M), np.int64)
-                code = np.empty((len(words), M), np.int64)
-                stage = np.empty((len(words), M), np.int64)
-                _expand_stage(words, f, L, W, K, H, pw, tab.off_ahead, tab.cnt_ahead,
-                              tab.off_last, tab.cnt_last, tab.row_d, tab.row_nd,
-                              tab.transparent, self.fold, child, code, stage)
+                child, code, stage = _expand(tab, words, f, pw, self.fold)
                 scatter(child, code, stage, np.arange(first, first + len(words), dtype=np.int64))
                 del child, code, stage
         bar.close()
@@ -732,20 +1005,10 @@ class RoadFactoredOperator(ProductOperator):
         codes = np.concatenate(code_parts) if code_parts else np.empty(0, np.int64)
         del indptr_parts, parent_parts, code_parts
         # the coins after the move, and the successors' indices
-        C = tab.C
-        keydig_of = np.zeros(W, np.int64)                # new word digit -> key digit
-        for k in range(K):
-            keydig_of[1 + K + k] = tab.rep[k] + 1
-        pw_key = lat.pw
-        fk = np.empty((len(final_words), 1 << C), np.int64)
-        fraw = np.empty((len(final_words), 1 << C), np.int64)
-        ramp_keydig = np.array([tab.digit_map[v + 1] for v in lat.ramp_velocity], np.int64) \
-            if lat.n_ramps else np.zeros(0, np.int64)
-        _post(final_words, L, W, K, keydig_of, pw_key, tab.entry == ENTRY_CODES["insert"],
-              tab.alpha, tab.vbulk, int(tab.digit_map[tab.vbulk + 1]), tab.order,
-              lat.ramp_cell, lat.ramp_alpha, ramp_keydig, fk, fraw)
+        fk, fraw = _final(tab, final_words)
         keep = fraw.ravel() >= 0
-        fparent = np.repeat(np.arange(stage_lo[-2], stage_lo[-1], dtype=np.int64), 1 << C)[keep]
+        fparent = np.repeat(np.arange(stage_lo[-2], stage_lo[-1], dtype=np.int64),
+                            fk.shape[1])[keep]
         fk = fk.ravel()[keep]
         fraw = fraw.ravel()[keep]
         col = np.searchsorted(self.keys, fk)
@@ -825,7 +1088,7 @@ def factored_successor_set(lattice: Lattice, keys: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     lattice : Lattice
-        An open road under parallel update (lumped or not).
+        An open road under parallel or ordered-sequential update (lumped or not).
     keys : (n,) int64 array
 
     Returns
@@ -835,8 +1098,9 @@ def factored_successor_set(lattice: Lattice, keys: np.ndarray) -> np.ndarray:
     from markov.chain.encoding import unique_keys
 
     road = lattice.system
-    if lattice.periodic or road.update != PARALLEL:
-        raise InvalidParameterError("the factored sweep is for open roads under parallel update")
+    if lattice.periodic or road.update not in (PARALLEL, ORDERED_SEQUENTIAL):
+        raise InvalidParameterError(
+            "the factored sweep is for open roads under parallel or ordered-sequential update")
     tab = _Tables(lattice)
     L, W, K, H, M = tab.L, tab.W, tab.K, tab.H, tab.M
     if W ** L > _INT64_MAX:
@@ -855,17 +1119,7 @@ def factored_successor_set(lattice: Lattice, keys: np.ndarray) -> np.ndarray:
     pending: list[list] = [[] for _ in range(L + 1)]
 
     def expand(words, f):
-        child = np.empty((len(words), M), np.int64)
-        code = np.empty((len(words), M), np.int64)
-        stage = np.empty((len(words), M), np.int64)
-        if f < 0:
-            _expand_pre(words, tab.entry, L, W, K, H, pw, tab.pre_off, tab.pre_cnt, tab.row_d,
-                        tab.row_nd, tab.off_ahead, tab.cnt_ahead, tab.off_last, tab.cnt_last,
-                        tab.transparent, True, child, code, stage)
-        else:
-            _expand_stage(words, f, L, W, K, H, pw, tab.off_ahead, tab.cnt_ahead,
-                          tab.off_last, tab.cnt_last, tab.row_d, tab.row_nd,
-                          tab.transparent, True, child, code, stage)
+        child, code, stage = _expand(tab, words, f, pw, True)
         keep = code.ravel() >= 0
         child, stage = child.ravel()[keep], stage.ravel()[keep]
         order = np.argsort(stage, kind="stable")
@@ -883,17 +1137,7 @@ def factored_successor_set(lattice: Lattice, keys: np.ndarray) -> np.ndarray:
             final = words
         elif len(words):
             expand(words, f)
-    C = tab.C
-    keydig_of = np.zeros(W, np.int64)
-    for k in range(K):
-        keydig_of[1 + K + k] = tab.rep[k] + 1
-    fk = np.empty((len(final), 1 << C), np.int64)
-    fraw = np.empty((len(final), 1 << C), np.int64)
-    ramp_keydig = np.array([tab.digit_map[v + 1] for v in lattice.ramp_velocity], np.int64) \
-        if lattice.n_ramps else np.zeros(0, np.int64)
-    _post(final, L, W, K, keydig_of, lattice.pw, tab.entry == ENTRY_CODES["insert"],
-          tab.alpha, tab.vbulk, int(tab.digit_map[tab.vbulk + 1]), tab.order,
-          lattice.ramp_cell, lattice.ramp_alpha, ramp_keydig, fk, fraw)
+    fk, fraw = _final(tab, final)
     return unique_keys(fk.ravel()[fraw.ravel() >= 0])
 
 

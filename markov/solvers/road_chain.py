@@ -42,7 +42,7 @@ __all__ = ["RoadChain", "RoadSolution", "solve_road", "estimate_road", "is_latti
 #: (:attr:`RoadChain.prediction`): above it a search takes a second or more.
 PREDICT_CONFIGURATIONS = 3 ** 13
 
-#: Open parallel roads with more states than this take the factored sweep (``auto``):
+#: Open parallel and ordered-sequential roads with more states than this take the factored sweep (``auto``):
 #: it builds 10-20x faster than the matrix and holds 2-4x less (measured at 16,384 to
 #: 275,807 states, ``docs/performance.md``).
 FACTORED_MIN_STATES = 20_000
@@ -103,7 +103,7 @@ class RoadChain:
     operator : {"auto", "matrix", "matrix-free"}
         How ``x -> x P`` is applied: the assembled CSR matrix, or the factored
         sweep (:class:`markov.chain.road_factored.RoadFactoredOperator`: open
-        roads under parallel update); ``auto`` takes the sweep for such a road
+        roads under parallel or ordered-sequential update); ``auto`` takes the sweep for such a road
         of more than :data:`FACTORED_MIN_STATES` states.
     start : str, optional
         A start configuration (text): the classes it reaches.
@@ -139,7 +139,8 @@ class RoadChain:
                 f"operator must be one of {', '.join(OPERATORS)}, got {operator!r}")
         if operator == "matrix-free" and not self.factorable:
             raise InvalidParameterError(
-                "the matrix-free road operator is for open roads under parallel update; this"
+                "the matrix-free road operator is for open roads under parallel or"
+                " ordered-sequential update; this"
                 f" {'ring' if self.system.periodic else 'road'} ({self.system.update}) is"
                 " solved with its matrix")
         self.operator = operator
@@ -150,8 +151,10 @@ class RoadChain:
 
     @property
     def factorable(self) -> bool:
-        """Whether the factored sweep applies: an open road under parallel update."""
-        return not self.system.periodic and self.system.update == "parallel"
+        """Whether the factored sweep applies: an open road under parallel or
+        ordered-sequential update."""
+        return not self.system.periodic and \
+            self.system.update in ("parallel", "ordered-sequential")
 
     def _successor_set(self):
         """The search's successor function: the factored sweep where it applies."""
@@ -854,7 +857,7 @@ def estimate_road(road: Road, lump: bool = True, calibration_states: int | None 
         (default :data:`markov.solvers.road_estimate.CALIBRATION_STATES`).
     factored : bool, optional
         Predict the factored sweep's solve (default: where it applies, an open
-        road under parallel update) or the matrix's.
+        road under parallel or ordered-sequential update) or the matrix's.
 
     Returns
     -------
@@ -865,7 +868,7 @@ def estimate_road(road: Road, lump: bool = True, calibration_states: int | None 
     if not isinstance(road, Road):
         raise InvalidParameterError(f"estimate_road takes a markov Road, got {type(road).__name__}")
     if factored is None:
-        factored = road.update == "parallel"
+        factored = road.update in ("parallel", "ordered-sequential")
     return road_estimate.estimate_road(
         road, _measure, lump, factored,
         road_estimate.CALIBRATION_STATES if calibration_states is None else calibration_states)

@@ -41,8 +41,8 @@ __all__ = ["solve"]
               help="--method mps: the bond dimension of the state [64]; the error bar"
                    " compares it with CHI/2.")
 @click.option("--operator", type=click.Choice(OPERATORS), default="auto", show_default=True,
-              help="Assemble P, or apply x -> xP without storing it (parallel update:"
-                   " factored car by car).")
+              help="Assemble P, or apply x -> xP without storing it (parallel and"
+                   " ordered-sequential roads: factored car by car).")
 @click.option("--tol", type=float, default=None,
               help="Target ||pi P - pi||_1 of the iterative solvers, 1e-15..1e-3"
                    f" [{DEFAULT_TOL:g}; --method mps: ||T p - p||_2 / ||p||_2, 1e-10].")
@@ -233,9 +233,11 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
     from markov.validate import ensure_int
 
     what = "a road" if not system.periodic else "a ring with a stretch"
-    if operator == "matrix-free" and (system.periodic or system.update != "parallel"):
+    if operator == "matrix-free" and (system.periodic or system.update not in (
+            "parallel", "ordered-sequential")):
         raise click.UsageError(f"{what} under {system.update} update is solved with its matrix"
-                               " (--operator matrix-free is for rings and parallel roads)")
+                               " (--operator matrix-free is for rings and parallel and"
+                               " ordered-sequential roads)")
     if method == "aggregation":
         raise click.UsageError(f"--method aggregation is for rings; {what} takes the others")
     if system.periodic:
