@@ -42,7 +42,8 @@ __all__ = ["RoadChain", "RoadSolution", "solve_road", "estimate_road", "is_latti
 #: (:attr:`RoadChain.prediction`): above it a search takes a second or more.
 PREDICT_CONFIGURATIONS = 3 ** 13
 
-#: Open parallel and ordered-sequential roads with more states than this take the factored sweep (``auto``):
+#: Open parallel and ordered-sequential roads with more states than this take the
+#: factored sweep (``auto``):
 #: it builds 10-20x faster than the matrix and holds 2-4x less (measured at 16,384 to
 #: 275,807 states, ``docs/performance.md``).
 FACTORED_MIN_STATES = 20_000
@@ -103,8 +104,8 @@ class RoadChain:
     operator : {"auto", "matrix", "matrix-free"}
         How ``x -> x P`` is applied: the assembled CSR matrix, or the factored
         sweep (:class:`markov.chain.road_factored.RoadFactoredOperator`: open
-        roads under parallel or ordered-sequential update); ``auto`` takes the sweep for such a road
-        of more than :data:`FACTORED_MIN_STATES` states.
+        roads under parallel or ordered-sequential update); ``auto`` takes the
+        sweep for such a road of more than :data:`FACTORED_MIN_STATES` states.
     start : str, optional
         A start configuration (text): the classes it reaches.
     lump : bool
