@@ -79,6 +79,7 @@ def main(length: int, cars: int, names=("vdr", "tt", "kkw"), rounds: int = 3, pr
     for name, layout in cases:
         n, lay, per, words = build[name, layout, "info"]
         b, p = min(build[name, layout]), min(product[name, layout])
+        lay += " (before)" if layout == "csr" else ""
         print(f"| {name} | {lay} | {n:,} | {words:,} | {per:.1f} | {b:.2f} | {b / b0:.2f} |"
               f" {1e3 * p:.1f} | {p / p0:.2f} |")
 
