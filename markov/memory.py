@@ -14,8 +14,9 @@ Paths
     assembling (unsummed int64 successor, column and value lists).
 ``factored``
     :class:`markov.chain.factored.FactoredOperator` (parallel update): the level
-    links (two int32 per word for NaSch, an int64 row pointer per word and an
-    int32 parent and int16 outcome per link for other rules; words summed over the levels are 1.5 to 5.5
+    links (two int32 per word for NaSch, two int32 and a uint8 pair code for
+    other rules of at most two parents per word, an int64 row pointer per word and an
+    int32 parent and int16 outcome per link for the rest; words summed over the levels are 1.5 to 5.5
     times the states, :data:`LEVEL_WORDS_PER_STATE` is the bound used before
     the levels exist), the level-0 permutation and offsets, two level buffers.
 ``rows``
@@ -144,8 +145,9 @@ def factored_bytes_per_state(method: str, words_per_state: float = LEVEL_WORDS_P
         Level-0 words per state (at most 1).
     link_bytes : float
         Bytes of links per word of levels ``1..N``: 8 for the NaSch form (two
-        int32 parents), ``8 + 6 x`` parents per word for the CSR of any other
-        rule (:func:`markov.chain.factored.link_bytes_per_word`).
+        int32 parents), 9 for the pair levels (two int32 parents, a uint8 pair
+        code), ``8 + 6 x`` parents per word for the CSR of any other rule
+        (:func:`markov.chain.factored.link_bytes_per_word`).
 
     Returns
     -------

@@ -9,7 +9,8 @@ import naive
 import naive_rule as nr
 from markov import InvalidParameterError, Ring, RingChain, solve
 from markov.solvers.aggregates import position_aggregates
-from markov.chain.factored import FactoredOperator, frontier_successors, level_rule, word_bits
+from markov.chain.factored import (FactoredOperator, frontier_successors, level_rule,
+                                   link_bytes_per_word, word_bits)
 from markov.chain.sequential import successor_keys
 from markov.model.load import MODELS, load_model
 from markov.chain.statespace import all_keys, recurrent_keys
@@ -219,16 +220,89 @@ def test_nasch_rows_are_the_pre_braking_velocity():
     assert level_rule(Ring(9, 3, model=_model("fi", 1)).table()).nasch_form
 
 
+def _csr(op, **kw):
+    """``op`` with its levels rebuilt as the CSR (the layout of any rule)."""
+    rule = replace(op.rule, nasch_form=False, pair_slots=None, pair_code=None)
+    return FactoredOperator(op.ring, op.keys, op.lump, _levels=op._build(rule, **kw),
+                            velocities=op.velocities)
+
+
 def test_the_general_merge_equals_the_nasch_form_on_nasch():
     for L, N, vmax, lump in ((12, 6, 2, True), (11, 4, 3, False), (9, 8, 1, True)):
         ring = Ring(L, N, vmax, 0.3)
         keys = recurrent_keys(ring, lump=lump)
         fast = FactoredOperator(ring, keys, lump)
-        general = FactoredOperator(ring, keys, lump,
-                                   _levels=fast._build(replace(fast.rule, nasch_form=False)))
-        assert general.level_sizes == fast.level_sizes and general.edges > fast.n
+        pairs = FactoredOperator(ring, keys, lump,
+                                 _levels=fast._build(replace(fast.rule, nasch_form=False)))
+        general = _csr(fast)
+        assert pairs.rule.layout == "pairs" and general.rule.layout == "csr"
+        assert general.level_sizes == fast.level_sizes == pairs.level_sizes
+        assert general.edges > fast.n and pairs.edges == fast.edges
         for x in np.random.default_rng(L).random((2, fast.n)):
             np.testing.assert_allclose(general.apply(x), fast.apply(x), rtol=1e-14)
+            assert np.array_equal(pairs.apply(x), general.apply(x))
+
+
+PAIR_MODELS = {"vdr", "tt", "cc", "fi"}     # at most two parents per word at vmax 2
+
+
+@pytest.mark.parametrize("vmax", [1, 2, 3])
+@pytest.mark.parametrize("name", list(MODELS))
+def test_every_model_layout_equals_the_csr(name, vmax):
+    """The layout :attr:`LevelRule.layout` picks (NaSch form, pairs or CSR)
+    against the CSR levels: products, derivative products and momentum
+    sectors, bit for bit where the sums run in the same order; and the links
+    held within :func:`link_bytes_per_word`."""
+    model = _model(name, vmax)
+    rng = np.random.default_rng(vmax)
+    for L, N in MODEL_RINGS[vmax]:
+        ring = Ring(L, N, model=model)
+        layout = level_rule(ring.table()).layout
+        if vmax == 2 and name in PAIR_MODELS:
+            assert layout == "pairs"
+        if name == "kkw" and vmax >= 2:
+            assert layout == "csr"          # three outcomes: up to four parents
+        for lump in (True, False):
+            keys = recurrent_keys(ring, lump=lump)
+            op = FactoredOperator(ring, keys, lump, shifts=lump)
+            csr = _csr(op, shifts=lump)
+            assert op.rule.layout == layout and csr.level_sizes == op.level_sizes
+            held = sum(a.nbytes for link in op._links for a in link)
+            assert held <= link_bytes_per_word(ring) * sum(op.level_sizes[1:]) + 8 * N
+            other, other_csr = op.with_params(**_other(model)), csr.with_params(**_other(model))
+            assert other._links is op._links and other_csr._links is csr._links
+            slots = rng.random(op.rule.weight.shape)
+            if op.rule.nasch_form:          # one (dp, dq) for every braking row
+                k = op.rule.new_velocity.shape[1]
+                slots = np.tile(slots[k:2 * k], op.rule.rows)
+                slots[:k] = 0.0
+            for x in rng.random((2, op.n)):
+                for a, b in ((op, csr), (other, other_csr)):
+                    same = np.testing.assert_array_equal if layout != "nasch" else \
+                        lambda u, v: np.testing.assert_allclose(u, v, rtol=1e-14, atol=0)
+                    same(a.apply(x), b.apply(x))
+                    da, db = np.empty(op.n), np.empty(op.n)
+                    a._derivative_product(x, slots, da)
+                    b._derivative_product(x, slots, db)
+                    np.testing.assert_allclose(da, db, rtol=1e-13, atol=1e-15)
+                    if lump:
+                        for k in (0, 1):
+                            np.testing.assert_allclose(a.sector_apply(x, k),
+                                                       b.sector_apply(x, k), rtol=1e-14,
+                                                       atol=1e-15)
+
+
+def test_pair_levels_refuse_a_third_parent():
+    # kkw vmax 2: a word can have four parents; forced pair codes must fail, not drop links
+    ring = Ring(8, 3, model=_model("kkw", 2))
+    rule = level_rule(ring.table())
+    assert rule.layout == "csr"
+    slots = rule.weight.shape[0]
+    forced = replace(rule, pair_slots=np.zeros((1, 2), np.int64),
+                     pair_code=np.zeros((slots + 1) ** 2, np.int64))
+    op = FactoredOperator(ring, recurrent_keys(ring), lump=True)
+    with pytest.raises(RuntimeError, match="more parents"):
+        op._build(forced)
 
 
 def test_rows_that_coincide_at_one_parameter_point_are_rebuilt_when_they_split():

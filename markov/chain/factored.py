@@ -36,7 +36,13 @@ braked copy and each word has at most two parents (arrays ``a`` and ``b``,
 weights ``q``/1 and ``p``).  Any other rule takes the general route: the
 children of a level, one per (row, outcome), are ``R K`` sorted runs (each
 run shifts the words of one row by one constant), merged ``K``-way into the
-next level with a CSR of (parent, outcome slot) per word.
+next level.  When no word can have more than two parents (the parents of a
+word share its gap class: at most two outcome slots of the rows of a gap
+class lead to one new velocity; VDR, TT, CC, FI at vmax 2,
+:func:`_pair_codes`), a word holds its two parents ``a``, ``b`` (int32) and
+a uint8 *pair code* naming the outcome slots of both (the *pair* layout, 9
+bytes per word); otherwise a CSR of (parent, outcome slot) per word.  The
+choice is :attr:`LevelRule.layout`, read by :func:`_step` and the products.
 
 Words
 -----
@@ -118,6 +124,14 @@ class LevelRule:
     dweight : (R K,) float64 array or None
         Derivatives of the weights with respect to one parameter, slot by slot,
         when the rows were numbered with them (:func:`level_rule`).
+    pair_slots : (C, 2) int64 array or None
+        When no word can have more than two parents (:func:`_pair_codes`): the
+        outcome slots ``(first, second)`` of each *pair code* ``c < C <= 256``
+        (``second = R K`` for a word of one parent), the layout of the pair
+        levels; ``None``: the CSR levels.
+    pair_code : ((R K + 1)**2,) int64 array or None
+        The code of the slots ``(s0, s1)`` at ``s0 (R K + 1) + s1`` (``-1``: a
+        pair that cannot occur).
     """
 
     row_id: np.ndarray
@@ -127,6 +141,17 @@ class LevelRule:
     horizon: int
     nasch_form: bool
     dweight: np.ndarray | None = None
+    pair_slots: np.ndarray | None = None
+    pair_code: np.ndarray | None = None
+
+    @property
+    def layout(self) -> str:
+        """How the levels hold their links: ``"nasch"`` (two parents, weights
+        ``q``/1 and ``p`` by sign), ``"pairs"`` (two parents and a uint8 pair
+        code per word) or ``"csr"`` (any number of parents)."""
+        if self.nasch_form:
+            return "nasch"
+        return "csr" if self.pair_slots is None else "pairs"
 
     @property
     def rows(self) -> int:
@@ -201,8 +226,48 @@ def level_rule(table: RuleTable, dweight: np.ndarray | None = None) -> LevelRule
         weight[r * k:r * k + len(ws)] = ws
         if dw is not None:
             dw[r * k:r * k + len(ds)] = ds
+    pair_slots, pair_code = _pair_codes(row_id, count, new)
     return LevelRule(row_id, count, new, weight, int(table.horizon),
-                     _nasch_form(count, new, weight, dw), dw)
+                     _nasch_form(count, new, weight, dw), dw, pair_slots, pair_code)
+
+
+#: Most pair codes of the pair levels (one uint8 per word).
+_MAX_PAIR_CODES = 256
+
+
+def _pair_codes(row_id, count, new) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The pair codes of a rule whose words have at most two parents, else ``(None, None)``.
+
+    The parents of a word of level ``j + 1`` differ from it in car ``j``
+    only, so they share its positions and its gap class ``g``: they are the
+    outcome slots ``(r, k)`` with ``new[r, k] = v'`` (car ``j``'s value in the
+    word) among the rows ``r`` that occur at ``g``.  The merge emits a word's
+    links in increasing slot order, so the codes number the slot pairs
+    ``s0 < s1`` of those sets (and every slot alone, ``s1 = R K``).
+    """
+    rows, k = new.shape
+    none = rows * k
+    pairs = {(s, none) for s in range(none)}
+    for g in range(row_id.shape[1]):
+        present = sorted(set(int(r) for r in row_id[:, g, :].ravel()))
+        for v in range(int(new.max()) + 1):
+            slots = [r * k + t for r in present for t in range(int(count[r])) if new[r, t] == v]
+            if len(slots) > 2:
+                return None, None
+            if len(slots) == 2:
+                pairs.add((slots[0], slots[1]))
+    if len(pairs) > _MAX_PAIR_CODES:
+        return None, None
+    pair_slots = np.array(sorted(pairs), dtype=np.int64)
+    pair_code = np.full((none + 1) ** 2, -1, dtype=np.int64)
+    pair_code[pair_slots[:, 0] * (none + 1) + pair_slots[:, 1]] = np.arange(len(pair_slots))
+    return pair_slots, pair_code
+
+
+def _pair_weights(rule: LevelRule, weight: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weights (or their derivatives) of each pair code's first and second parent."""
+    ext = np.append(weight, 0.0)
+    return ext[rule.pair_slots[:, 0]], ext[rule.pair_slots[:, 1]]
 
 
 def _slot_derivatives(rule: LevelRule, dweight: np.ndarray) -> np.ndarray | None:
@@ -266,10 +331,11 @@ def _model_rule(model: Model) -> LevelRule:
 def link_bytes_per_word(ring: Ring) -> float:
     """Bytes of level links per word, estimated before the levels exist.
 
-    The NaSch form holds two int32 parents per word; any other rule an int64
-    row pointer per word and an int32 parent and int16 slot per link, at most
-    ``K`` (the most outcomes of a row) links per word on average when the
-    levels do not shrink.
+    The NaSch form holds two int32 parents per word, a rule of at most two
+    parents per word (:attr:`LevelRule.layout` ``"pairs"``) two int32 parents
+    and a uint8 pair code; any other rule an int64 row pointer per word and an
+    int32 parent and int16 slot per link, at most ``K`` (the most outcomes of
+    a row) links per word on average when the levels do not shrink.
 
     Parameters
     ----------
@@ -280,7 +346,7 @@ def link_bytes_per_word(ring: Ring) -> float:
     float
     """
     rule = _model_rule(ring.model)
-    return 8.0 if rule.nasch_form else 8.0 + 6.0 * rule.new_velocity.shape[1]
+    return {"nasch": 8.0, "pairs": 9.0}.get(rule.layout, 8.0 + 6.0 * rule.new_velocity.shape[1])
 
 
 def word_bits(ring: Ring) -> tuple[int, int]:
@@ -432,19 +498,18 @@ def _next_level(words, j, w, links):
 
 
 @njit(cache=True)
-def _merge_level(words, j, w, count, new_velocity, links):
-    """Any rule: the next level as the ``K``-way merge of one sorted run per (row, outcome).
+def _streams(words, j, w, count, new_velocity):
+    """The runs of a ``K``-way merge: the parents bucketed by car ``j``'s row, one stream per (row, outcome).
 
-    Returns the next level (sorted) and, if ``links``, its CSR of parents:
-    word ``t`` of the next level has the parents ``parent[indptr[t]:indptr[t+1]]``
-    (indices into ``words``) through the outcome slots ``slot[...]`` (row
-    ``r``, outcome ``k``: ``r K + k``).
+    Returns ``bucket`` (the indices of ``words``, row by row, in order), per
+    stream its cursor and end in ``bucket``, its shift ``(v' - r) << j w``,
+    its outcome slot and its head word, the number of streams and the number
+    of links (children counted with multiplicity).
     """
     m = words.shape[0]
     rows, kmax = new_velocity.shape
     shift = j * w
     vmask = (np.int64(1) << w) - 1
-    # the parents bucketed by car j's row, in order: bucket r is the run of row r
     start = np.zeros(rows + 1, np.int64)
     total = 0
     for i in range(m):
@@ -476,6 +541,19 @@ def _merge_level(words, j, w, count, new_velocity, links):
             slot_of[g] = r * kmax + k
             head[g] = words[bucket[start[r]]] + delta[g]
             g += 1
+    return bucket, cur, end, delta, slot_of, head, g, total
+
+
+@njit(cache=True)
+def _merge_level(words, j, w, count, new_velocity, links):
+    """Any rule: the next level as the ``K``-way merge of one sorted run per (row, outcome).
+
+    Returns the next level (sorted) and, if ``links``, its CSR of parents:
+    word ``t`` of the next level has the parents ``parent[indptr[t]:indptr[t+1]]``
+    (indices into ``words``) through the outcome slots ``slot[...]`` (row
+    ``r``, outcome ``k``: ``r K + k``), in increasing slot order.
+    """
+    bucket, cur, end, delta, slot_of, head, g, total = _streams(words, j, w, count, new_velocity)
     out = np.empty(total, np.int64)
     indptr = np.empty(total + 1 if links else 0, np.int64)
     parent = np.empty(total if links else 0, np.int32)
@@ -505,11 +583,64 @@ def _merge_level(words, j, w, count, new_velocity, links):
     return out[:k].copy(), indptr, parent, slot
 
 
+@njit(cache=True)
+def _merge_pairs(words, j, w, count, new_velocity, pair_code):
+    """A rule of at most two parents per word: the merge of :func:`_merge_level` into pair links.
+
+    Returns the next level, the first parent ``a`` and the second ``b``
+    (``-1`` for none) of each word, its pair code (``pair_code[s0 (S + 1) + s1]``,
+    ``s1 = S`` for none, ``S = R K``), and ``False`` when a word had a third
+    parent or a pair without a code (then the rest is garbage).
+    """
+    bucket, cur, end, delta, slot_of, head, g, total = _streams(words, j, w, count, new_velocity)
+    none = new_velocity.shape[0] * new_velocity.shape[1]
+    out = np.empty(total, np.int64)
+    a = np.empty(total, np.int32)
+    b = np.empty(total, np.int32)
+    key = np.empty(total, np.int64)     # s0 (S + 1) + s1 of each word
+    done = np.iinfo(np.int64).max
+    k = -1
+    ok = True
+    for e in range(total):
+        best = 0
+        for s in range(1, g):
+            if head[s] < head[best]:
+                best = s
+        word = head[best]
+        if k < 0 or word != out[k]:
+            k += 1
+            out[k] = word
+            a[k] = bucket[cur[best]]
+            b[k] = -1
+            key[k] = slot_of[best] * (none + 1) + none
+        elif b[k] < 0:
+            b[k] = bucket[cur[best]]
+            key[k] += slot_of[best] - none
+        else:
+            ok = False
+        cur[best] += 1
+        head[best] = words[bucket[cur[best]]] + delta[best] if cur[best] < end[best] else done
+    k += 1
+    code = np.empty(k, np.uint8)
+    for t in range(k):
+        c = pair_code[key[t]]
+        ok = ok and c >= 0
+        code[t] = c
+    return out[:k].copy(), a[:k].copy(), b[:k].copy(), code, ok
+
+
 def _step(words, j, w, rule: LevelRule, links: bool):
-    """Level ``j + 1`` from level ``j`` and its links (``(a, b)`` or ``(indptr, parent, slot)``)."""
+    """Level ``j + 1`` from level ``j`` and its links, in the rule's :attr:`~LevelRule.layout`:
+    ``(a, b)`` (NaSch form), ``(a, b, code)`` (pairs) or ``(indptr, parent, slot)`` (CSR)."""
     if rule.nasch_form:
         out, a, b = _next_level(words, j, w, links)
         return out, (a, b)
+    if links and rule.pair_slots is not None:
+        out, a, b, code, ok = _merge_pairs(words, j, w, rule.count, rule.new_velocity,
+                                           rule.pair_code)
+        if not ok:
+            raise RuntimeError("a word has more parents than the rule's pair codes allow")
+        return out, (a, b, code)
     out, indptr, parent, slot = _merge_level(words, j, w, rule.count, rule.new_velocity, links)
     return out, (indptr, parent, slot)
 
@@ -690,6 +821,31 @@ def _gather_rows_last(indptr, parent, slot, offsets, weight, z, out):
         out[s] = acc
 
 
+@njit(cache=True, parallel=True)
+def _gather_pairs(a, b, code, wa, wb, z, out):
+    """Pairs, level ``j``: ``out[w] = wa[c] z[a[w]] + wb[c] z[b[w]]``, ``c = code[w]``
+    (the CSR's sum, in its order)."""
+    for i in prange(out.shape[0]):
+        c = code[i]
+        s = wa[c] * z[a[i]]
+        if b[i] >= 0:
+            s += wb[c] * z[b[i]]
+        out[i] = s
+
+
+@njit(cache=True, parallel=True)
+def _gather_pairs_last(a, b, code, offsets, wa, wb, z, out):
+    """Pairs, level ``N`` fused with R4."""
+    for s in prange(out.shape[0]):
+        acc = 0.0
+        for k in range(offsets[s], offsets[s + 1]):
+            c = code[k]
+            acc += wa[c] * z[a[k]]
+            if b[k] >= 0:
+                acc += wb[c] * z[b[k]]
+        out[s] = acc
+
+
 # Forward mode: a level is linear in z and in the weights, z_j = G_j(w) z_{j-1},
 # so dz_j = G_j(w) dz_{j-1} + G_j(dw) z_{j-1} (dz_0 = 0: level 0 has no weights).
 
@@ -748,6 +904,35 @@ def _gather_rows_last_pair(indptr, parent, slot, offsets, weight, dweight, z, dz
         for k in range(offsets[s], offsets[s + 1]):
             for e in range(indptr[k], indptr[k + 1]):
                 acc += weight[slot[e]] * dz[parent[e]] + dweight[slot[e]] * z[parent[e]]
+        dout[s] = acc
+
+
+@njit(cache=True, parallel=True)
+def _gather_pairs_pair(a, b, code, wa, wb, da, db, z, dz, out, dout):
+    """Pairs, level ``j``, and its derivative."""
+    for i in prange(out.shape[0]):
+        c = code[i]
+        x = z[a[i]]
+        s = wa[c] * x
+        ds = wa[c] * dz[a[i]] + da[c] * x
+        if b[i] >= 0:
+            x = z[b[i]]
+            s += wb[c] * x
+            ds += wb[c] * dz[b[i]] + db[c] * x
+        out[i] = s
+        dout[i] = ds
+
+
+@njit(cache=True, parallel=True)
+def _gather_pairs_last_pair(a, b, code, offsets, wa, wb, da, db, z, dz, dout):
+    """Pairs, level ``N`` fused with R4: the derivative only."""
+    for s in prange(dout.shape[0]):
+        acc = 0.0
+        for k in range(offsets[s], offsets[s + 1]):
+            c = code[k]
+            acc += wa[c] * dz[a[k]] + da[c] * z[a[k]]
+            if b[k] >= 0:
+                acc += wb[c] * dz[b[k]] + db[c] * z[b[k]]
         dout[s] = acc
 
 
@@ -855,21 +1040,20 @@ class FactoredOperator(ChainOperator):
         offsets_last = np.empty(n + 1, dtype=np.int64)
         if _segments(targets[order], self.keys, offsets_last):
             raise RuntimeError("a successor lies outside the state set: it is not closed")
-        if rule.nasch_form:
-            a, b = links[-1]
-            links[-1] = (a[order], b[order])
-        else:
+        if rule.layout == "csr":
             links[-1] = _permute_rows(*links[-1], order)
+        else:
+            links[-1] = tuple(x[order] for x in links[-1])
         shift_arrays = (state_shift, word_shift[order]) if shifts else None
         return rule, perm, offsets0, links, offsets_last, sizes, shift_arrays
 
     @property
     def edges(self) -> int:
-        """Parent links per product: the words of levels ``1..N`` (NaSch form,
-        two-parent gathers) or their parents (general)."""
-        if self.rule.nasch_form:
-            return int(sum(self.level_sizes[1:]))
-        return int(sum(link[1].shape[0] for link in self._links))
+        """Parent links per product: the words of levels ``1..N`` (NaSch form and
+        pairs, two-parent gathers) or their parents (CSR)."""
+        if self.rule.layout == "csr":
+            return int(sum(link[1].shape[0] for link in self._links))
+        return int(sum(self.level_sizes[1:]))
 
     @property
     def nbytes(self) -> int:
@@ -992,6 +1176,15 @@ class FactoredOperator(ChainOperator):
             a, b = self._links[-1]
             _gather_last_pair(a, b, self._offsets_last, z, dz, p, q, dp, dq, out)
             return
+        if rule.layout == "pairs":
+            (wa, wb), (da, db) = _pair_weights(rule, rule.weight), _pair_weights(rule, dweight)
+            for a, b, code in self._links[:-1]:
+                nz, ndz = np.empty(a.shape[0]), np.empty(a.shape[0])
+                _gather_pairs_pair(a, b, code, wa, wb, da, db, z, dz, nz, ndz)
+                z, dz = nz, ndz
+            a, b, code = self._links[-1]
+            _gather_pairs_last_pair(a, b, code, self._offsets_last, wa, wb, da, db, z, dz, out)
+            return
         for indptr, parent, slot in self._links[:-1]:
             m = indptr.shape[0] - 1
             nz, ndz = np.empty(m), np.empty(m)
@@ -1026,6 +1219,18 @@ class FactoredOperator(ChainOperator):
                 _gather_last(a, b, self._offsets_last, z, p, q, out)
             else:
                 _gather_level(a, b, z, p, q, out)
+            return
+        if rule.layout == "pairs":
+            wa, wb = _pair_weights(rule, rule.weight)
+            for a, b, code in self._links[:-1]:
+                which ^= 1
+                parents, z = z, buffers[which][:a.shape[0]]
+                _gather_pairs(a, b, code, wa, wb, parents, z)
+            a, b, code = self._links[-1]
+            if fused:
+                _gather_pairs_last(a, b, code, self._offsets_last, wa, wb, z, out)
+            else:
+                _gather_pairs(a, b, code, wa, wb, z, out)
             return
         for indptr, parent, slot in self._links[:-1]:
             which ^= 1
