@@ -44,6 +44,9 @@ bench-large: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/large.py
 	$(BIN)/python benchmarks/roads_large.py
 	$(BIN)/python benchmarks/mps_roads.py
+	$(BIN)/python benchmarks/pair_levels.py
+	$(BIN)/python benchmarks/bandwidth.py
+	$(BIN)/python benchmarks/blas_threads.py
 
 bench-coverage: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/error_coverage.py
