@@ -544,6 +544,22 @@ def _streams(words, j, w, count, new_velocity):
     return bucket, cur, end, delta, slot_of, head, g, total
 
 
+@njit(cache=True, inline="always")
+def _pop(words, bucket, cur, end, delta, head, g):
+    """The stream with the smallest head word: its index, that word and its parent (an
+    index of ``words``); the stream advances (its head ``int64`` max once spent)."""
+    best = 0
+    for s in range(1, g):
+        if head[s] < head[best]:
+            best = s
+    word = head[best]
+    parent = bucket[cur[best]]
+    cur[best] += 1
+    head[best] = words[bucket[cur[best]]] + delta[best] if cur[best] < end[best] \
+        else np.iinfo(np.int64).max
+    return best, word, parent
+
+
 @njit(cache=True)
 def _merge_level(words, j, w, count, new_velocity, links):
     """Any rule: the next level as the ``K``-way merge of one sorted run per (row, outcome).
@@ -558,24 +574,17 @@ def _merge_level(words, j, w, count, new_velocity, links):
     indptr = np.empty(total + 1 if links else 0, np.int64)
     parent = np.empty(total if links else 0, np.int32)
     slot = np.empty(total if links else 0, np.int16)
-    done = np.iinfo(np.int64).max
     k = -1
     for e in range(total):
-        best = 0
-        for s in range(1, g):
-            if head[s] < head[best]:
-                best = s
-        word = head[best]
+        best, word, par = _pop(words, bucket, cur, end, delta, head, g)
         if k < 0 or word != out[k]:
             k += 1
             out[k] = word
             if links:
                 indptr[k] = e
         if links:
-            parent[e] = bucket[cur[best]]
+            parent[e] = par
             slot[e] = slot_of[best]
-        cur[best] += 1
-        head[best] = words[bucket[cur[best]]] + delta[best] if cur[best] < end[best] else done
     k += 1
     if links:
         indptr[k] = total
@@ -598,28 +607,21 @@ def _merge_pairs(words, j, w, count, new_velocity, pair_code):
     a = np.empty(total, np.int32)
     b = np.empty(total, np.int32)
     key = np.empty(total, np.int64)     # s0 (S + 1) + s1 of each word
-    done = np.iinfo(np.int64).max
     k = -1
     ok = True
-    for e in range(total):
-        best = 0
-        for s in range(1, g):
-            if head[s] < head[best]:
-                best = s
-        word = head[best]
+    for _ in range(total):
+        best, word, par = _pop(words, bucket, cur, end, delta, head, g)
         if k < 0 or word != out[k]:
             k += 1
             out[k] = word
-            a[k] = bucket[cur[best]]
+            a[k] = par
             b[k] = -1
             key[k] = slot_of[best] * (none + 1) + none
         elif b[k] < 0:
-            b[k] = bucket[cur[best]]
+            b[k] = par
             key[k] += slot_of[best] - none
         else:
             ok = False
-        cur[best] += 1
-        head[best] = words[bucket[cur[best]]] + delta[best] if cur[best] < end[best] else done
     k += 1
     code = np.empty(k, np.uint8)
     for t in range(k):
