@@ -30,9 +30,7 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-import csv  # noqa: E402
 import datetime as dt  # noqa: E402
-import io  # noqa: E402
 import platform  # noqa: E402
 import subprocess  # noqa: E402
 import time  # noqa: E402
@@ -116,14 +114,10 @@ def road_case(L: int) -> dict:
 
 
 def _write(rows: list, meta: dict) -> None:
+    from common import write_csv
     from markov.files import write_bytes_atomic
 
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, COLUMNS)
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: r.get(k) for k in COLUMNS})
-    write_bytes_atomic(RESULTS / "bandwidth.csv", buf.getvalue().encode())
+    write_csv(RESULTS / "bandwidth.csv", rows, COLUMNS)
 
     def fmt(v):
         if isinstance(v, float):

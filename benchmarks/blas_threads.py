@@ -18,9 +18,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import csv
 import datetime as dt
-import io
 import os
 import platform
 import subprocess
@@ -52,14 +50,6 @@ CASES = [
 COLUMNS = ["case", "tool", "blas", "seconds", "peak_MB", "rc", "last_line"]
 
 
-def _tree() -> Path:
-    tree = ROOT.parent / f"{ROOT.name}-blas-previous"
-    if not tree.exists():
-        subprocess.run(["git", "worktree", "add", "--detach", "--force", str(tree), PREVIOUS],
-                       cwd=ROOT, check=True, capture_output=True)
-    return tree
-
-
 def _run(tree: Path, args: list[str], blas_one: bool) -> dict:
     """``nasch ARGS`` from ``tree`` in a fresh process: seconds, peak memory, last line."""
     env = {k: v for k, v in os.environ.items()
@@ -85,14 +75,10 @@ def _run(tree: Path, args: list[str], blas_one: bool) -> dict:
 
 
 def _write(rows: list, meta: dict) -> None:
+    from common import write_csv
     from markov.files import write_bytes_atomic
 
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, COLUMNS)
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: r.get(k) for k in COLUMNS})
-    write_bytes_atomic(RESULTS / "blas_threads.csv", buf.getvalue().encode())
+    write_csv(RESULTS / "blas_threads.csv", rows, COLUMNS)
     md = [f"# BLAS threads and the numba-parallel products ({meta['date']},"
           f" {meta['machine']}, this commit {meta['commit']}, previous {PREVIOUS})", "",
           "Each row one `nasch ... --quiet` process; `default`: no BLAS variable set (what a"
@@ -110,7 +96,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="Only the two small cases.")
     args = ap.parse_args()
-    prev = _tree()
+    from common import previous_worktree
+
+    prev = previous_worktree(ROOT, "blas-previous", PREVIOUS)
     meta = {"date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": f"{platform.machine()}, {os.cpu_count()} cores",
             "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,

@@ -35,9 +35,7 @@ import os
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
-import csv  # noqa: E402
 import datetime as dt  # noqa: E402
-import io  # noqa: E402
 import json  # noqa: E402
 import platform  # noqa: E402
 import resource  # noqa: E402
@@ -187,22 +185,16 @@ def _child(fn: str, args: list, tree: Path | None = None) -> dict:
 
 
 def _tree() -> Path:
-    tree = ROOT.parent / f"{ROOT.name}-{PREVIOUS_TREE_MARK}"
-    if not tree.exists():
-        subprocess.run(["git", "worktree", "add", "--detach", "--force", str(tree), PREVIOUS],
-                       cwd=ROOT, check=True, capture_output=True)
-    return tree
+    from common import previous_worktree
+
+    return previous_worktree(ROOT, PREVIOUS_TREE_MARK, PREVIOUS)
 
 
 def _write(rows: list, meta: dict, name: str = "roads_large") -> None:
+    from common import write_csv
     from markov.files import write_bytes_atomic
 
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, COLUMNS)
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: r.get(k) for k in COLUMNS})
-    write_bytes_atomic(RESULTS / f"{name}.csv", buf.getvalue().encode())
+    write_csv(RESULTS / f"{name}.csv", rows, COLUMNS)
 
     def fmt(v):
         if isinstance(v, float):
