@@ -376,25 +376,20 @@ def _iterate(product, n: int, method: str, tol: float, maxiter: int,
         return product(v)
 
     stages = ("bicgstab", "gmres", "power") if method == "iterative" else (method,)
-    with one_blas_thread():
-        return _stages(counted, n, stages, x, tol, maxiter, count, aggregates)
-
-
-def _stages(counted, n, stages, x, tol, maxiter, count, aggregates):
-    """Run ``stages`` in turn from ``x``; the best iterate, its residual, products, stage."""
-    res = np.inf
-    for stage in stages:
-        if stage == "power":
-            y, r = _power_steps(counted, x, tol, maxiter, count)
-        elif stage == "aggregation":
-            y, r = _aggregation_steps(counted, x, tol, maxiter, count, aggregates)
-        else:
-            y, r = _krylov_steps(counted, n, x, tol, maxiter, stage, count)
-        if y is not None and r <= res:
-            x, res = y, r
-        if res <= tol:
-            return x, res, count[0], stage
-    return x, res, count[0], stage
+    with one_blas_thread():     # the products are numba-parallel (markov._blas)
+        res = np.inf
+        for stage in stages:
+            if stage == "power":
+                y, r = _power_steps(counted, x, tol, maxiter, count)
+            elif stage == "aggregation":
+                y, r = _aggregation_steps(counted, x, tol, maxiter, count, aggregates)
+            else:
+                y, r = _krylov_steps(counted, n, x, tol, maxiter, stage, count)
+            if y is not None and r <= res:
+                x, res = y, r
+            if res <= tol:
+                return x, res, count[0], stage
+        return x, res, count[0], stage
 
 
 def _product_of(P):
