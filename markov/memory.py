@@ -110,9 +110,10 @@ def solver_vectors(method: str) -> int:
     -------
     int
     """
-    # Krylov methods: scipy's work vectors plus three temporaries of the shifted
-    # system's product (measured: L = 26 with BiCGSTAB peaked 1 GiB above 10 vectors)
-    return {"gmres": GMRES_RESTART + 9, "bicgstab": 13, "power": 5,
+    # GMRES: scipy's work vectors plus three temporaries of the shifted system's
+    # product; BiCGSTAB in place (markov.solvers.bicgstab): x, r, r~, p, v, t, the
+    # caller's iterate and the residual's work vector
+    return {"gmres": GMRES_RESTART + 9, "bicgstab": 8, "power": 5,
             "iterative": GMRES_RESTART + 9, "aggregation": 9,
             "direct": 4, "eigs": 24, "auto": GMRES_RESTART + 6}[method]
 

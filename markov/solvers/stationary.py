@@ -43,8 +43,10 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import connected_components
 
 from markov._blas import one_blas_thread
+from markov.chain.operator import ProductOperator
 from markov.choices import DEFAULT_MAXITER, DEFAULT_TOL, GMRES_RESTART, METHODS, PRODUCT_METHODS
 from markov.errors import ConvergenceError, InvalidParameterError, NoUniqueStationaryStateError
+from markov.solvers.bicgstab import bicgstab
 
 __all__ = ["Aggregates", "StationaryResult", "stationary", "residual",
            "check_irreducible"]
@@ -181,12 +183,13 @@ def _power_steps(product, x, tol, maxiter, count):
     """Power iteration; returns (x, residual of x)."""
     res = np.inf
     work = np.empty_like(x)
+    x, y = x.copy(), np.empty_like(x)   # two vectors in turn (the caller's x is kept)
     while count[0] < maxiter:
-        y = product(x)
+        product(x, y)
         res = _l1_distance(y, x, work)  # the residual of x, measured on the way
         if res <= tol:
             return x, res
-        x = _normalise_in_place(y)
+        x, y = _normalise_in_place(y), x
     return x, res
 
 
@@ -199,11 +202,14 @@ def _krylov_steps(product, n, x, tol, maxiter, method, count, restart=GMRES_REST
     measures the reported ``||pi P - pi||_1`` of the normalised iterate and
     tightens ``rtol`` tenfold only if that falls short.  Asking for far less
     than the attainable accuracy up front makes GMRES stagnate for thousands
-    of restarts.
+    of restarts.  BiCGSTAB runs in place (:mod:`markov.solvers.bicgstab`);
+    ``product(v, out)`` writes ``v P`` into ``out``.
     """
-    ones_over_n = np.full(n, 1.0 / n)
+    ones_over_n = np.full(n, 1.0 / n) if method == "gmres" else None
     A = spla.LinearOperator((n, n), dtype=np.float64,
                             matvec=lambda v: v - product(v) + ones_over_n * v.sum())
+    work = np.empty(n)
+    x = np.array(x, dtype=np.float64)
     rtol, res = tol, np.inf
     for _ in range(8):
         left = maxiter - count[0]
@@ -213,12 +219,11 @@ def _krylov_steps(product, n, x, tol, maxiter, method, count, restart=GMRES_REST
             x, _ = spla.gmres(A, ones_over_n, x0=x, rtol=rtol, atol=0.0, restart=restart,
                               maxiter=max(1, left // restart))
         else:
-            x, _ = spla.bicgstab(A, ones_over_n, x0=x, rtol=rtol, atol=0.0,
-                                 maxiter=max(1, left // 2))
+            bicgstab(product, x, rtol, max(1, left // 2))
         if not np.all(np.isfinite(x)) or x.sum() <= 0:  # a breakdown: give up this method
             return None, np.inf
-        x = _normalise(x)
-        res = float(np.abs(product(x) - x).sum())
+        _normalise_in_place(x)
+        res = _l1_distance(product(x, work), x, work)
         if res <= tol:
             break
         rtol *= 0.1
@@ -300,8 +305,9 @@ def _aggregation_steps(product, x, tol, maxiter, count, agg: Aggregates):
     # lives in the caller's vector x, updated in place, beside the operator's
     # output y and one work vector.
     work = np.empty_like(x)
+    y = np.empty_like(x)       # x P, then z P: one vector for every cycle (no fresh mapping)
     while count[0] < maxiter:
-        y = product(x)
+        product(x, y)
         C = np.bincount(entry, weights=y, minlength=rows.size)
         X = np.maximum(np.bincount(rows, weights=C, minlength=m), np.finfo(float).tiny)
         np.divide(C, X[rows], out=AT.data)
@@ -310,24 +316,21 @@ def _aggregation_steps(product, x, tol, maxiter, count, agg: Aggregates):
             xi = _normalise(_direct(AT.T.tocsr(), tol, maxiter)[0])
         else:
             coarse_tol = max(0.01 * tol, 0.1 * min(res, 1.0))
-            xi, _, _, _ = _iterate(lambda v: AT @ v, m, "iterative", coarse_tol, _COARSE_MAXITER,
-                                  X if xi is None else xi)
+            xi, _, _, _ = _iterate(_writing_into(lambda v: AT @ v), m, "iterative",
+                                   coarse_tol, _COARSE_MAXITER, X if xi is None else xi)
         scale = xi / X
         z = x  # disaggregation: z = x xi_I / X_I, in place
         z *= np.take(scale, agg.group, out=work)
         _normalise_in_place(z)
         zP = y  # z P = y xi_source / X_source, in place
         zP *= np.take(scale, agg.source, out=work)
-        del y
         res = _l1_distance(zP, z, work)
         if res <= tol and count[0] < maxiter:
-            del zP
-            zP = product(z)  # accept on a genuine product, not on the rescaled one
+            product(z, zP)  # accept on a genuine product, not on the rescaled one
             res = _l1_distance(zP, z, work)
             if res <= tol:
                 return z, res
         x[:] = zP  # z (= x) is spent
-        del zP
         _normalise_in_place(x)
     return x, res
 
@@ -339,7 +342,8 @@ def _iterate(product, n: int, method: str, tol: float, maxiter: int,
     Parameters
     ----------
     product : callable
-        ``product(x)`` returns ``x P`` (i.e. ``P^T x``) for a float64 vector.
+        ``product(x, out=None)`` returns ``x P`` (i.e. ``P^T x``) for a float64
+        vector, written into ``out`` when one is given (:func:`_writing_into`).
     n : int
         Number of states.
     method : {"iterative", "gmres", "bicgstab", "power"}
@@ -371,9 +375,9 @@ def _iterate(product, n: int, method: str, tol: float, maxiter: int,
     x = np.full(n, 1.0 / n) if x0 is None else _normalise(np.asarray(x0, dtype=np.float64))
     count = [0]
 
-    def counted(v):
+    def counted(v, out=None):
         count[0] += 1
-        return product(v)
+        return product(v, out)
 
     stages = ("bicgstab", "gmres", "power") if method == "iterative" else (method,)
     with one_blas_thread():     # the products are numba-parallel (markov._blas)
@@ -392,13 +396,30 @@ def _iterate(product, n: int, method: str, tol: float, maxiter: int,
         return x, res, count[0], stage
 
 
+def _writing_into(matvec):
+    """``product(v, out=None)`` from a ``matvec(v)`` that returns a new vector."""
+    def product(v, out=None):
+        y = matvec(v)
+        if out is None:
+            return y
+        out[:] = y
+        return out
+    return product
+
+
 def _product_of(P):
-    """``x -> x P`` and ``n`` of a sparse matrix ``P`` or of an operator ``A = P^T``."""
+    """``(x, out=None) -> x P`` and ``n`` of a sparse matrix ``P`` or of an operator ``A = P^T``.
+
+    The matrix-free operators (:class:`markov.chain.operator.ProductOperator`)
+    write into ``out``; the others fill it from a new vector.
+    """
     if sp.issparse(P):
         PT = P.T.tocsr()
-        return (lambda v: PT @ v), P.shape[0]
+        return _writing_into(lambda v: PT @ v), P.shape[0]
+    if isinstance(P, ProductOperator):
+        return P.apply, P.shape[0]
     if isinstance(P, spla.LinearOperator) and P.shape[0] == P.shape[1]:
-        return P.matvec, P.shape[0]
+        return _writing_into(P.matvec), P.shape[0]
     raise InvalidParameterError(
         "the chain must be a square sparse matrix P or a scipy LinearOperator for P^T,"
         f" got {type(P).__name__}")
@@ -522,9 +543,9 @@ def stationary(P, method: str = "auto", tol: float = DEFAULT_TOL,
 
     with progress_bar(None, f"{method} (x P products)", "product") as bar:
 
-        def counted(v):
+        def counted(v, out=None):
             bar.update(1)
-            return product(v)
+            return product(v, out)
 
         x, res, products, stage = _iterate(counted, n, method, tol, maxiter, x0, aggregates)
     if not res <= tol:
