@@ -320,5 +320,5 @@ def scgf(ring_or_chain, s_values, pi: np.ndarray | None = None) -> SCGF:
     bound = MAX_TILT / max(1, ring.cars * ring.vmax)
     s_arr = np.array([ensure_real("s", s, -bound, bound) for s in s_arr])
     sc = prepare(ring_or_chain, pi)
-    values, residuals = scgf_values(sc, sc.increments(keep=True), s_arr)
+    values, residuals = scgf_values(sc, sc.increments(keep=True), s_arr, DENSE_EIG_LIMIT)
     return SCGF(s_arr, values, residuals)

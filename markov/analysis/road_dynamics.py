@@ -1,9 +1,13 @@
 """The dynamics of a solved open road: spectrum, sensitivities, exit-current fluctuations, C(t).
 
-Every analysis of a ring (:mod:`markov.analysis.spectrum`, ``sensitivity``,
-``correlations``, ``fluctuations``) has its road version here, on the
-road's own transition matrix ``P`` (:class:`markov.solvers.road_chain.RoadChain`,
-row-stochastic, never lumped: a road has no rotation, so one sector).
+The road's entry points and result types of the analyses a ring has
+(:mod:`markov.analysis.spectrum`, ``sensitivity``, ``correlations``,
+``fluctuations``).  The computations are written once, against the chain
+interface (:mod:`markov.analysis.stationary_chain`) that the road produces
+(:mod:`markov.analysis.road_system`: the road's own transition matrix ``P``,
+row-stochastic, never lumped, one sector; its observables; the cars leaving as the
+increment per transition).  What stays here is the road's own: the result types
+with their per-time-step units, and the derivative of ``P`` in a road parameter.
 
 Units.  ``P`` is one *chain step*: a time step under parallel and
 ordered-sequential update, one *sub-step* under random-sequential update, where
@@ -13,7 +17,7 @@ result is given per time step (times divided, rates multiplied by ``S``), and
 the per-chain-step value is kept beside it.
 
 * :func:`road_spectrum`: the leading eigenvalues of ``P`` (dense LAPACK up to
-  :data:`markov.analysis.spectrum.DENSE_SECTOR_STATES` states, else ARPACK,
+  :data:`markov.analysis.stationary_chain.DENSE_SECTOR_STATES` states, else ARPACK,
   largest modulus), with residuals; ``tau = -1 / (S ln |lambda_2|)`` time steps.
 * :func:`road_sensitivity`: ``d pi / d theta`` and the derivatives of the flux,
   the inflow, the mean number of cars and the density profile, for ``theta`` =
@@ -32,10 +36,11 @@ the per-chain-step value is kept beside it.
 * :func:`exit_fluctuations`: ``J`` and the diffusion coefficient
   ``Delta = lim var(Y_t) / t`` of ``Y_t``, the number of cars that left up to
   time ``t``, by the Green-Kubo (Poisson-equation) formula of
-  :mod:`markov.analysis.fluctuations` with the cars leaving in each transition
+  :mod:`markov.analysis.stationary_chain` with the cars leaving in each transition
   (:func:`markov.chain.lattice.successor_branches`); :func:`exit_count_variance`
   gives ``var(Y_t)`` at finite ``t``, :func:`exit_scgf` the scaled cumulant
-  generating function from the tilted matrix ``P_s(x, y) = sum P e^{s m}``.
+  generating function: the Perron root of the tilted matrix ``P_s(x, y) = sum P e^{s m}``
+  (centred by ``J``, as a ring's).
 * :func:`road_autocorrelation` and :func:`road_autocorrelation_time`: ``C(t)``
   and ``tau_int`` of the exit current (cars leaving in one chain step) or of a
   state observable (:data:`ROAD_OBSERVABLES`: cars on the road, stopped cars,
@@ -53,14 +58,16 @@ import scipy.sparse.linalg as spla
 
 from markov.analysis.road_system import (ROAD_OBSERVABLES, _digits, chain_step_name,
                                          exit_branches, prepare_road, road_observable, road_of)
-from markov.analysis.stationary_chain import (autocorrelation_of, autocorrelation_time_of,
-                                              count_variance, diffusion,
-                                              increment_autocorrelation, scgf_values)
+from markov.analysis.stationary_chain import (DENSE_SECTOR_STATES, autocorrelation_of,
+                                              autocorrelation_time_of,
+                                              continuous_time_relaxation_time, count_variance,
+                                              derivative_solve, diffusion, drop_stationary,
+                                              increment_autocorrelation, leading,
+                                              relaxation_time, scgf_values)
 from markov.chain.lattice import increments, lattice_of, successors
 from markov.errors import InvalidParameterError
 from markov.model.road import OnRamp, Road
 from markov.model.stretch import Stretch
-from markov.solvers.fundamental import solve_fundamental
 from markov.solvers.road_chain import RoadChain, RoadSolution
 from markov.validate import ensure_int, ensure_real
 
@@ -109,10 +116,7 @@ class RoadSpectrum:
     @property
     def relaxation_time_chain_steps(self) -> float:
         """``-1 / ln |lambda_2|`` in chain steps (sub-steps: random-sequential)."""
-        lam = self.second
-        if lam is None or abs(lam) == 0:
-            return 0.0
-        return math.inf if abs(lam) >= 1 - 1e-12 else -1.0 / math.log(abs(lam))
+        return 0.0 if self.second is None else relaxation_time(abs(self.second))
 
     @property
     def relaxation_time(self) -> float:
@@ -129,12 +133,7 @@ class RoadSpectrum:
         """Random-sequential update in continuous time (generator ``S (P - 1)``):
         ``1 / (S min(1 - Re lambda))`` over the eigenvalues found, in units of time
         (``S`` sub-steps per unit); None for the other updates."""
-        if self.steps_per_time_step == 1:
-            return None
-        if not self.eigenvalues:
-            return 0.0
-        gap = min(1.0 - float(np.real(v)) for v in self.eigenvalues)
-        return math.inf if gap <= 1e-14 else 1.0 / (self.steps_per_time_step * gap)
+        return continuous_time_relaxation_time(self.eigenvalues, self.steps_per_time_step)
 
     def to_dict(self) -> dict:
         """JSON-ready, with the road and its conventions.
@@ -187,7 +186,6 @@ def road_spectrum(system, count: int = 4, tol: float = 1e-10, maxiter: int = 20_
     >>> round(s.second.real, 12)
     0.1
     """
-    from markov.analysis.spectrum import DENSE_SECTOR_STATES, _leading
     from markov.validate import ensure_tol
 
     count = ensure_int("count", count, 1, 1000)
@@ -200,9 +198,7 @@ def road_spectrum(system, count: int = 4, tol: float = 1e-10, maxiter: int = 20_
     want = min(count + 1, n)
     # complex, as the ring's sector matrices: _leading starts ARPACK from a complex vector
     A = spla.aslinearoperator(sv.P.T.tocsr().astype(np.complex128))
-    pairs = _leading(A, want, tol, maxiter)
-    drop = int(np.argmin([abs(v - 1) for v, _ in pairs]))
-    pairs = (pairs[:drop] + pairs[drop + 1:])[:count]
+    pairs = drop_stationary(leading(A, want, tol, maxiter), count)
     route = "dense" if n <= DENSE_SECTOR_STATES or want >= n - 1 else "arpack"
     return RoadSpectrum(sv.road, tuple(v for v, _ in pairs), tuple(r for _, r in pairs), n,
                         sv.S, route, time.perf_counter() - start)
@@ -487,8 +483,7 @@ def road_sensitivity(system, parameter: str, solution: RoadSolution | None = Non
     pi = sv.pi
     h = dP.T @ pi
     h -= pi * h.sum()                 # exact sum zero (rows of dP sum to zero)
-    dpi = solve_fundamental(sv.P, pi, h, tol=tol)
-    residual = float(np.abs(dpi - sv.step(dpi) - h).sum())
+    dpi, residual = derivative_solve(sv.P, sv.step, pi, h, tol)
     a = increments(sv.chain.lattice, keys)[:, cols]
     dflux = sv.S * float(dpi @ a[:, 0] + pi @ da[:, 0])
     dinflow = sv.S * float(dpi @ a[:, 1] + pi @ da[:, 1])

@@ -56,12 +56,16 @@ from markov.solvers.fundamental import solve_fundamental
 
 __all__ = ["StationaryChain", "Increments", "moments_increments", "autocorrelation_of",
            "autocorrelation_time_of", "increment_autocorrelation", "diffusion",
-           "count_variance", "perron", "scgf_values", "MAX_LAGS", "DENSE_EIG_LIMIT"]
+           "count_variance", "perron", "scgf_values", "leading", "drop_stationary",
+           "relaxation_time", "continuous_time_relaxation_time", "derivative_solve",
+           "MAX_LAGS", "DENSE_EIG_LIMIT", "DENSE_SECTOR_STATES"]
 
 #: Most lags (products ``x P``) of a correlation or a finite-time variance.
 MAX_LAGS = 1_000_000
 #: Tilted chains up to this many states are diagonalised densely (LAPACK).
 DENSE_EIG_LIMIT = 300
+#: Sectors up to this many states are diagonalised densely (LAPACK).
+DENSE_SECTOR_STATES = 200
 
 
 class Increments(NamedTuple):
@@ -357,7 +361,8 @@ def count_variance(sc: StationaryChain, inc: Increments, steps: int) -> np.ndarr
     return out
 
 
-def perron(apply, n: int, v0: np.ndarray, tol: float = 1e-14) -> tuple[float, float]:
+def perron(apply, n: int, v0: np.ndarray, tol: float = 1e-14,
+           dense_limit: int = DENSE_EIG_LIMIT) -> tuple[float, float]:
     """Perron root of a nonnegative irreducible operator and the residual of its vector.
 
     Parameters
@@ -368,6 +373,8 @@ def perron(apply, n: int, v0: np.ndarray, tol: float = 1e-14) -> tuple[float, fl
     v0 : (n,) array
         ARPACK's start (above :data:`DENSE_EIG_LIMIT` states).
     tol : float
+    dense_limit : int
+        Up to this many states, dense LAPACK.
 
     Returns
     -------
@@ -376,7 +383,7 @@ def perron(apply, n: int, v0: np.ndarray, tol: float = 1e-14) -> tuple[float, fl
         ``||A v - lambda v||_1 / ||v||_1``.
     """
     with one_blas_thread():   # the products are numba-parallel (markov._blas)
-        if n <= DENSE_EIG_LIMIT:
+        if n <= dense_limit:
             M = np.column_stack([apply(e) for e in np.eye(n)])
             vals, vecs = scipy.linalg.eig(M)
             k = int(np.argmax(vals.real))
@@ -394,7 +401,8 @@ def perron(apply, n: int, v0: np.ndarray, tol: float = 1e-14) -> tuple[float, fl
         return lam, res
 
 
-def scgf_values(sc: StationaryChain, inc: Increments, s_values) -> tuple[np.ndarray, np.ndarray]:
+def scgf_values(sc: StationaryChain, inc: Increments, s_values,
+                dense_limit: int = DENSE_EIG_LIMIT) -> tuple[np.ndarray, np.ndarray]:
     """``Lambda(s) = s J + log lambda(s)`` per chain step, with the Perron residuals.
 
     ``lambda(s)`` is the Perron root of the tilted chain centred by the current,
@@ -407,6 +415,8 @@ def scgf_values(sc: StationaryChain, inc: Increments, s_values) -> tuple[np.ndar
     inc : Increments
         With ``m`` or ``transitions``.
     s_values : (k,) float64 array
+    dense_limit : int
+        Up to this many states, dense LAPACK (:func:`perron`).
 
     Returns
     -------
@@ -425,6 +435,146 @@ def scgf_values(sc: StationaryChain, inc: Increments, s_values) -> tuple[np.ndar
             tilted_T = sp.csr_array((prob * np.exp(s * (moved - J)), (col, src)), shape=(n, n))
             def apply(x, tilted_T=tilted_T):
                 return tilted_T @ np.asarray(x, dtype=np.float64).ravel()
-        lam, residuals[i] = perron(apply, n, v0)
+        lam, residuals[i] = perron(apply, n, v0, dense_limit=dense_limit)
         values[i] = s * J + math.log(lam)
     return values, residuals
+
+
+# --- the spectrum of one sector -------------------------------------------------------------
+
+
+def _ncv(count: int) -> int:
+    """ARPACK's Krylov vectors for ``count`` eigenvalues."""
+    return max(2 * count + 1, count + 20)
+
+
+def leading(A, count: int, tol: float, maxiter: int, dense_limit: int = DENSE_SECTOR_STATES):
+    """The ``count`` eigenvalues of largest modulus of the operator ``A``, with residuals.
+
+    Parameters
+    ----------
+    A : LinearOperator (complex)
+        ``A @ x`` is ``x P_k``: one sector (a ring's momentum sector, a road's one).
+    count : int
+    tol : float
+        ARPACK's relative accuracy.
+    maxiter : int
+    dense_limit : int
+        Up to this many states (or ``count >= m - 1``), dense LAPACK.
+
+    Returns
+    -------
+    list of (complex, float)
+        ``(lambda, ||x P - lambda x|| / ||x||)`` by decreasing modulus, then argument.
+    """
+    m = A.shape[0]
+    # one BLAS thread: on the small dense matrices threads only contend (10x slower on
+    # a loaded 2-core machine), and ARPACK's vector work between the numba-parallel
+    # sector products gains nothing from them (markov._blas)
+    with one_blas_thread():
+        if m <= dense_limit or count >= m - 1:
+            M = A.matmat(np.eye(m, dtype=np.complex128))
+            vals, vecs = np.linalg.eig(M)
+        else:
+            v0 = np.random.default_rng(12345).standard_normal(m) + 0j
+            try:
+                vals, vecs = spla.eigs(A, k=count, which="LM", tol=tol, maxiter=maxiter,
+                                       v0=v0, ncv=min(m, _ncv(count)))
+            except spla.ArpackNoConvergence as exc:
+                raise ConvergenceError(
+                    f"ARPACK found {len(exc.eigenvalues)} of {count} eigenvalues in"
+                    f" {maxiter} iterations", maxiter, np.inf) from None
+        order = np.lexsort((np.angle(vals), -np.abs(vals)))[:count]
+        out = []
+        for i in order:
+            v = vecs[:, i]
+            r = A.matvec(v) - vals[i] * v
+            out.append((complex(vals[i]), float(np.linalg.norm(r) / np.linalg.norm(v))))
+        return out
+
+
+def drop_stationary(pairs: list, count: int) -> list:
+    """The pairs of sector 0 without the stationary eigenvalue (the nearest to 1).
+
+    Parameters
+    ----------
+    pairs : list of (complex, float)
+        From :func:`leading`.
+    count : int
+        Pairs kept.
+
+    Returns
+    -------
+    list of (complex, float)
+    """
+    drop = int(np.argmin([abs(v - 1) for v, _ in pairs]))
+    return (pairs[:drop] + pairs[drop + 1:])[:count]
+
+
+def relaxation_time(modulus: float) -> float:
+    """``-1 / ln |lambda|`` in chain steps: 0 for ``lambda = 0``, ``inf`` for ``|lambda| = 1``.
+
+    Parameters
+    ----------
+    modulus : float
+
+    Returns
+    -------
+    float
+    """
+    if modulus == 0:
+        return 0.0
+    return math.inf if modulus >= 1 - 1e-12 else -1.0 / math.log(modulus)
+
+
+def continuous_time_relaxation_time(values, steps_per_time_step: int) -> float | None:
+    """Random-sequential update in continuous time (generator ``S (P - 1)``).
+
+    ``1 / (S min(1 - Re lambda))`` over the eigenvalues found, in units of time
+    (``S`` sub-steps per unit).
+
+    Parameters
+    ----------
+    values : sequence of complex
+        Eigenvalues of ``P`` other than the stationary 1.
+    steps_per_time_step : int
+        ``S``; 1 (parallel, ordered-sequential update) gives None.
+
+    Returns
+    -------
+    float or None
+    """
+    if steps_per_time_step == 1:
+        return None
+    if not len(values):
+        return 0.0
+    gap = min(1.0 - float(np.real(v)) for v in values)
+    return math.inf if gap <= 1e-14 else 1.0 / (steps_per_time_step * gap)
+
+
+# --- sensitivity ------------------------------------------------------------------------------
+
+
+def derivative_solve(P, step, pi: np.ndarray, h: np.ndarray,
+                     tol: float = 1e-12) -> tuple[np.ndarray, float]:
+    """``dpi`` of ``dpi (I - P) = h = pi dP``, ``sum dpi = 0``, and its residual.
+
+    Parameters
+    ----------
+    P : sparse matrix or LinearOperator
+        What :func:`markov.solvers.fundamental.solve_fundamental` takes.
+    step : callable
+        ``step(x)`` is ``x P`` (for the residual).
+    pi : (n,) float64 array
+    h : (n,) float64 array
+        ``pi dP``, from the system's derivative product.
+    tol : float
+
+    Returns
+    -------
+    dpi : (n,) float64 array
+    residual : float
+        ``||dpi (I - P) - h||_1``.
+    """
+    dpi = solve_fundamental(P, pi, h, tol=tol)
+    return dpi, float(np.abs(dpi - step(dpi) - h).sum())
