@@ -8,7 +8,10 @@ the stationary chain ``X_0, X_1, ...`` (``X_0 ~ pi``):
           h_0 = \\pi \\circ (f - \\langle f \\rangle), \\quad h_{t+1} = h_t P,
 
 one product ``x -> x P`` per lag (the CSR matrix or the matrix-free operator
-``A = P^T`` of :class:`markov.solvers.ring_chain.RingChain`).  The integrated
+``A = P^T`` of :class:`markov.solvers.ring_chain.RingChain`).  The computation is
+written once for a ring and a road
+(:func:`markov.analysis.stationary_chain.autocorrelation_of`); this module is the
+ring's entry point, the road's is :mod:`markov.analysis.road_dynamics`.  The integrated
 autocorrelation time, in the convention of
 :func:`markov.simulation.montecarlo.integrated_autocorrelation_time`,
 
@@ -18,7 +21,7 @@ is one linear solve: ``sum_{t >= 0} h_0 P^t = w`` with ``w (I - P) = h_0``,
 ``sum(w) = 0`` (:func:`markov.solvers.fundamental.solve_fundamental`), so
 ``sum_{t >= 1} C(t) = (w - h_0) . (f - <f>)``.
 
-Observables (:data:`OBSERVABLES`), per cell:
+Observables (:data:`OBSERVABLES`, :mod:`markov.analysis.ring_system`), per cell:
 
 * ``"flux"``: the sum of the car velocities divided by ``L``.  Under parallel
   and ordered-sequential update a car's velocity is what it moved in the step
@@ -40,173 +43,20 @@ A periodic chain (none of NaSch's with ``0 < p < 1``) has no limit of
 """
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
-import scipy.sparse.linalg as spla
 
-from markov.errors import InvalidParameterError
-from markov.model.ring import RANDOM_SEQUENTIAL, Ring
-from markov.solvers.fundamental import solve_fundamental
-from markov.solvers.observables import velocity_counts
-from markov.solvers.ring_chain import RingChain
+from markov.analysis.ring_system import (OBSERVABLES, ensure_observable, observable_values,
+                                         prepare, sub_steps)
+from markov.analysis.stationary_chain import (MAX_LAGS, StationaryChain, autocorrelation_of,
+                                              autocorrelation_time_of)
+from markov.model.ring import Ring
 from markov.validate import ensure_int
 
 __all__ = ["OBSERVABLES", "MAX_LAGS", "StationaryChain", "prepare", "observable_values",
            "sub_steps", "autocorrelation", "autocorrelation_time"]
 
-#: Observables of :func:`observable_values`.
-OBSERVABLES = ("flux", "stopped")
-#: Most lags :func:`autocorrelation` computes (one product ``x P`` each).
-MAX_LAGS = 1_000_000
 #: Largest ``stride`` of :func:`autocorrelation_time`.
 MAX_STRIDE = 10_000
-
-
-class StationaryChain(NamedTuple):
-    """A chain with its stationary vector and the product ``x -> x P``.
-
-    Attributes
-    ----------
-    chain : RingChain
-    pi : (n,) float64 array
-        Stationary vector over ``chain.keys``.
-    P : sparse matrix or LinearOperator
-        What :func:`markov.solvers.fundamental.solve_fundamental` takes: the CSR
-        matrix ``P``, or the matrix-free operator ``A = P^T``.
-    step : callable
-        ``step(x)`` is the row vector ``x P``.
-    """
-
-    chain: RingChain
-    pi: np.ndarray
-    P: object
-    step: object
-
-    @property
-    def ring(self) -> Ring:
-        return self.chain.ring
-
-    @property
-    def keys(self) -> np.ndarray:
-        return self.chain.keys
-
-
-def prepare(ring_or_chain, pi: np.ndarray | None = None) -> StationaryChain:
-    """The chain of a ring, its stationary vector and its product, ready for correlations.
-
-    Parameters
-    ----------
-    ring_or_chain : Ring or RingChain
-        A ring gets ``RingChain(ring, lump_velocities=False)`` (rotations lumped,
-        every velocity kept, ``operator="auto"``); a chain with its velocities
-        lumped (the default) is replaced by :meth:`RingChain.with_every_velocity`.
-    pi : (n,) array, optional
-        The stationary vector over ``chain.keys`` if already solved (a
-        :class:`markov.solvers.ring_chain.Solution`'s ``pi`` for the same chain); default
-        ``chain.solution().pi``, and always for a chain with its velocities
-        lumped (a vector over velocity classes is solved again).
-
-    Returns
-    -------
-    StationaryChain
-
-    Raises
-    ------
-    InvalidParameterError
-        For anything but a Ring or RingChain, or ``pi`` of another length.
-
-    Examples
-    --------
-    >>> sc = prepare(Ring(3, 2, 1, 0.5))
-    >>> len(sc.pi), bool(np.allclose(sc.step(sc.pi), sc.pi))
-    (2, True)
-    """
-    # the dynamics read each state's velocities: every velocity kept
-    if isinstance(ring_or_chain, Ring):
-        chain = RingChain(ring_or_chain, lump_velocities=False)
-    elif isinstance(ring_or_chain, RingChain):
-        chain = ring_or_chain.with_every_velocity()
-        if chain is not ring_or_chain:
-            pi = None   # a vector over the lumped states: solved again
-    else:
-        raise InvalidParameterError(
-            "expected a markov.Ring or markov.RingChain, got"
-            f" {type(ring_or_chain).__name__}")
-    n = chain.n_states
-    if pi is None:
-        pi = chain.solution().pi
-    pi = np.ascontiguousarray(pi, dtype=np.float64)
-    if pi.shape != (n,):
-        raise InvalidParameterError(
-            f"pi must have one entry per state of the chain ({n:,}), got shape {pi.shape}")
-    if chain.ring.trivial or chain.operator_kind == "matrix":
-        P = chain.matrix
-        PT = P.T.tocsr()
-        return StationaryChain(chain, pi, P, lambda x: PT @ x)
-    A = chain.transition_operator
-    return StationaryChain(chain, pi, A, A.apply)
-
-
-def sub_steps(ring: Ring) -> int:
-    """Steps of the chain per time step: ``L`` for random-sequential update, else 1.
-
-    Parameters
-    ----------
-    ring : Ring
-
-    Returns
-    -------
-    int
-
-    Examples
-    --------
-    >>> sub_steps(Ring(10, 5, 2, 0.5)), sub_steps(Ring(10, 5, 2, 0.5, "random-sequential"))
-    (1, 10)
-    """
-    return ring.length if ring.update == RANDOM_SEQUENTIAL else 1
-
-
-def _ensure_observable(name) -> str:
-    if name not in OBSERVABLES:
-        raise InvalidParameterError(
-            f"observable must be one of {', '.join(OBSERVABLES)}, got {name!r}")
-    return name
-
-
-def observable_values(ring: Ring, keys: np.ndarray, name: str) -> np.ndarray:
-    """An observable of :data:`OBSERVABLES` in every state, per cell.
-
-    Parameters
-    ----------
-    ring : Ring
-    keys : (n,) int64 array
-    name : {"flux", "stopped"}
-        ``"flux"``: sum of the velocities / ``L``; ``"stopped"``: cars at
-        velocity 0 / ``L``.
-
-    Returns
-    -------
-    (n,) float64 array
-
-    Examples
-    --------
-    >>> from markov.chain.encoding import encode
-    >>> ring = Ring(5, 3, 2, 0.5)
-    >>> keys = np.array([encode([2, -1, 0, 1, -1], 2)])
-    >>> observable_values(ring, keys, "flux").tolist(), observable_values(ring, keys, "stopped").tolist()
-    ([0.6], [0.2])
-    """
-    counts = velocity_counts(ring, keys)
-    if _ensure_observable(name) == "flux":
-        return counts @ np.arange(ring.vmax + 1, dtype=np.float64) / ring.length
-    return counts[:, 0].astype(np.float64) / ring.length
-
-
-def _centred(sc: StationaryChain, name: str) -> tuple[np.ndarray, bool]:
-    """``f - <f>`` and whether ``f`` is constant (then every correlation is zero)."""
-    f = observable_values(sc.ring, sc.keys, name)
-    return f - float(np.dot(sc.pi, f)), bool(np.ptp(f) == 0)
 
 
 def autocorrelation(ring_or_chain, observable: str = "flux", lags: int = 100,
@@ -238,34 +88,9 @@ def autocorrelation(ring_or_chain, observable: str = "flux", lags: int = 100,
     >>> bool(np.allclose(c, [0.25 * 0.75 / 9, 0, 0]))
     True
     """
-    _ensure_observable(observable)
+    ensure_observable(observable)
     lags = ensure_int("lags", lags, 0, MAX_LAGS)
-    sc = prepare(ring_or_chain, pi)
-    d, constant = _centred(sc, observable)
-    out = np.zeros(lags + 1)
-    if constant:
-        return out
-    h = sc.pi * d
-    out[0] = np.dot(h, d)
-    for t in range(1, lags + 1):
-        h = sc.step(h)
-        out[t] = np.dot(h, d)
-    return out
-
-
-def _power(sc: StationaryChain, k: int):
-    """``x -> x P^k`` as an operator ``(P^k)^T`` for :func:`solve_fundamental`."""
-    if k == 1:
-        return sc.P
-
-    def matvec(x):
-        x = np.asarray(x, dtype=np.float64).ravel()
-        for _ in range(k):
-            x = sc.step(x)
-        return x
-
-    n = len(sc.pi)
-    return spla.LinearOperator((n, n), matvec=matvec, dtype=np.float64)
+    return autocorrelation_of(prepare(ring_or_chain, pi), observable, lags)
 
 
 def autocorrelation_time(ring_or_chain, observable: str = "flux",
@@ -302,13 +127,6 @@ def autocorrelation_time(ring_or_chain, observable: str = "flux",
     >>> round(autocorrelation_time(Ring(3, 1, 1, 0.25)), 12)
     1.0
     """
-    _ensure_observable(observable)
+    ensure_observable(observable)
     stride = ensure_int("stride", stride, 1, MAX_STRIDE)
-    sc = prepare(ring_or_chain, pi)
-    d, constant = _centred(sc, observable)
-    if constant:
-        return 1.0
-    h = sc.pi * d
-    c0 = float(np.dot(h, d))
-    w = solve_fundamental(_power(sc, stride), sc.pi, h)
-    return 1.0 + 2.0 * float(np.dot(w - h, d)) / c0
+    return autocorrelation_time_of(prepare(ring_or_chain, pi), observable, stride)

@@ -30,6 +30,13 @@ is the log of the Perron eigenvalue of the tilted matrix ``P_s(x, y) = P(x, y)
 exp(s m(x, y))`` (for parallel update ``A_s = diag(e^{s m}) A``, matrix-free
 when the chain is); ``Lambda'(0) = J``, ``Lambda''(0) = Delta``.
 
+Written once for a ring and a road (:mod:`markov.analysis.stationary_chain`: the
+increments per transition of a :class:`~markov.analysis.stationary_chain.StationaryChain`,
+the Green-Kubo solve, the finite-time variance, the tilted Perron root); this
+module is the ring's entry point, with its increment the cells moved
+(:mod:`markov.analysis.ring_system`), the road's is
+:mod:`markov.analysis.road_dynamics`, with the cars leaving.
+
 Units: per step of the chain: a time step for parallel and ordered-sequential
 update, a sub-step (one cell drawn) for random-sequential update.  Per time
 step of random-sequential update (``L`` sub-steps) ``J`` and ``Delta`` are
@@ -41,148 +48,25 @@ current through one bond has ``Delta / L^2`` (per time step).
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-import scipy.linalg
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
-from markov._blas import one_blas_thread
-from markov._jit import njit
-from markov import memory
-from markov.analysis.correlations import MAX_LAGS, StationaryChain, prepare, sub_steps
-from markov.chain.encoding import canonical_keys
-from markov.chain.kernels import cars_of
-from markov.chain.transition import state_indices, successors
-from markov.errors import ConvergenceError, InvalidParameterError
-from markov.model.ring import RANDOM_SEQUENTIAL, Ring
-from markov.solvers.fundamental import solve_fundamental
-from markov.solvers.observables import velocity_counts
+from markov.analysis.ring_system import moved_per_state, prepare, sub_steps
+from markov.analysis.stationary_chain import (DENSE_EIG_LIMIT, MAX_LAGS, count_variance,
+                                              diffusion, perron as _perron, scgf_values)
+from markov.errors import InvalidParameterError
+from markov.model.ring import Ring
 from markov.solvers.ring_chain import RingChain
 from markov.validate import ensure_int, ensure_real
 
 __all__ = ["CurrentFluctuations", "SCGF", "current_fluctuations", "current_variance",
            "block_autocorrelation_time", "scgf", "moved_per_state", "DENSE_EIG_LIMIT"]
 
-#: Tilted chains up to this many states are diagonalised densely (LAPACK).
-DENSE_EIG_LIMIT = 300
 #: Bound on ``|s| * N * vmax`` of :func:`scgf` (``exp`` of it must not overflow).
 MAX_TILT = 300.0
-_CHUNK = 1 << 15
-
-
-# --- the increments ---------------------------------------------------------------
-
-
-def moved_per_state(ring: Ring, keys: np.ndarray) -> np.ndarray:
-    """Cells moved in the step into each state: the sum of its velocities.
-
-    The increment ``m(y)`` of parallel and ordered-sequential update (every
-    car moves its new velocity once a step).
-
-    Parameters
-    ----------
-    ring : Ring
-    keys : (n,) int64 array
-
-    Returns
-    -------
-    (n,) float64 array
-
-    Examples
-    --------
-    >>> from markov.chain.encoding import encode
-    >>> moved_per_state(Ring(5, 3, 2, 0.5), np.array([encode([2, -1, 0, 1, -1], 2)])).tolist()
-    [3.0]
-    """
-    return velocity_counts(ring, keys) @ np.arange(ring.vmax + 1, dtype=np.float64)
-
-
-@njit(cache=True)
-def _position_sums(keys, length, b, out):
-    pos = np.empty(length, np.int64)
-    vel = np.empty(length, np.int64)
-    for i in range(keys.shape[0]):
-        n = cars_of(keys[i], length, b, pos, vel)
-        s = 0
-        for j in range(n):
-            s += pos[j]
-        out[i] = s
-
-
-def _position_sum(ring: Ring, keys: np.ndarray) -> np.ndarray:
-    out = np.empty(len(keys), np.int64)
-    _position_sums(np.ascontiguousarray(keys, np.int64), ring.length, ring.vmax + 2, out)
-    return out
-
-
-class _Increments(NamedTuple):
-    """What the moments of ``Y_t`` need: ``cov_j = (h0 P^{j-1}) . r`` for ``j >= 1``."""
-
-    current: float              # J = E m
-    variance: float             # var(m) of one step
-    h0: np.ndarray              # row vector, sums to zero
-    r: np.ndarray               # column read out
-    m: np.ndarray | None        # moved per target state (parallel, ordered-sequential)
-    transitions: tuple | None   # (source, target, probability, moved) (random-sequential)
-
-
-def _transition_moves(sc: StationaryChain, keep: bool):
-    """Stream the unlumped successor rows: ``a``, ``E[m^2 | x]``, ``b``; the entries if ``keep``."""
-    ring, keys, pi = sc.ring, sc.keys, sc.pi
-    n = len(keys)
-    a, a2, b = np.zeros(n), np.zeros(n), np.zeros(n)
-    parts = []
-    for start in range(0, n, _CHUNK):
-        chunk = keys[start:start + _CHUNK]
-        rows = successors(ring, chunk, lump=False)
-        prob = rows.probabilities()
-        local = np.repeat(np.arange(len(chunk)), np.diff(rows.indptr))
-        # one car moved d < L cells: the position sum changed by d mod L
-        moved = (_position_sum(ring, rows.keys) - _position_sum(ring, chunk)[local]) % ring.length
-        target = canonical_keys(rows.keys, ring.length, ring.vmax) if sc.chain.lump \
-            else rows.keys
-        col = state_indices(keys, target)
-        pm = prob * moved
-        a[start:start + len(chunk)] = np.bincount(local, pm, len(chunk))
-        a2[start:start + len(chunk)] = np.bincount(local, pm * moved, len(chunk))
-        b += np.bincount(col, pi[start + local] * pm, n)
-        if keep:
-            parts.append((start + local, col, prob, moved.astype(np.int16)))
-    entries = tuple(np.concatenate(x) for x in zip(*parts)) if keep else None
-    return a, a2, b, entries
-
-
-def _increments(sc: StationaryChain, keep: bool = False) -> _Increments:
-    pi = sc.pi
-    if sc.ring.update != RANDOM_SEQUENTIAL:
-        m = moved_per_state(sc.ring, sc.keys)
-        J = float(np.dot(pi, m))
-        d = m - J
-        # cov_j = (pi o d) P^j . m: start one product further
-        return _Increments(J, float(np.dot(pi, d * d)), _sum_free(sc.step(pi * d), pi), m, m,
-                           None)
-    if keep:
-        memory.check_fits(f"the tilted matrix ({sc.chain.transitions:,} transitions)",
-                          40.0 * sc.chain.transitions, sc.chain.limit)
-    a, a2, b, entries = _transition_moves(sc, keep)
-    J = float(np.dot(pi, a))
-    return _Increments(J, float(np.dot(pi, a2)) - J * J, _sum_free(b - J * pi, pi), a, None,
-                       entries)
-
-
-def _sum_free(h: np.ndarray, pi: np.ndarray) -> np.ndarray:
-    """``h`` with its rounding sum removed along ``pi``.
-
-    ``h`` sums to zero in exact arithmetic; when every covariance vanishes (a
-    lone car: independent steps) it is rounding noise, whose sum is of the
-    order of the vector itself, which :func:`solve_fundamental` would refuse.
-    """
-    return h - pi * h.sum()
 
 
 # --- diffusion ---------------------------------------------------------------------
@@ -268,13 +152,6 @@ class CurrentFluctuations:
                 "states": self.states, "seconds": self.seconds}
 
 
-def _diffusion(sc: StationaryChain, inc: _Increments) -> float:
-    if inc.variance <= 0:
-        return 0.0
-    w = solve_fundamental(sc.P, sc.pi, inc.h0)
-    return inc.variance + 2.0 * float(np.dot(w, inc.r))
-
-
 def current_fluctuations(ring_or_chain, pi: np.ndarray | None = None) -> CurrentFluctuations:
     """The current ``J`` and diffusion coefficient ``Delta`` of the ring's cars, exactly.
 
@@ -304,8 +181,8 @@ def current_fluctuations(ring_or_chain, pi: np.ndarray | None = None) -> Current
     """
     start = time.perf_counter()
     sc = prepare(ring_or_chain, pi)
-    inc = _increments(sc)
-    delta = _diffusion(sc, inc)
+    inc = sc.increments()
+    delta = diffusion(sc, inc)
     return CurrentFluctuations(sc.ring, inc.current, delta, inc.variance, sub_steps(sc.ring),
                                len(sc.pi), time.perf_counter() - start)
 
@@ -337,16 +214,7 @@ def current_variance(ring_or_chain, steps: int, pi: np.ndarray | None = None) ->
     """
     steps = ensure_int("steps", steps, 0, MAX_LAGS)
     sc = prepare(ring_or_chain, pi)
-    inc = _increments(sc)
-    out = np.zeros(steps + 1)
-    g = inc.h0
-    partial = 0.0     # sum_{j < t} cov_j
-    for t in range(1, steps + 1):
-        out[t] = out[t - 1] + inc.variance + 2.0 * partial
-        if t < steps:
-            partial += float(np.dot(g, inc.r))
-            g = sc.step(g)
-    return out
+    return count_variance(sc, sc.increments(), steps)
 
 
 def block_autocorrelation_time(ring_or_chain, block: int = 1,
@@ -416,27 +284,6 @@ class SCGF(NamedTuple):
     residual: np.ndarray
 
 
-def _perron(apply, n: int, v0: np.ndarray, tol: float = 1e-14) -> tuple[float, float]:
-    """Perron root of a nonnegative irreducible operator and the residual of its vector."""
-    with one_blas_thread():   # the products are numba-parallel (markov._blas)
-        if n <= DENSE_EIG_LIMIT:
-            M = np.column_stack([apply(e) for e in np.eye(n)])
-            vals, vecs = scipy.linalg.eig(M)
-            k = int(np.argmax(vals.real))
-            lam, v = float(vals[k].real), vecs[:, k].real
-        else:
-            op = spla.LinearOperator((n, n), matvec=apply, dtype=np.float64)
-            try:
-                vals, vecs = spla.eigs(op, k=1, which="LR", v0=v0, tol=tol, maxiter=20_000)
-            except spla.ArpackNoConvergence as err:
-                raise ConvergenceError(f"ARPACK found no Perron pair of the tilted chain: {err}",
-                                       20_000, math.inf, None) from None
-            lam, v = float(vals[0].real), vecs[:, 0].real
-        v = v / v.sum()    # the Perron vector has one sign
-        res = float(np.abs(apply(v) - lam * v).sum() / np.abs(v).sum())
-        return lam, res
-
-
 def scgf(ring_or_chain, s_values, pi: np.ndarray | None = None) -> SCGF:
     """The scaled cumulant generating function ``Lambda(s)`` of ``Y_t``, per step.
 
@@ -473,20 +320,5 @@ def scgf(ring_or_chain, s_values, pi: np.ndarray | None = None) -> SCGF:
     bound = MAX_TILT / max(1, ring.cars * ring.vmax)
     s_arr = np.array([ensure_real("s", s, -bound, bound) for s in s_arr])
     sc = prepare(ring_or_chain, pi)
-    inc = _increments(sc, keep=True)
-    n, J = len(sc.pi), inc.current
-    v0 = np.abs(sc.pi) + 1e-300
-    values, residuals = np.empty(len(s_arr)), np.empty(len(s_arr))
-    for i, s in enumerate(s_arr):
-        if inc.m is not None:
-            tilt = np.exp(s * (inc.m - J))
-            def apply(x, tilt=tilt):
-                return tilt * sc.step(np.asarray(x, dtype=np.float64).ravel())
-        else:
-            src, col, prob, moved = inc.transitions
-            tilted_T = sp.csr_array((prob * np.exp(s * (moved - J)), (col, src)), shape=(n, n))
-            def apply(x, tilted_T=tilted_T):
-                return tilted_T @ np.asarray(x, dtype=np.float64).ravel()
-        lam, residuals[i] = _perron(apply, n, v0)
-        values[i] = s * J + math.log(lam)
+    values, residuals = scgf_values(sc, sc.increments(keep=True), s_arr, DENSE_EIG_LIMIT)
     return SCGF(s_arr, values, residuals)

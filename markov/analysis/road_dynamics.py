@@ -1,9 +1,13 @@
 """The dynamics of a solved open road: spectrum, sensitivities, exit-current fluctuations, C(t).
 
-Every analysis of a ring (:mod:`markov.analysis.spectrum`, ``sensitivity``,
-``correlations``, ``fluctuations``) has its road version here, on the
-road's own transition matrix ``P`` (:class:`markov.solvers.road_chain.RoadChain`,
-row-stochastic, never lumped: a road has no rotation, so one sector).
+The road's entry points and result types of the analyses a ring has
+(:mod:`markov.analysis.spectrum`, ``sensitivity``, ``correlations``,
+``fluctuations``).  The computations are written once, against the chain
+interface (:mod:`markov.analysis.stationary_chain`) that the road produces
+(:mod:`markov.analysis.road_system`: the road's own transition matrix ``P``,
+row-stochastic, never lumped, one sector; its observables; the cars leaving as the
+increment per transition).  What stays here is the road's own: the result types
+with their per-time-step units, and the derivative of ``P`` in a road parameter.
 
 Units.  ``P`` is one *chain step*: a time step under parallel and
 ordered-sequential update, one *sub-step* under random-sequential update, where
@@ -13,7 +17,7 @@ result is given per time step (times divided, rates multiplied by ``S``), and
 the per-chain-step value is kept beside it.
 
 * :func:`road_spectrum`: the leading eigenvalues of ``P`` (dense LAPACK up to
-  :data:`markov.analysis.spectrum.DENSE_SECTOR_STATES` states, else ARPACK,
+  :data:`markov.analysis.stationary_chain.DENSE_SECTOR_STATES` states, else ARPACK,
   largest modulus), with residuals; ``tau = -1 / (S ln |lambda_2|)`` time steps.
 * :func:`road_sensitivity`: ``d pi / d theta`` and the derivatives of the flux,
   the inflow, the mean number of cars and the density profile, for ``theta`` =
@@ -32,10 +36,11 @@ the per-chain-step value is kept beside it.
 * :func:`exit_fluctuations`: ``J`` and the diffusion coefficient
   ``Delta = lim var(Y_t) / t`` of ``Y_t``, the number of cars that left up to
   time ``t``, by the Green-Kubo (Poisson-equation) formula of
-  :mod:`markov.analysis.fluctuations` with the cars leaving in each transition
+  :mod:`markov.analysis.stationary_chain` with the cars leaving in each transition
   (:func:`markov.chain.lattice.successor_branches`); :func:`exit_count_variance`
   gives ``var(Y_t)`` at finite ``t``, :func:`exit_scgf` the scaled cumulant
-  generating function from the tilted matrix ``P_s(x, y) = sum P e^{s m}``.
+  generating function: the Perron root of the tilted matrix ``P_s(x, y) = sum P e^{s m}``
+  (centred by ``J``, as a ring's).
 * :func:`road_autocorrelation` and :func:`road_autocorrelation_time`: ``C(t)``
   and ``tau_int`` of the exit current (cars leaving in one chain step) or of a
   state observable (:data:`ROAD_OBSERVABLES`: cars on the road, stopped cars,
@@ -46,18 +51,23 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from markov._blas import one_blas_thread
-from markov.chain.lattice import increments, lattice_of, successor_branches, successors
-from markov.errors import InvalidParameterError, NoUniqueStationaryStateError
+from markov.analysis.road_system import (ROAD_OBSERVABLES, _digits, chain_step_name,
+                                         exit_branches, prepare_road, road_observable, road_of)
+from markov.analysis.stationary_chain import (DENSE_SECTOR_STATES, autocorrelation_of,
+                                              autocorrelation_time_of,
+                                              continuous_time_relaxation_time, count_variance,
+                                              derivative_solve, diffusion, drop_stationary,
+                                              increment_autocorrelation, leading,
+                                              relaxation_time, scgf_values)
+from markov.chain.lattice import increments, lattice_of, successors
+from markov.errors import InvalidParameterError
 from markov.model.road import OnRamp, Road
 from markov.model.stretch import Stretch
-from markov.solvers.fundamental import solve_fundamental
 from markov.solvers.road_chain import RoadChain, RoadSolution
 from markov.validate import ensure_int, ensure_real
 
@@ -67,68 +77,8 @@ __all__ = ["RoadSpectrum", "road_spectrum", "RoadSensitivity", "road_sensitivity
            "road_observable", "road_autocorrelation", "road_autocorrelation_time",
            "exit_branches"]
 
-#: State observables of :func:`road_autocorrelation` besides ``"exit"`` (an increment)
-#: and ``"occupation:X"``.
-ROAD_OBSERVABLES = ("exit", "cars", "stopped")
 #: Most lags of :func:`road_autocorrelation` and steps of :func:`exit_count_variance`.
 MAX_LAGS = 1_000_000
-_CHUNK = 1 << 14
-
-
-# ------------------------------------------------------------------ the chain
-
-
-class _Solved(NamedTuple):
-    chain: RoadChain
-    solution: RoadSolution
-    P: sp.csr_array
-    pi: np.ndarray
-    S: int               # chain steps per time step
-
-    @property
-    def road(self) -> Road:
-        return self.chain.system
-
-    @property
-    def keys(self) -> np.ndarray:
-        return self.solution.keys
-
-    def step(self, x: np.ndarray) -> np.ndarray:
-        """The row vector ``x P``."""
-        return self.P.T @ x
-
-
-def _prepare(system, solution: RoadSolution | None = None) -> _Solved:
-    """The road's chain, its solution and matrix; one closed class, or the refusal."""
-    if isinstance(system, RoadChain):
-        chain = system
-        if chain.lattice.lumping is not None:    # the analyses read every velocity
-            chain = RoadChain(chain.system, max_memory=chain.max_memory, lump=False)
-    elif isinstance(system, Road):
-        chain = RoadChain(system, lump=False)
-    else:
-        raise InvalidParameterError(
-            f"expected a markov Road or RoadChain, got {type(system).__name__}")
-    if chain.system.periodic:
-        raise InvalidParameterError(
-            "these are the analyses of an open road; a ring (with stretches or not) has"
-            " markov.analysis.spectrum, sensitivity, correlations and fluctuations")
-    if solution is not None and getattr(solution, "lumping", None) is not None:
-        solution = None           # solved on lumped states: solved again on the full ones
-    if solution is not None:
-        if not isinstance(solution, RoadSolution) or solution.system != chain.system:
-            raise InvalidParameterError("the solution is not of this road")
-        # its states: no search for the classes again
-        chain.__dict__.setdefault("keys", solution.keys)
-        if not np.array_equal(chain.keys, solution.keys):
-            raise InvalidParameterError("the solution is not on this chain's states")
-    else:
-        solution = chain.solution()   # several closed classes: refused there, with them
-    return _Solved(chain, solution, chain.matrix, solution.pi, solution.steps_per_time_step)
-
-
-def _chain_step_name(S: int) -> str:
-    return "one time step" if S == 1 else f"one sub-step ({S} sub-steps = one time step)"
 
 
 # ------------------------------------------------------------------ spectrum
@@ -166,10 +116,7 @@ class RoadSpectrum:
     @property
     def relaxation_time_chain_steps(self) -> float:
         """``-1 / ln |lambda_2|`` in chain steps (sub-steps: random-sequential)."""
-        lam = self.second
-        if lam is None or abs(lam) == 0:
-            return 0.0
-        return math.inf if abs(lam) >= 1 - 1e-12 else -1.0 / math.log(abs(lam))
+        return 0.0 if self.second is None else relaxation_time(abs(self.second))
 
     @property
     def relaxation_time(self) -> float:
@@ -186,12 +133,7 @@ class RoadSpectrum:
         """Random-sequential update in continuous time (generator ``S (P - 1)``):
         ``1 / (S min(1 - Re lambda))`` over the eigenvalues found, in units of time
         (``S`` sub-steps per unit); None for the other updates."""
-        if self.steps_per_time_step == 1:
-            return None
-        if not self.eigenvalues:
-            return 0.0
-        gap = min(1.0 - float(np.real(v)) for v in self.eigenvalues)
-        return math.inf if gap <= 1e-14 else 1.0 / (self.steps_per_time_step * gap)
+        return continuous_time_relaxation_time(self.eigenvalues, self.steps_per_time_step)
 
     def to_dict(self) -> dict:
         """JSON-ready, with the road and its conventions.
@@ -207,7 +149,7 @@ class RoadSpectrum:
                                 for v, r in zip(self.eigenvalues, self.residuals)],
                 "relaxation_time": tau if math.isfinite(tau) else None,
                 "relaxation_time_chain_steps": tau_c if math.isfinite(tau_c) else None,
-                "time_unit": "time step", "chain_step": _chain_step_name(
+                "time_unit": "time step", "chain_step": chain_step_name(
                     self.steps_per_time_step),
                 "steps_per_time_step": self.steps_per_time_step,
                 "relaxation_time_continuous": self.continuous_time_relaxation_time,
@@ -244,22 +186,19 @@ def road_spectrum(system, count: int = 4, tol: float = 1e-10, maxiter: int = 20_
     >>> round(s.second.real, 12)
     0.1
     """
-    from markov.analysis.spectrum import DENSE_SECTOR_STATES, _leading
     from markov.validate import ensure_tol
 
     count = ensure_int("count", count, 1, 1000)
     tol = ensure_tol(tol)
     start = time.perf_counter()
-    sv = _prepare(system, solution)
+    sv = prepare_road(system, solution)
     n = len(sv.pi)
     if n == 1:
         return RoadSpectrum(sv.road, (), (), 1, sv.S, "dense", time.perf_counter() - start)
     want = min(count + 1, n)
     # complex, as the ring's sector matrices: _leading starts ARPACK from a complex vector
     A = spla.aslinearoperator(sv.P.T.tocsr().astype(np.complex128))
-    pairs = _leading(A, want, tol, maxiter)
-    drop = int(np.argmin([abs(v - 1) for v, _ in pairs]))
-    pairs = (pairs[:drop] + pairs[drop + 1:])[:count]
+    pairs = drop_stationary(leading(A, want, tol, maxiter), count)
     route = "dense" if n <= DENSE_SECTOR_STATES or want >= n - 1 else "arpack"
     return RoadSpectrum(sv.road, tuple(v for v, _ in pairs), tuple(r for _, r in pairs), n,
                         sv.S, route, time.perf_counter() - start)
@@ -512,7 +451,7 @@ def road_sensitivity(system, parameter: str, solution: RoadSolution | None = Non
         raise InvalidParameterError(
             f"expected a markov Road or RoadChain, got {type(system).__name__}")
     value, at = road_parameter(road, parameter)     # before any work
-    sv = _prepare(system, solution)
+    sv = prepare_road(system, solution)
     start = time.perf_counter()
     radius = 0.5 * min(value, 1 - value)
     degree = polynomial_degree_bound(road, parameter, at, value, radius)
@@ -544,8 +483,7 @@ def road_sensitivity(system, parameter: str, solution: RoadSolution | None = Non
     pi = sv.pi
     h = dP.T @ pi
     h -= pi * h.sum()                 # exact sum zero (rows of dP sum to zero)
-    dpi = solve_fundamental(sv.P, pi, h, tol=tol)
-    residual = float(np.abs(dpi - sv.step(dpi) - h).sum())
+    dpi, residual = derivative_solve(sv.P, sv.step, pi, h, tol)
     a = increments(sv.chain.lattice, keys)[:, cols]
     dflux = sv.S * float(dpi @ a[:, 0] + pi @ da[:, 0])
     dinflow = sv.S * float(dpi @ a[:, 1] + pi @ da[:, 1])
@@ -556,92 +494,7 @@ def road_sensitivity(system, parameter: str, solution: RoadSolution | None = Non
                            time.perf_counter() - start)
 
 
-# -------------------------------------------------------------- observables
-
-
-def _digits(road: Road, keys: np.ndarray) -> np.ndarray:
-    """``(n, L)``: 0 for an empty cell, ``v + 1`` for a car of velocity ``v``."""
-    B = road.top_vmax + 2
-    pw = B ** np.arange(road.length, dtype=np.int64)
-    return (np.asarray(keys, np.int64)[:, None] // pw[None, :]) % B
-
-
-def road_observable(road: Road, keys: np.ndarray, name: str) -> np.ndarray:
-    """A state observable in every state: ``cars``, ``stopped`` or ``occupation:X``.
-
-    Parameters
-    ----------
-    road : Road
-    keys : (n,) int64 array
-    name : str
-
-    Returns
-    -------
-    (n,) float64 array
-    """
-    d = _digits(road, keys)
-    if name == "cars":
-        return (d > 0).sum(axis=1).astype(np.float64)
-    if name == "stopped":
-        return (d == 1).sum(axis=1).astype(np.float64)
-    if isinstance(name, str) and name.startswith("occupation:"):
-        try:
-            x = int(name.partition(":")[2])
-        except ValueError:
-            x = 0
-        if not 1 <= x <= road.length:
-            raise InvalidParameterError(
-                f"occupation:X needs a cell X in 1..{road.length}, got {name!r}")
-        return (d[:, x - 1] > 0).astype(np.float64)
-    raise InvalidParameterError(
-        f"observable must be one of {', '.join(ROAD_OBSERVABLES)} or occupation:X, got {name!r}")
-
-
 # -------------------------------------------------------------- fluctuations
-
-
-class _Exit(NamedTuple):
-    a: np.ndarray       # E[m | x]
-    a2: np.ndarray      # E[m^2 | x]
-    b: np.ndarray       # b(y) = sum_x pi(x) P(x, y) m(x, y)
-    entries: tuple | None
-
-
-def exit_branches(lattice, keys: np.ndarray):
-    """Every branch of every row: ``(source index, target index, weight, cars leaving)``.
-
-    Parameters
-    ----------
-    lattice : Lattice
-    keys : (n,) int64 array, sorted (a closed set)
-
-    Returns
-    -------
-    tuple of four arrays
-    """
-    parts = []
-    left = lattice.layout["left"]
-    for start in range(0, len(keys), _CHUNK):
-        chunk = keys[start:start + _CHUNK]
-        indptr, succ, weight, counts = successor_branches(lattice, chunk)
-        src = start + np.repeat(np.arange(len(chunk)), np.diff(indptr))
-        col = np.searchsorted(keys, succ)
-        col[col == len(keys)] = 0
-        if not np.array_equal(keys[col], succ):
-            raise NoUniqueStationaryStateError(
-                "the set of states is not closed: a successor lies outside it")
-        parts.append((src, col, weight, counts[:, left].copy()))
-    return tuple(np.concatenate(x) for x in zip(*parts))
-
-
-def _exit(sv: _Solved, keep: bool = False) -> _Exit:
-    src, col, w, m = exit_branches(sv.chain.lattice, sv.keys)
-    n = len(sv.keys)
-    wm = w * m
-    a = np.bincount(src, wm, n)
-    a2 = np.bincount(src, wm * m, n)
-    b = np.bincount(col, sv.pi[src] * wm, n)
-    return _Exit(a, a2, b, (src, col, w, m) if keep else None)
 
 
 @dataclass(frozen=True)
@@ -723,7 +576,7 @@ class ExitFluctuations:
                 "exit_diffusion_per_chain_step": self.diffusion,
                 "exit_diffusion_continuous_time": self.continuous_time_diffusion,
                 "tau_int_exit": self.tau_int_time_steps, "tau_int_exit_chain_steps": self.tau_int,
-                "time_unit": "time step", "chain_step": _chain_step_name(S),
+                "time_unit": "time step", "chain_step": chain_step_name(S),
                 "steps_per_time_step": S, "states": self.states, "seconds": self.seconds}
 
 
@@ -753,22 +606,14 @@ def exit_fluctuations(system, solution: RoadSolution | None = None) -> ExitFluct
     0.25
     """
     start = time.perf_counter()
-    sv = _prepare(system, solution)
-    ex = _exit(sv)
-    pi = sv.pi
-    J = float(pi @ ex.a)
-    var = float(pi @ ex.a2) - J * J
-    delta = 0.0
-    if var > 0:
-        h0 = ex.b - J * pi
-        h0 -= pi * h0.sum()
-        w = solve_fundamental(sv.P, pi, h0)
-        delta = var + 2.0 * float(w @ ex.a)
+    sv = prepare_road(system, solution)
+    inc = sv.increments()
+    delta = diffusion(sv, inc)
     step_var = None
     if sv.S > 1:            # var(Y_S): the cars leaving in one time step of S sub-steps
-        step_var = _count_variance(sv, ex, sv.S)[sv.S]
-    return ExitFluctuations(sv.road, J, delta, var, sv.S, len(pi), time.perf_counter() - start,
-                            step_var)
+        step_var = count_variance(sv, inc, sv.S)[sv.S]
+    return ExitFluctuations(sv.road, inc.current, delta, inc.variance, sv.S, len(sv.pi),
+                            time.perf_counter() - start, step_var)
 
 
 def exit_count_variance(system, steps: int, solution: RoadSolution | None = None) -> np.ndarray:
@@ -789,23 +634,8 @@ def exit_count_variance(system, steps: int, solution: RoadSolution | None = None
     (steps + 1,) float64 array
     """
     steps = ensure_int("steps", steps, 0, MAX_LAGS)
-    sv = _prepare(system, solution)
-    return _count_variance(sv, _exit(sv), steps)
-
-
-def _count_variance(sv, ex, steps: int) -> np.ndarray:
-    """:func:`exit_count_variance` on a prepared chain."""
-    J = float(sv.pi @ ex.a)
-    var = float(sv.pi @ ex.a2) - J * J
-    g = ex.b - J * sv.pi
-    out = np.zeros(steps + 1)
-    partial = 0.0
-    for t in range(1, steps + 1):
-        out[t] = out[t - 1] + var + 2.0 * partial
-        if t < steps:
-            partial += float(g @ ex.a)
-            g = sv.step(g)
-    return out
+    sv = prepare_road(system, solution)
+    return count_variance(sv, sv.increments(), steps)
 
 
 def exit_scgf(system, s_values, solution: RoadSolution | None = None) -> np.ndarray:
@@ -824,21 +654,9 @@ def exit_scgf(system, s_values, solution: RoadSolution | None = None) -> np.ndar
     -------
     (k,) float64 array
     """
-    s_arr = [ensure_real("s", s, -50.0, 50.0) for s in np.atleast_1d(s_values)]
-    sv = _prepare(system, solution)
-    src, col, w, m = _exit(sv, keep=True).entries
-    n = len(sv.pi)
-    out = []
-    for s in s_arr:
-        Ps = sp.csr_array((w * np.exp(s * m), (src, col)), shape=(n, n))
-        if n <= 300:
-            lam = float(np.max(np.linalg.eigvals(Ps.toarray()).real))
-        else:
-            with one_blas_thread():
-                lam = float(spla.eigs(Ps.T.tocsr(), k=1, which="LR", v0=sv.pi + 1e-300,
-                                      tol=1e-14)[0][0].real)
-        out.append(math.log(lam))
-    return np.array(out)
+    s_arr = np.array([ensure_real("s", s, -50.0, 50.0) for s in np.atleast_1d(s_values)])
+    sv = prepare_road(system, solution)
+    return scgf_values(sv, sv.increments(keep=True), s_arr)[0]
 
 
 # ------------------------------------------------------------ correlations
@@ -864,28 +682,13 @@ def road_autocorrelation(system, observable: str = "exit", lags: int = 100,
     (lags + 1,) float64 array
     """
     lags = ensure_int("lags", lags, 0, MAX_LAGS)
-    road = system.system if isinstance(system, RoadChain) else system
+    road = road_of(system)
     if observable != "exit" and isinstance(road, Road):
         road_observable(road, np.zeros(1, np.int64), observable)    # the name, before work
-    sv = _prepare(system, solution)
-    out = np.zeros(lags + 1)
+    sv = prepare_road(system, solution)
     if observable == "exit":
-        ex = _exit(sv)
-        J = float(sv.pi @ ex.a)
-        out[0] = float(sv.pi @ ex.a2) - J * J
-        g, r = ex.b - J * sv.pi, ex.a
-        for t in range(1, lags + 1):
-            out[t] = float(g @ r)
-            g = sv.step(g)
-        return out
-    f = road_observable(sv.road, sv.keys, observable)
-    d = f - float(sv.pi @ f)
-    h = sv.pi * d
-    out[0] = float(h @ d)
-    for t in range(1, lags + 1):
-        h = sv.step(h)
-        out[t] = float(h @ d)
-    return out
+        return increment_autocorrelation(sv, sv.increments(), lags)
+    return autocorrelation_of(sv, observable, lags)
 
 
 def road_autocorrelation_time(system, observable: str = "exit",
@@ -906,16 +709,7 @@ def road_autocorrelation_time(system, observable: str = "exit",
     """
     if observable == "exit":
         return exit_fluctuations(system, solution).tau_int
-    road = system.system if isinstance(system, RoadChain) else system
+    road = road_of(system)
     if isinstance(road, Road):
         road_observable(road, np.zeros(1, np.int64), observable)
-    sv = _prepare(system, solution)
-    f = road_observable(sv.road, sv.keys, observable)
-    d = f - float(sv.pi @ f)
-    h = sv.pi * d
-    c0 = float(h @ d)
-    if c0 <= 0:
-        return 1.0
-    h = h - sv.pi * h.sum()
-    w = solve_fundamental(sv.P, sv.pi, h)
-    return 1.0 + 2.0 * float((w - h) @ d) / c0
+    return autocorrelation_time_of(prepare_road(system, solution), observable)

@@ -41,6 +41,7 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from markov.analysis.stationary_chain import derivative_solve
 from markov.chain.transition import state_indices, successor_counts, successors
 from markov.errors import InvalidParameterError
 from markov.model.guard import RuleCaller
@@ -48,7 +49,6 @@ from markov.model.load import Model
 from markov.model.ring import ORDERED_SEQUENTIAL, PARALLEL, Ring
 from markov.model.table import RuleTable, cached_table, tabulate
 from markov.solvers import observables
-from markov.solvers.fundamental import solve_fundamental
 from markov.solvers.ring_chain import RingChain, Solution
 
 __all__ = ["Sensitivity", "WeightDerivatives", "weight_derivatives", "sensitivity",
@@ -466,9 +466,8 @@ def sensitivity(system, parameter: str, solution: Solution | None = None,
             and not ring.trivial else "rows"
     h = derivative_product(chain, pi, derivatives, route)
     P = chain.matrix if sol.operator == "matrix" else chain.transition_operator
-    dpi = solve_fundamental(P, pi, h, tol=tol)
-    dpi_P = (dpi @ P) if sp.issparse(P) else P.matvec(dpi)
-    residual = float(np.abs(dpi - dpi_P - h).sum())
+    dpi, residual = derivative_solve(P, (lambda x: x @ P) if sp.issparse(P) else P.matvec,
+                                     pi, h, tol)
     dc_v = observables.velocity_densities(ring, sol.keys, dpi)
     if ring.update in (PARALLEL, ORDERED_SEQUENTIAL):
         dflux = float(np.dot(np.arange(ring.vmax + 1), dc_v))

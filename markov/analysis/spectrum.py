@@ -40,12 +40,14 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from markov._blas import one_blas_thread
 from markov._jit import njit
+from markov.analysis.stationary_chain import (DENSE_SECTOR_STATES, _ncv,
+                                              continuous_time_relaxation_time, drop_stationary,
+                                              leading, relaxation_time as _relaxation_time)
 from markov.chain.encoding import powers
 from markov.chain.kernels import canonical_shift, orbit_size, shift_bits
 from markov.chain.transition import state_indices, successors
-from markov.errors import ConvergenceError, InvalidParameterError
+from markov.errors import InvalidParameterError
 from markov.model.ring import ORDERED_SEQUENTIAL, PARALLEL, RANDOM_SEQUENTIAL, Ring
 from markov.validate import ensure_int
 
@@ -53,8 +55,6 @@ __all__ = ["Eigenvalue", "Spectrum", "orbit_sizes", "sector_states", "sector_mat
            "sector_operator", "relaxation_spectrum", "DENSE_SECTOR_STATES",
            "FACTORED_SECTOR_STATES"]
 
-#: Sectors up to this many states are diagonalised densely (LAPACK).
-DENSE_SECTOR_STATES = 200
 #: Parallel rings with more states use the factored operator instead of sector matrices.
 FACTORED_SECTOR_STATES = 20_000
 _CHUNK = 1 << 15
@@ -77,13 +77,6 @@ class Eigenvalue:
         """
         return {"re": float(self.value.real), "im": float(self.value.imag),
                 "sector": int(self.sector), "residual": float(self.residual)}
-
-
-def _relaxation_time(modulus: float) -> float:
-    """``-1 / ln |lambda|``: 0 for ``lambda = 0``, ``inf`` for ``|lambda| = 1``."""
-    if modulus == 0:
-        return 0.0
-    return math.inf if modulus >= 1 - 1e-12 else -1.0 / math.log(modulus)
 
 
 @dataclass(frozen=True)
@@ -147,6 +140,14 @@ class Spectrum:
         """The argument of ``lambda_2`` (radians per step)."""
         lam = self.second
         return 0.0 if lam is None else float(np.angle(lam.value))
+
+    @property
+    def continuous_time_relaxation_time(self) -> float | None:
+        """Random-sequential update in continuous time (each cell drawn at rate 1,
+        generator ``L (P - 1)``): ``1 / (L min(1 - Re lambda))`` over the eigenvalues
+        found, in time steps; None for the other updates (not in :meth:`to_dict`)."""
+        steps = self.ring.length if self.ring.update == RANDOM_SEQUENTIAL else 1
+        return continuous_time_relaxation_time([e.value for e in self.eigenvalues], steps)
 
     def to_dict(self) -> dict:
         """The spectrum as JSON-ready values (``None`` for an infinite time).
@@ -355,37 +356,9 @@ def _parse_sectors(ring: Ring, sectors) -> list[int]:
     return out
 
 
-def _ncv(count: int) -> int:
-    """ARPACK's Krylov vectors for ``count`` eigenvalues."""
-    return max(2 * count + 1, count + 20)
-
-
 def _leading(A, count: int, tol: float, maxiter: int):
-    """The ``count`` eigenvalues of largest modulus of the operator ``A``, with residuals."""
-    m = A.shape[0]
-    # one BLAS thread: on the small dense matrices threads only contend (10x slower on
-    # a loaded 2-core machine), and ARPACK's vector work between the numba-parallel
-    # sector products gains nothing from them (markov._blas)
-    with one_blas_thread():
-        if m <= DENSE_SECTOR_STATES or count >= m - 1:
-            M = A.matmat(np.eye(m, dtype=np.complex128))
-            vals, vecs = np.linalg.eig(M)
-        else:
-            v0 = np.random.default_rng(12345).standard_normal(m) + 0j
-            try:
-                vals, vecs = spla.eigs(A, k=count, which="LM", tol=tol, maxiter=maxiter,
-                                       v0=v0, ncv=min(m, _ncv(count)))
-            except spla.ArpackNoConvergence as exc:
-                raise ConvergenceError(
-                    f"ARPACK found {len(exc.eigenvalues)} of {count} eigenvalues in"
-                    f" {maxiter} iterations", maxiter, np.inf) from None
-        order = np.lexsort((np.angle(vals), -np.abs(vals)))[:count]
-        out = []
-        for i in order:
-            v = vecs[:, i]
-            r = A.matvec(v) - vals[i] * v
-            out.append((complex(vals[i]), float(np.linalg.norm(r) / np.linalg.norm(v))))
-        return out
+    """:func:`markov.analysis.stationary_chain.leading` at :data:`DENSE_SECTOR_STATES`."""
+    return leading(A, count, tol, maxiter, DENSE_SECTOR_STATES)
 
 
 #: Bytes per transition of the sector-matrix route: the shifted rows (row, column,
@@ -551,9 +524,7 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
             route = "matrix-free" if free_op is not None else "matrix"
         pairs = _leading(A, want, tol, maxiter)
         if k == 0:   # drop the stationary eigenvalue
-            drop = int(np.argmin([abs(v - 1) for v, _ in pairs]))
-            pairs = pairs[:drop] + pairs[drop + 1:]
-            pairs = pairs[:count]
+            pairs = drop_stationary(pairs, count)
         for kk in sorted({k, (ring.length - k) % ring.length} & set(wanted)):
             for value, res in pairs:
                 found.append(Eigenvalue(value if kk == k else value.conjugate(), kk, res))
