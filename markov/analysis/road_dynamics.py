@@ -58,7 +58,7 @@ import scipy.sparse.linalg as spla
 
 from markov.analysis.road_system import (ROAD_OBSERVABLES, _digits, chain_step_name,
                                          exit_branches, prepare_road, road_observable, road_of)
-from markov.analysis.stationary_chain import (DENSE_SECTOR_STATES, autocorrelation_of,
+from markov.analysis.stationary_chain import (DENSE_SECTOR_STATES, MAX_LAGS, autocorrelation_of,
                                               autocorrelation_time_of,
                                               continuous_time_relaxation_time, count_variance,
                                               derivative_solve, diffusion, drop_stationary,
@@ -76,9 +76,6 @@ __all__ = ["RoadSpectrum", "road_spectrum", "RoadSensitivity", "road_sensitivity
            "exit_fluctuations", "exit_count_variance", "exit_scgf", "ROAD_OBSERVABLES",
            "road_observable", "road_autocorrelation", "road_autocorrelation_time",
            "exit_branches"]
-
-#: Most lags of :func:`road_autocorrelation` and steps of :func:`exit_count_variance`.
-MAX_LAGS = 1_000_000
 
 
 # ------------------------------------------------------------------ spectrum
