@@ -47,6 +47,7 @@ bench-large: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/pair_levels.py
 	$(BIN)/python benchmarks/bandwidth.py
 	$(BIN)/python benchmarks/blas_threads.py
+	$(BIN)/python benchmarks/solver_vectors.py --large
 
 bench-coverage: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/error_coverage.py

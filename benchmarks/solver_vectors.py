@@ -1,0 +1,124 @@
+"""The in-place BiCGSTAB against scipy's, as a user runs ``nasch solve``.
+
+scipy's ``bicgstab`` and the shifted product made fresh vectors every iteration; above
+glibc's 32 MB ``mmap`` threshold each was mapped anew and zeroed by the kernel
+(``docs/performance.md``, "The solver's vectors").  This runs the same commands from
+this checkout and from the commit before the change (a ``git worktree``), interleaved,
+each in a fresh process, and records wall, build and solve seconds, system time, page
+faults and peak memory (the child's own ``wait4`` usage).  ``--large`` adds NaSch
+L = 26, N = 13 (6.4e7 states lumped), this checkout only.  Results:
+``benchmarks/results/solver_vectors.{csv,md}``.
+
+Usage::
+
+    python benchmarks/solver_vectors.py               # about 12 minutes on 2 cores
+    python benchmarks/solver_vectors.py --large       # and L = 26 (about 5 minutes more)
+"""
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "benchmarks" / "results"
+PREVIOUS = "b6cd644"          # the commit before markov/solvers/bicgstab.py
+RING = ["solve", "-N", "{N}", "--vmax", "2", "--p", "0.5", "--tol", "1e-10", "--max-memory", "20"]
+CASES = [
+    ("ring L = 24, N = 12, vmax 2 (lumped)", ["-L", "24"] + RING, 24),
+    ("road L = 16, vmax 2, reservoir/wall", ["solve", "--road", "-L", "16", "--vmax", "2",
+                                            "--p", "0.25", "--alpha", "0.5", "--beta", "0.5",
+                                            "--tol", "1e-10"], None),
+]
+LARGE = ("ring L = 26, N = 13, vmax 2 (lumped)", ["-L", "26"] + RING, 26)
+COLUMNS = ["case", "tool", "round", "seconds", "build_s", "solve_s", "products", "system_s",
+           "page_faults", "peak_MB", "residual", "flux", "rc"]
+
+
+def _run(tree: Path, args: list[str]) -> dict:
+    """``nasch ARGS --json`` from ``tree`` in a fresh process, with its own usage."""
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    t = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, "-m", "nasch", *args, "--json", "--quiet"],
+                            cwd=tree, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True)
+    out = proc.stdout.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    seconds = time.perf_counter() - t
+    row = {"seconds": round(seconds, 1), "system_s": round(usage.ru_stime, 1),
+           "page_faults": usage.ru_minflt, "peak_MB": round(usage.ru_maxrss / 1024),
+           "rc": os.waitstatus_to_exitcode(status)}
+    try:
+        d = json.loads(out)
+    except ValueError:
+        return row
+    row.update(build_s=round(d["build_seconds"], 1), solve_s=round(d["solve_seconds"], 1),
+               products=d.get("iterations"), residual=f"{d['residual']:.2e}",
+               flux=repr(d["flux"]))
+    return row
+
+
+def _write(rows: list, meta: dict) -> None:
+    from common import write_csv
+    from markov.files import write_bytes_atomic
+
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    write_csv(RESULTS / "solver_vectors.csv", rows, COLUMNS)
+    lines = [f"# The solver's vectors: in-place BiCGSTAB against {PREVIOUS} ({meta['date']})",
+             "", f"- machine: {meta['machine']}", f"- load average at start: {meta['load0']}",
+             f"- load average at end: {meta.get('load1', '')}",
+             "- each case in a fresh process, the two versions interleaved; peak_MB, system_s"
+             " and page_faults from the child's own wait4 usage", "",
+             "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
+    lines += ["| " + " | ".join(str(r.get(c, "")) for c in COLUMNS) + " |" for r in rows]
+    lines += [""] + [f"- {x}" for x in meta["ratios"]]
+    write_bytes_atomic(RESULTS / "solver_vectors.md", ("\n".join(lines) + "\n").encode())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument("--large", action="store_true", help="add L = 26 (this checkout only)")
+    args = ap.parse_args()
+    sys.path.insert(0, str(ROOT))
+    from common import previous_worktree
+
+    old = previous_worktree(ROOT, "solver-previous", PREVIOUS)
+    for tree in (old, ROOT):       # compile each tree's kernels before timing
+        subprocess.run([sys.executable, "-m", "markov.warmup"], cwd=tree,
+                       env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True)
+    meta = {"date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+            "machine": f"{platform.machine()}, {os.cpu_count()} cores",
+            "load0": " ".join(f"{x:.2f}" for x in os.getloadavg()), "ratios": []}
+    rows: list[dict] = []
+    for name, argv, N in CASES:
+        argv = [a.replace("{N}", str(N // 2)) if N else a for a in argv]
+        for rnd in range(1, args.rounds + 1):
+            for tool, tree in (("previous", old), ("this", ROOT)):
+                rows.append({"case": name, "tool": tool, "round": rnd, **_run(tree, argv)})
+                _write(rows, meta)
+        mine = [r for r in rows if r["case"] == name]
+        for key in ("seconds", "solve_s", "peak_MB"):
+            a = [r.get(key) for r in mine if r["tool"] == "previous"]
+            b = [r.get(key) for r in mine if r["tool"] == "this"]
+            if all(a) and all(b):
+                meta["ratios"].append(
+                    f"{name}: {key} previous / this = "
+                    + ", ".join(f"{x / y:.2f}" for x, y in zip(a, b)) + " (by round)")
+    if args.large:
+        name, argv, N = LARGE
+        argv = [a.replace("{N}", str(N // 2)) for a in argv]
+        rows.append({"case": name, "tool": "this", "round": 1, **_run(ROOT, argv)})
+    meta["load1"] = " ".join(f"{x:.2f}" for x in os.getloadavg())
+    _write(rows, meta)
+    print((RESULTS / "solver_vectors.md").read_text())
+
+
+if __name__ == "__main__":
+    main()
