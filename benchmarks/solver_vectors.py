@@ -29,14 +29,14 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "benchmarks" / "results"
 PREVIOUS = "b6cd644"          # the commit before markov/solvers/bicgstab.py
-RING = ["solve", "-N", "{N}", "--vmax", "2", "--p", "0.5", "--tol", "1e-10", "--max-memory", "20"]
+RING = ["-N", "{N}", "--vmax", "2", "--p", "0.5", "--tol", "1e-10", "--max-memory", "20"]
 CASES = [
-    ("ring L = 24, N = 12, vmax 2 (lumped)", ["-L", "24"] + RING, 24),
+    ("ring L = 24, N = 12, vmax 2 (lumped)", ["solve", "-L", "24"] + RING, 24),
     ("road L = 16, vmax 2, reservoir/wall", ["solve", "--road", "-L", "16", "--vmax", "2",
                                             "--p", "0.25", "--alpha", "0.5", "--beta", "0.5",
                                             "--tol", "1e-10"], None),
 ]
-LARGE = ("ring L = 26, N = 13, vmax 2 (lumped)", ["-L", "26"] + RING, 26)
+LARGE = ("ring L = 26, N = 13, vmax 2 (lumped)", ["solve", "-L", "26"] + RING, 26)
 COLUMNS = ["case", "tool", "round", "seconds", "build_s", "solve_s", "products", "system_s",
            "page_faults", "peak_MB", "residual", "flux", "rc"]
 
@@ -103,11 +103,11 @@ def main() -> None:
             for tool, tree in (("previous", old), ("this", ROOT)):
                 rows.append({"case": name, "tool": tool, "round": rnd, **_run(tree, argv)})
                 _write(rows, meta)
-        mine = [r for r in rows if r["case"] == name]
+        mine = [r for r in rows if r["case"] == name and r["rc"] == 0]
         for key in ("seconds", "solve_s", "peak_MB"):
             a = [r.get(key) for r in mine if r["tool"] == "previous"]
             b = [r.get(key) for r in mine if r["tool"] == "this"]
-            if all(a) and all(b):
+            if a and len(a) == len(b) and all(a) and all(b):
                 meta["ratios"].append(
                     f"{name}: {key} previous / this = "
                     + ", ".join(f"{x / y:.2f}" for x, y in zip(a, b)) + " (by round)")
