@@ -13,6 +13,8 @@ Usage::
 
     python benchmarks/solver_vectors.py               # about 12 minutes on 2 cores
     python benchmarks/solver_vectors.py --large       # and L = 26 (about 5 minutes more)
+    python benchmarks/solver_vectors.py --previous 2c3153e   # against the commit before
+                                                             # one BLAS thread as well
 """
 from __future__ import annotations
 
@@ -70,7 +72,8 @@ def _write(rows: list, meta: dict) -> None:
 
     RESULTS.mkdir(parents=True, exist_ok=True)
     write_csv(RESULTS / "solver_vectors.csv", rows, COLUMNS)
-    lines = [f"# The solver's vectors: in-place BiCGSTAB against {PREVIOUS} ({meta['date']})",
+    lines = [f"# The solver's vectors: in-place BiCGSTAB against {meta['previous']}"
+             f" ({meta['date']})",
              "", f"- machine: {meta['machine']}", f"- load average at start: {meta['load0']}",
              f"- load average at end: {meta.get('load1', '')}",
              "- each case in a fresh process, the two versions interleaved; peak_MB, system_s"
@@ -85,15 +88,18 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--large", action="store_true", help="add L = 26 (this checkout only)")
+    ap.add_argument("--previous", default=PREVIOUS,
+                    help=f"the commit to compare with [{PREVIOUS}, the one before the change;"
+                         " 2c3153e is the one before one BLAS thread too]")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT))
     from common import previous_worktree
 
-    old = previous_worktree(ROOT, "solver-previous", PREVIOUS)
+    old = previous_worktree(ROOT, f"solver-{args.previous}", args.previous)
     for tree in (old, ROOT):       # compile each tree's kernels before timing
         subprocess.run([sys.executable, "-m", "markov.warmup"], cwd=tree,
                        env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True)
-    meta = {"date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
+    meta = {"previous": args.previous, "date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": f"{platform.machine()}, {os.cpu_count()} cores",
             "load0": " ".join(f"{x:.2f}" for x in os.getloadavg()), "ratios": []}
     rows: list[dict] = []
