@@ -356,3 +356,24 @@ def test_word_bits_hold_the_largest_row_id():
     rows = level_rule(ring.table()).rows
     assert rows - 1 > ring.vmax
     assert word_bits(ring) == ((rows - 1).bit_length(), 22 + 11 * (rows - 1).bit_length())
+
+
+@pytest.mark.parametrize("update", ["parallel", "random-sequential"])
+def test_sector_apply_on_the_sector_states_alone(update):
+    """``sector_apply(x, k, states)`` equals the product of every state gathered on
+    ``states``, sector after sector (the scatter's buffer holds another sector's states)."""
+    from markov.analysis.spectrum import sector_states
+    from markov.chain.sequential import SequentialOperator
+
+    ring = Ring(10, 4, 2, 0.3, update)
+    keys = recurrent_keys(ring, lump=True)
+    op = (FactoredOperator(ring, keys, True, shifts=True) if update == "parallel"
+          else SequentialOperator(ring, keys, True))
+    rng = np.random.default_rng(3)
+    for k in (0, 3, 5, 3, 1):
+        states = sector_states(ring, keys, k)
+        x = rng.random(len(states)) + 1j * rng.random(len(states))
+        full = np.zeros(op.n, np.complex128)
+        full[states] = x
+        np.testing.assert_allclose(op.sector_apply(x, k, states),
+                                   op.sector_apply(full, k)[states], rtol=1e-14, atol=1e-16)

@@ -307,12 +307,10 @@ class _SectorOperator(spla.LinearOperator):
 
     def __init__(self, op, k: int, states: np.ndarray):
         self.op, self.k, self.states = op, k, states
-        self.full = np.zeros(op.n, np.complex128)
         super().__init__(np.complex128, (len(states), len(states)))
 
     def _matvec(self, x):
-        self.full[self.states] = np.ravel(x)
-        return self.op.sector_apply(self.full, self.k)[self.states]
+        return self.op.sector_apply(np.ravel(x), self.k, self.states)
 
 
 def sector_operator(ring: Ring, keys: np.ndarray, k: int, free=None,

@@ -1001,6 +1001,7 @@ class FactoredOperator(ChainOperator):
          self.level_sizes, self._shifts) = _levels
         self._buffers = (np.empty(max(self.level_sizes)), np.empty(max(self.level_sizes)))
         self._complex_buffers = None   # sector_apply's, made on first use
+        self._scattered = None         # the states whose entries sector_apply's input holds
         self.derivative_split = None   # set by derivative_apply
         self._split = None             # (dweight, operator with rows split by it)
 
@@ -1244,7 +1245,7 @@ class FactoredOperator(ChainOperator):
         else:
             _gather_rows(indptr, parent, slot, rule.weight, z, out)
 
-    def sector_apply(self, x: np.ndarray, k: int) -> np.ndarray:
+    def sector_apply(self, x: np.ndarray, k: int, states: np.ndarray | None = None) -> np.ndarray:
         """``x P_k``: the chain in momentum sector ``k`` (:mod:`markov.analysis.spectrum`).
 
         ``P_k[c, c']`` sums ``P(c, s) exp(2 pi i k r / L)`` over the successors
@@ -1255,40 +1256,66 @@ class FactoredOperator(ChainOperator):
 
         Parameters
         ----------
-        x : (n,) complex array
+        x : (n,) or (m,) complex array
             A row vector on the states (zero on states whose orbit does not
-            carry sector ``k``).
+            carry sector ``k``), or on ``states`` alone.
         k : int
             The sector, ``0 <= k < L``.
+        states : (m,) int64 array, optional
+            The sector's states (:func:`markov.analysis.spectrum.sector_states`):
+            ``x`` and the result are then on them alone, scattered and gathered
+            with the phases in one pass each (no vector of every state made per
+            product).
 
         Returns
         -------
-        (n,) complex128 array
+        (n,) or (m,) complex128 array
         """
         if self._shifts is None:
             raise InvalidParameterError("this operator was built without shifts=True")
         length = self.ring.length
         phase = np.exp(2j * np.pi * (int(k) % length) * np.arange(length) / length)
         state_shift, word_shift = self._shifts
-        x = np.asarray(x, dtype=np.complex128) * phase[state_shift]
         if self._complex_buffers is None:
             size = max(self.level_sizes)
             self._complex_buffers = (np.empty(size, np.complex128),
                                      np.empty(size, np.complex128),
-                                     np.empty(self.level_sizes[-1], np.complex128))
-        values = self._complex_buffers[2]
+                                     np.empty(self.level_sizes[-1], np.complex128),
+                                     np.zeros(self.n, np.complex128))
+        values, full = self._complex_buffers[2:]
+        if states is None:
+            x = np.asarray(x, dtype=np.complex128) * phase[state_shift]
+            out = np.empty(self.n, np.complex128)
+            states = np.arange(self.n)
+        else:
+            if self._scattered is not states:   # another sector's states may be set
+                full[:] = 0.0
+                self._scattered = states
+            _scatter_phase(np.ascontiguousarray(x, dtype=np.complex128), states, state_shift,
+                           phase, full)
+            x = full
+            out = np.empty(len(states), np.complex128)
         self._through_levels(x, values, fused=False, buffers=self._complex_buffers[:2])
-        out = np.empty(self.n, np.complex128)
-        _phase_segments(values, self._offsets_last, word_shift, phase, out)
+        _phase_segments(values, self._offsets_last, word_shift, phase, states, out)
         self.products += 1
         return out
 
 
 @njit(cache=True, parallel=True)
-def _phase_segments(values, offsets, shift, phase, out):
-    """``out[s] = sum over the words k moving onto s of phase[shift[k]] values[k]``."""
-    for s in prange(out.shape[0]):
+def _scatter_phase(x, states, state_shift, phase, full):
+    """``full[states[i]] = x[i] phase[state_shift[states[i]]]``."""
+    for i in prange(states.shape[0]):
+        s = states[i]
+        full[s] = x[i] * phase[state_shift[s]]
+
+
+@njit(cache=True, parallel=True)
+def _phase_segments(values, offsets, shift, phase, states, out):
+    """``out[i]`` = the sum over the words ``k`` moving onto ``s = states[i]`` of
+    ``phase[shift[k]] values[k]``."""
+    for i in prange(out.shape[0]):
+        s = states[i]
         acc = 0j
         for k in range(offsets[s], offsets[s + 1]):
             acc += phase[shift[k]] * values[k]
-        out[s] = acc
+        out[i] = acc

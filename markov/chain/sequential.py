@@ -348,7 +348,7 @@ class SequentialOperator(ChainOperator):
             raise RuntimeError(f"{int(self._bad.sum())} successors lie outside the state set:"
                                " it is not closed")
 
-    def sector_apply(self, x: np.ndarray, k: int) -> np.ndarray:
+    def sector_apply(self, x: np.ndarray, k: int, states: np.ndarray | None = None) -> np.ndarray:
         """``x P_k``: the sub-step chain in momentum sector ``k`` (:mod:`markov.analysis.spectrum`).
 
         Every entry ``P(c, s)`` is multiplied by ``exp(2 pi i k r / L)``, ``s``
@@ -357,18 +357,24 @@ class SequentialOperator(ChainOperator):
 
         Parameters
         ----------
-        x : (n,) complex array
+        x : (n,) or (m,) complex array
             A row vector on the (lumped) states, zero on the classes whose
-            orbit does not carry sector ``k``.
+            orbit does not carry sector ``k``, or on ``states`` alone.
         k : int
             The sector, ``0 <= k < L``.
+        states : (m,) int64 array, optional
+            The sector's states: ``x`` and the result are then on them alone.
 
         Returns
         -------
-        (n,) complex128 array
+        (n,) or (m,) complex128 array
         """
         if not self.lump:
             raise InvalidParameterError("momentum sectors need the lumped chain")
+        if states is not None:
+            full = np.zeros(self.n, np.complex128)
+            full[states] = x
+            return self.sector_apply(full, k)[states]
         r, idx = self.ring, self.index
         phase = np.exp(2j * np.pi * (int(k) % r.length) * np.arange(r.length) / r.length)
         x = np.ascontiguousarray(x, dtype=np.complex128)
