@@ -66,6 +66,13 @@ def _intern(tkeys, tvals, bits, count, items, ids, first):
     return m
 
 
+@njit(cache=True, parallel=True)
+def _empty(tkeys):
+    """Every slot empty (-1), in parallel: the fresh pages are faulted in by both cores."""
+    for i in prange(tkeys.shape[0]):
+        tkeys[i] = -1
+
+
 @njit(cache=True)
 def _rehash(tkeys, tvals, bits, nkeys, nvals):
     mask = (1 << bits) - 1
@@ -98,8 +105,9 @@ class _Table:
         if bits > 32:
             raise MemoryError("more than 2^31 words in one stage")
         if bits != self.bits:
-            keys = np.full(1 << bits, -1, np.int64)
+            keys = np.empty(1 << bits, np.int64)
             vals = np.empty(1 << bits, np.int32)
+            _empty(keys)
             _rehash(self.keys, self.vals, bits, keys, vals)
             self.keys, self.vals, self.bits = keys, vals, bits
         ids = np.empty(len(items), np.int32)
