@@ -1122,8 +1122,9 @@ def factored_successor_set(lattice: Lattice, keys: np.ndarray) -> np.ndarray:
     The same sweep as :class:`RoadFactoredOperator` without links: the words of
     each stage are merged before the next car draws, so the cost grows with the
     words, not with the ``2^k`` branches of a state.  Equal to
-    :func:`markov.chain.lattice.successor_set` (tested); what the search of a
-    large road's states calls.
+    :func:`markov.chain.lattice.successor_set` (tested); the search of a large
+    road's states (:func:`markov.chain.road_closure.closure`) runs the same sweep
+    once over every frontier, each word expanded once, recording the links.
 
     Parameters
     ----------
