@@ -20,7 +20,8 @@ seconds are its own.  Tables, one run:
   9.3e9 states with every velocity).
 
 Results go to ``benchmarks/results/roads_large.csv`` and ``roads_large.md``,
-rewritten after every case.
+rewritten after every case; with ``--only``, the rows and ratios of the tables
+not run are kept from the files there (the header says which tables ran when).
 
 Usage::
 
@@ -190,10 +191,54 @@ def _tree() -> Path:
     return previous_worktree(ROOT, PREVIOUS_TREE_MARK, PREVIOUS)
 
 
+def _ratio_table(line: str) -> str:
+    """The table a ratio line of the .md file belongs to."""
+    if line.startswith("road / ring"):
+        return "per_state"
+    if line.startswith("phase grid"):
+        return "phase"
+    if "every velocity / lumped" in line:
+        return "rings"
+    return "previous"
+
+
+def _kept(name: str, only: list) -> tuple[list, list]:
+    """The rows (CSV) and ratio lines (.md) of the tables not in ``only``, from the files
+    of an earlier run, with the header line that dated them."""
+    import csv
+
+    path = RESULTS / f"{name}.csv"
+    if not path.exists() or set(TABLES) <= set(only):
+        return [], []
+
+    def value(v):
+        for kind in (int, float):
+            try:
+                return kind(v)
+            except ValueError:
+                pass
+        return v or None
+
+    with open(path, newline="") as f:
+        rows = [{k: value(v) for k, v in r.items()} for r in csv.DictReader(f)
+                if r["table"] not in only]
+    md = RESULTS / f"{name}.md"
+    lines = md.read_text().splitlines() if md.exists() else []
+    ratios = [ln[2:] for ln in lines if ln.startswith("- ") and not ln.startswith("- tables ")
+              and _ratio_table(ln[2:]) not in only]
+    dated = [ln.lstrip("# ") for ln in lines[:1] if ln.startswith("# ")]
+    return rows, ratios + [f"tables {', '.join(sorted({r['table'] for r in rows}))}"
+                           f" kept from: {dated[0]}" for _ in dated if rows]
+
+
 def _write(rows: list, meta: dict, name: str = "roads_large") -> None:
     from common import write_csv
     from markov.files import write_bytes_atomic
 
+    kept = meta.get("kept", ([], []))
+    order = {t: i for i, t in enumerate(("previous", "per_state", "phase", "rings",
+                                         "targets"))}       # the order main() runs them
+    rows = sorted(kept[0] + rows, key=lambda r: order.get(r.get("table"), len(TABLES)))
     write_csv(RESULTS / f"{name}.csv", rows, COLUMNS)
 
     def fmt(v):
@@ -208,7 +253,7 @@ def _write(rows: list, meta: dict, name: str = "roads_large") -> None:
     md += ["| " + " | ".join(fmt(r.get(k)) for k in COLUMNS) + " |" for r in rows]
     md += ["", "size: links of the factored sweep, or nonzeros of the matrix (previous:"
            " matrix); peak_MB: the subprocess's ru_maxrss, interpreter and libraries included."]
-    for line in meta.get("ratios", []):
+    for line in kept[1] + meta.get("ratios", []):
         md.append(f"- {line}")
     write_bytes_atomic(RESULTS / f"{name}.md", ("\n".join(md) + "\n").encode())
 
@@ -224,6 +269,7 @@ def main() -> None:
             "commit": subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
                                      capture_output=True, text=True).stdout.strip(),
             "ratios": []}
+    meta["kept"] = _kept(args.out, args.only)
     rows: list = []
 
     def run(table, tool, case, fn, fargs, tree=None):

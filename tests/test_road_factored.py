@@ -191,6 +191,60 @@ def test_factored_successor_set_is_the_row_generators(name, vmax, update):
                                       factored_successor_set(lat, some)), (entry, exit_, a, b)
 
 
+@pytest.mark.parametrize("update", UPDATES)
+@pytest.mark.parametrize("name", ["nasch1", "nasch2", "kkw"])
+def test_the_search_records_the_sweep(name, update):
+    """markov.chain.road_closure: the states of the breadth-first search and the operator
+    built from the keys, found in one sweep (links and words the same, products to rounding)."""
+    from markov.chain.lattice import reachable_keys, start_key
+    from markov.chain.road_closure import closure
+    from markov.chain.road_factored import factored_successor_set
+
+    rng = np.random.default_rng(11)
+    checked = 0
+    for entry, exit_ in ENDS:
+        for i, make in enumerate(_roads(name, entry, exit_, update)):
+            for lump in (True, False):
+                if (i + lump) % 3:        # a third of the roads, each lumped and not
+                    continue
+                try:
+                    road = make()
+                except NaschError:
+                    continue
+                lat = lattice_of(road, lump=lump)
+                some = reachable_keys(lat)
+                for start in {start_key(lat), int(rng.choice(some))}:
+                    keys, sweep = closure(lat, start)
+                    assert np.array_equal(keys, reachable_keys(
+                        lat, start, successors=factored_successor_set)), road
+                    assert np.array_equal(closure(lat, start, record=False)[0], keys)
+                    op = RoadFactoredOperator(road, keys, lump, lat)
+                    got = RoadFactoredOperator.from_sweep(road, keys, sweep, lump, lat)
+                    assert (got.links, got.words) == (op.links, op.words)
+                    x = rng.random(len(keys))
+                    ref = op.apply(x)
+                    assert np.abs(got.apply(x) - ref).max() <= 1e-14 * np.abs(ref).max(), road
+                    cref = op.counts(x)
+                    assert np.abs(got.counts(x) - cref).max() <= 1e-14 * max(
+                        1.0, np.abs(cref).max()), road
+                    checked += 1
+    assert checked >= 40
+
+
+def test_a_chain_takes_the_recorded_sweep():
+    road = Road(9, load_model("nasch", {"vmax": 2, "p": 0.25}), "parallel", 0.5, 0.5,
+                "reservoir", "wall", ramps=[OnRamp(5, 0.3, 1)])
+    chain = RoadChain(road, operator="matrix-free")
+    assert chain.keys is chain.reachable and chain._sweep is not None
+    op = chain.factored
+    assert chain._sweep is None                        # released once the operator has it
+    ref = RoadFactoredOperator(road, chain.keys, True, chain.lattice)
+    x = np.random.default_rng(2).random(chain.n_states)
+    assert np.abs(op.apply(x) - ref.apply(x)).max() <= 1e-14 * np.abs(ref.apply(x)).max()
+    assert RoadChain(road, operator="matrix").reachable is not None
+    assert RoadChain(road, operator="matrix")._sweep is None
+
+
 @pytest.mark.parametrize("road", [
     Road(9, load_model("nasch", {"vmax": 2, "p": 0.3}), "parallel", 0.6, 0.4, "reservoir", "wall",
          0, (Stretch(3, 4, {"p": 0.7}),), (OnRamp(6, 0.2, 1),)),

@@ -920,6 +920,39 @@ class RoadFactoredOperator(ProductOperator):
         """
         return cls(chain.system, chain.keys, chain.lump, chain.lattice)
 
+    @classmethod
+    def from_sweep(cls, road, keys: np.ndarray, sweep, lump: bool = True,
+                   lattice: Lattice | None = None) -> "RoadFactoredOperator":
+        """The operator from the links :func:`markov.chain.road_closure.closure` recorded
+        while it found ``keys`` (no second sweep).
+
+        Parameters
+        ----------
+        road : Road
+        keys : (n,) int64 array, sorted
+            The keys :func:`~markov.chain.road_closure.closure` returned with ``sweep``.
+        sweep : markov.chain.road_closure.Sweep
+        lump : bool
+        lattice : Lattice, optional
+
+        Returns
+        -------
+        RoadFactoredOperator
+        """
+        t0 = time.perf_counter()
+        self = cls.__new__(cls)
+        self.road = road
+        self.lump = bool(lump)
+        self.fold = True
+        self.lattice = lattice if lattice is not None else lattice_of(road, lump=lump)
+        self.keys = np.ascontiguousarray(keys, dtype=np.int64)
+        self._start(self.keys.shape[0])
+        self._tab = tab = _Tables(self.lattice)
+        self._store(tab, sweep.stage_lo, sweep.indptr, sweep.parent, sweep.code, sweep.findptr,
+                    sweep.fparent, sweep.fcode, sweep.post_w, sweep.post_inc)
+        self.build_seconds = time.perf_counter() - t0
+        return self
+
     # -------------------------------------------------------------- building
     def _build(self, tab: _Tables, pw: np.ndarray) -> None:
         lat = self.lattice
@@ -996,9 +1029,6 @@ class RoadFactoredOperator(ProductOperator):
                 scatter(child, code, stage, np.arange(first, first + len(words), dtype=np.int64))
                 del child, code, stage
         bar.close()
-        n_words = stage_lo[-1] - n
-        self.words = int(n_words)
-        self.stage_sizes = [int(b - a) for a, b in zip(stage_lo[:-1], stage_lo[1:])]
         indptr = np.concatenate(indptr_parts + [np.array([nlinks], np.int64)]) \
             if indptr_parts else np.zeros(1, np.int64)
         parent = np.concatenate(parent_parts) if parent_parts else np.empty(0, np.int64)
@@ -1025,22 +1055,32 @@ class RoadFactoredOperator(ProductOperator):
         fparent = fparent[order]
         fcode = fcode[order]
         del order, col, fraw
+        self._store(tab, stage_lo, indptr, parent, codes, findptr, fparent, fcode, post_w,
+                    post_inc)
+
+    def _store(self, tab: _Tables, stage_lo, indptr, parent, codes, findptr, fparent, fcode,
+               post_w, post_inc) -> None:
+        """Keep the links in their compact types, with the code table."""
+        n = self.n
+        nlinks = len(parent)
+        self.words = int(stage_lo[-1] - n)
+        self.stage_sizes = [int(b - a) for a, b in zip(stage_lo[:-1], stage_lo[1:])]
         # the code table: weights and counts
         self._wtab = np.concatenate([np.array(tab.rows_w, np.float64), post_w])
         self._inc = np.vstack([np.array(tab.rows_inc, np.float64).reshape(-1, tab.size),
                                post_inc])
         ncodes = len(self._wtab)
         cdt = np.uint16 if ncodes <= np.iinfo(np.uint16).max else np.int32
-        nodes = stage_lo[-1]
+        nodes = int(stage_lo[-1])
         idt = np.int32 if nodes <= _INT32_MAX else np.int64
         pdt = np.int32 if max(nlinks, len(fparent)) <= _INT32_MAX else np.int64
         self._stage_lo = np.array(stage_lo, np.int64)
-        self._indptr = indptr.astype(pdt)
-        self._parent = parent.astype(idt)
-        self._code = codes.astype(cdt)
-        self._findptr = findptr.astype(pdt)
-        self._fparent = fparent.astype(idt)
-        self._fcode = fcode.astype(cdt)
+        self._indptr = indptr.astype(pdt, copy=False)
+        self._parent = parent.astype(idt, copy=False)
+        self._code = codes.astype(cdt, copy=False)
+        self._findptr = findptr.astype(pdt, copy=False)
+        self._fparent = fparent.astype(idt, copy=False)
+        self._fcode = fcode.astype(cdt, copy=False)
         self._mass = np.empty(nodes)
         self.links = int(len(self._parent) + len(self._fparent))
         self.nbytes = int(sum(a.nbytes for a in (
@@ -1082,8 +1122,9 @@ def factored_successor_set(lattice: Lattice, keys: np.ndarray) -> np.ndarray:
     The same sweep as :class:`RoadFactoredOperator` without links: the words of
     each stage are merged before the next car draws, so the cost grows with the
     words, not with the ``2^k`` branches of a state.  Equal to
-    :func:`markov.chain.lattice.successor_set` (tested); what the search of a
-    large road's states calls.
+    :func:`markov.chain.lattice.successor_set` (tested); the search of a large
+    road's states (:func:`markov.chain.road_closure.closure`) runs the same sweep
+    once over every frontier, each word expanded once, recording the links.
 
     Parameters
     ----------

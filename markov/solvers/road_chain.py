@@ -149,6 +149,7 @@ class RoadChain:
         self.build_seconds = 0.0
         self.unverified = False
         self.census: ClassCensus | None = None
+        self._sweep = None        # the factored sweep's links, recorded by the search
 
     @property
     def factorable(self) -> bool:
@@ -156,14 +157,6 @@ class RoadChain:
         ordered-sequential update."""
         return not self.system.periodic and \
             self.system.update in ("parallel", "ordered-sequential")
-
-    def _successor_set(self):
-        """The search's successor function: the factored sweep where it applies."""
-        if not self.factorable:
-            return None
-        from markov.chain.road_factored import factored_successor_set
-
-        return factored_successor_set
 
     @property
     def operator_kind(self) -> str:
@@ -225,12 +218,23 @@ class RoadChain:
         """Sorted keys of everything reachable from the start (the empty road by default)."""
         self.check_prediction()
         t = time.perf_counter()
-        keys = reachable_keys(self.lattice, self.start, self.max_memory,
-                              per_state=memory.matrix_bytes(1, 32, "direct")
-                              if not self.factorable else None,
-                              successors=self._successor_set())
+        if self.factorable:
+            # the factored sweep's links recorded as the states are found (one sweep, not
+            # a search and then a build: markov.chain.road_closure)
+            keys, self._sweep = self._closure(self.start, record=self.operator != "matrix")
+        else:
+            keys = reachable_keys(self.lattice, self.start, self.max_memory,
+                                  per_state=memory.matrix_bytes(1, 32, "direct"))
         self.build_seconds += time.perf_counter() - t
         return keys
+
+    def _closure(self, start: int | None, record: bool):
+        from markov.chain.lattice import start_key
+        from markov.chain.road_closure import closure
+
+        return closure(self.lattice, start_key(self.lattice) if start is None else start,
+                       record=record, limit=self.limit,
+                       per_state=memory.search_bytes_per_state())
 
     def _rows(self, keys: np.ndarray):
         if len(keys) <= _ROW_CHUNK:
@@ -342,6 +346,7 @@ class RoadChain:
             return RoadSolution(self.system, keys, result, None, self.build_seconds,
                                 "factored", self.census, self.lattice,
                                 step_counts=op.counts(result.pi), links=op.links)
+        self._sweep = None                        # not needed for the matrix
         P = self.matrix
         result = stationary(P, method=method, tol=tol)
         if self.unverified:
@@ -357,14 +362,22 @@ class RoadChain:
 
         keys = self.keys
         t = time.perf_counter()
-        op = RoadFactoredOperator(self.system, keys, self.lump, self.lattice)
+        sweep, self._sweep = self._sweep, None
+        if sweep is not None and keys is self.__dict__.get("reachable"):
+            op = RoadFactoredOperator.from_sweep(self.system, keys, sweep, self.lump,
+                                                 self.lattice)
+        else:
+            op = RoadFactoredOperator(self.system, keys, self.lump, self.lattice)
+        del sweep
         self.build_seconds += time.perf_counter() - t
         return op
 
     def _verify_one_class(self, pi: np.ndarray) -> None:
         top = int(self.keys[int(np.argmax(pi))])
-        found = reachable_keys(self.lattice, top, self.max_memory,
-                               successors=self._successor_set())
+        if self.factorable:
+            found, _ = self._closure(top, record=False)
+        else:
+            found = reachable_keys(self.lattice, top, self.max_memory)
         if len(found) != len(self.keys):
             raise NoUniqueStationaryStateError(
                 f"the chain of {self.system.summary() if hasattr(self.system, 'summary') else self.system}"
