@@ -205,9 +205,10 @@ def _krylov_steps(product, n, x, tol, maxiter, method, count, restart=GMRES_REST
     of restarts.  BiCGSTAB runs in place (:mod:`markov.solvers.bicgstab`);
     ``product(v, out)`` writes ``v P`` into ``out``.
     """
-    ones_over_n = np.full(n, 1.0 / n) if method == "gmres" else None
-    A = spla.LinearOperator((n, n), dtype=np.float64,
-                            matvec=lambda v: v - product(v) + ones_over_n * v.sum())
+    if method == "gmres":
+        ones_over_n = np.full(n, 1.0 / n)
+        A = spla.LinearOperator((n, n), dtype=np.float64,
+                                matvec=lambda v: v - product(v) + ones_over_n * v.sum())
     work = np.empty(n)
     x = np.array(x, dtype=np.float64)
     rtol, res = tol, np.inf
