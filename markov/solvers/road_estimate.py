@@ -28,11 +28,13 @@ from dataclasses import dataclass
 
 __all__ = ["RoadEstimate", "estimate_road", "closed_form_states"]
 
-#: Seconds per link of a whole factored solve (search, build, solve to 1e-10), measured
-#: on the 2-core VM (2026-12-04): 0.98e-6 (vmax 1, L = 20), 1.03e-6 (L = 22), 0.99e-6
-#: (L = 24), 0.70e-6 (vmax 2, L = 16).  The short calibration roads' own rate is
-#: dominated by fixed costs (it predicted 26 min for the 4.2 min of L = 24).
-FACTORED_SECONDS_PER_LINK = 1.0e-6
+#: Seconds per link of a whole factored solve (search and build in one sweep, solve),
+#: measured on the 2-core VM (2026-12-05, `nasch solve --road`, its tolerance 1e-14):
+#: 0.55e-6 (vmax 1, L = 24: 139 s), 0.37e-6 (vmax 2, L = 18: 53.7 s); 0.33e-6 (vmax 2,
+#: L = 16, to 1e-10).  Before the one sweep and the in-place BiCGSTAB it was 1e-6.  The
+#: short calibration roads' own rate is dominated by fixed costs (it predicted 26 min
+#: for the 4.2 min of L = 24 then).
+FACTORED_SECONDS_PER_LINK = 0.6e-6
 
 #: Largest calibration road, in states (each takes well under a second).
 CALIBRATION_STATES = 6_000
@@ -199,7 +201,7 @@ def estimate_road(road, measure, lump: bool = True, factored: bool = False,
         states = float(closed)
         basis = f"states: closed form; {what} " + basis
     size = z2 * r_size ** cells
-    if factored:    # search, build and ~150-180 products: 1 us a link on the 2-core VM
+    if factored:    # search, build and ~100-200 products: 0.6 us a link on the 2-core VM
         seconds = max(FACTORED_SECONDS_PER_LINK * size, s2)
     else:
         seconds = s2 * size / z2 * (road.length / L2)   # iterations grow about like L
