@@ -1,9 +1,9 @@
 """The states of an open road and its factored sweep in one search.
 
-:func:`markov.chain.lattice.reachable_keys` with the factored successors
-(:func:`markov.chain.road_factored.factored_successor_set`) sweeps every
-frontier of the breadth-first search on its own: a word (a half-moved road,
-:mod:`markov.chain.road_factored`) met again in a later frontier is expanded
+A breadth-first search that gets each frontier's successors from the factored
+sweep (as this package's search did before) sweeps every frontier on its own: a
+word (a half-moved road, :mod:`markov.chain.road_factored`) met again in a later
+frontier is expanded
 again (1.8 times the sweep's words at vmax 2, L = 16), and
 :class:`~markov.chain.road_factored.RoadFactoredOperator` then sweeps all the
 states once more to store the links, sorting every stage's words to merge them.

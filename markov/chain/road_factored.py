@@ -105,7 +105,7 @@ from markov.chain.operator import ProductOperator
 from markov.errors import InvalidParameterError
 from markov.model.ring import ORDERED_SEQUENTIAL, PARALLEL
 
-__all__ = ["RoadFactoredOperator", "factored_successor_set"]
+__all__ = ["RoadFactoredOperator"]
 
 _INT64_MAX = np.iinfo(np.int64).max
 _INT32_MAX = np.iinfo(np.int32).max
@@ -1114,72 +1114,6 @@ class RoadFactoredOperator(ProductOperator):
         F = _flows(self._mass, self._parent, self._code, ncodes, chunks).sum(axis=0)
         F += _flows(self._mass, self._fparent, self._fcode, ncodes, chunks).sum(axis=0)
         return (F * self._wtab) @ self._inc
-
-
-def factored_successor_set(lattice: Lattice, keys: np.ndarray) -> np.ndarray:
-    """Sorted distinct successors of ``keys`` (the support of ``x P``), swept car by car.
-
-    The same sweep as :class:`RoadFactoredOperator` without links: the words of
-    each stage are merged before the next car draws, so the cost grows with the
-    words, not with the ``2^k`` branches of a state.  Equal to
-    :func:`markov.chain.lattice.successor_set` (tested); the search of a large
-    road's states (:func:`markov.chain.road_closure.closure`) runs the same sweep
-    once over every frontier, each word expanded once, recording the links.
-
-    Parameters
-    ----------
-    lattice : Lattice
-        An open road under parallel or ordered-sequential update (lumped or not).
-    keys : (n,) int64 array
-
-    Returns
-    -------
-    (m,) int64 array
-    """
-    from markov.chain.encoding import unique_keys
-
-    road = lattice.system
-    if lattice.periodic or road.update not in (PARALLEL, ORDERED_SEQUENTIAL):
-        raise InvalidParameterError(
-            "the factored sweep is for open roads under parallel or ordered-sequential update")
-    tab = _Tables(lattice)
-    L, W, K, H, M = tab.L, tab.W, tab.K, tab.H, tab.M
-    if W ** L > _INT64_MAX:
-        raise InvalidParameterError(
-            f"the factored sweep writes a word in base {W} over L = {L} cells, which overflows"
-            f" int64 (at most L = {_max_cells(W)} for this model)")
-    pw = np.array([W ** y for y in range(L + 1)] if W ** (L + 1) <= _INT64_MAX
-                  else [W ** y for y in range(L)] + [0], dtype=np.int64)
-    B = lattice.top_vmax + 2
-    digit_of = np.zeros(B, np.int64)
-    for dgt in range(1, B):
-        digit_of[dgt] = 1 + tab.cls[dgt - 1]
-    keys = np.ascontiguousarray(keys, dtype=np.int64)
-    words = np.empty(len(keys), np.int64)
-    _state_words(keys, B, L, W, digit_of, words)
-    pending: list[list] = [[] for _ in range(L + 1)]
-
-    def expand(words, f):
-        child, code, stage = _expand(tab, words, f, pw, True)
-        keep = code.ravel() >= 0
-        child, stage = child.ravel()[keep], stage.ravel()[keep]
-        order = np.argsort(stage, kind="stable")
-        cut = np.searchsorted(stage[order], np.arange(L + 2))
-        for s_ in range(L + 1):
-            if cut[s_ + 1] > cut[s_]:
-                pending[s_].append(unique_keys(child[order[cut[s_]:cut[s_ + 1]]]))
-
-    expand(words, -1)
-    final = np.empty(0, np.int64)
-    for f in range(L + 1):
-        parts, pending[f] = pending[f], []
-        words = unique_keys(np.concatenate(parts)) if parts else np.empty(0, np.int64)
-        if f == L:
-            final = words
-        elif len(words):
-            expand(words, f)
-    fk, fraw = _final(tab, final)
-    return unique_keys(fk.ravel()[fraw.ravel() >= 0])
 
 
 def _max_cells(W: int) -> int:
