@@ -251,24 +251,15 @@ def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float 
     StateSpaceTooLargeError
         As soon as the states found, times ``per_state``, exceed ``limit``.
     """
-    from markov.chain.road_factored import (_INT64_MAX, _Tables, _expand, _final,
-                                            _max_cells, _state_words)
-    from markov.errors import InvalidParameterError, StateSpaceTooLargeError
+    from markov.chain.road_factored import _Tables, _expand, _final, state_words, word_powers
+    from markov.errors import StateSpaceTooLargeError
     from markov.memory import gib
     from markov.progress import progress_bar
 
     tab = _Tables(lattice)
-    L, W, K = tab.L, tab.W, tab.K
-    if W ** L > _INT64_MAX:
-        raise InvalidParameterError(
-            f"the factored sweep writes a word in base {W} over L = {L} cells, which overflows"
-            f" int64 (at most L = {_max_cells(W)} for this model)")
-    pw = np.array([W ** y for y in range(L + 1)] if W ** (L + 1) <= _INT64_MAX
-                  else [W ** y for y in range(L)] + [0], dtype=np.int64)
+    L = tab.L
+    pw = word_powers(tab)
     B = lattice.top_vmax + 2
-    digit_of = np.zeros(B, np.int64)
-    for dgt in range(1, B):
-        digit_of[dgt] = 1 + tab.cls[dgt - 1]
     small = np.uint16 if tab.n_moves < np.iinfo(np.uint16).max else np.int32
     states = _Table()
     stages = [_Table() for _ in range(L + 1)]
@@ -304,8 +295,7 @@ def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float 
                         pending[s].append((c[cut[s]:cut[s + 1]], p[cut[s]:cut[s + 1]],
                                            cd[cut[s]:cut[s + 1]], f))
 
-        words0 = np.empty(len(frontier), np.int64)
-        _state_words(frontier, B, L, W, digit_of, words0)
+        words0 = state_words(tab, B, frontier)
         expand(words0, -1, lo_state)
         lo_state += len(frontier)
         del words0

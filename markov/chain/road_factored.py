@@ -896,14 +896,7 @@ class RoadFactoredOperator(ProductOperator):
         self._start(self.keys.shape[0])
         tab = _Tables(self.lattice)
         self._tab = tab
-        L, W = tab.L, tab.W
-        if W ** L > _INT64_MAX:
-            raise InvalidParameterError(
-                f"the factored road operator writes a word in base {W} over L = {L} cells,"
-                f" which overflows int64 (at most L = {_max_cells(W)} for this model)")
-        pw = np.array([W ** y for y in range(L + 1)] if W ** (L + 1) <= _INT64_MAX
-                      else [W ** y for y in range(L)] + [0], dtype=np.int64)
-        self._build(tab, pw)
+        self._build(tab, word_powers(tab))
         self.build_seconds = time.perf_counter() - t0
 
     @classmethod
@@ -956,14 +949,10 @@ class RoadFactoredOperator(ProductOperator):
     # -------------------------------------------------------------- building
     def _build(self, tab: _Tables, pw: np.ndarray) -> None:
         lat = self.lattice
-        L, W, K, H, M = tab.L, tab.W, tab.K, tab.H, tab.M
+        L, M = tab.L, tab.M
         B = lat.top_vmax + 2
         n = self.n
-        digit_of = np.zeros(B, np.int64)          # key digit -> old word digit
-        for dgt in range(1, B):
-            digit_of[dgt] = 1 + tab.cls[dgt - 1]
-        words0 = np.empty(n, np.int64)
-        _state_words(self.keys, B, L, W, digit_of, words0)
+        words0 = state_words(tab, B, self.keys)
         pending: list[list] = [[] for _ in range(L + 1)]
 
         # links held compact while they wait for their stage (int32 parent, small code)
@@ -1114,6 +1103,54 @@ class RoadFactoredOperator(ProductOperator):
         F = _flows(self._mass, self._parent, self._code, ncodes, chunks).sum(axis=0)
         F += _flows(self._mass, self._fparent, self._fcode, ncodes, chunks).sum(axis=0)
         return (F * self._wtab) @ self._inc
+
+
+def word_powers(tab: _Tables) -> np.ndarray:
+    """``W**y`` for the cells ``y = 0..L`` of the sweep's words (0 past int64).
+
+    Parameters
+    ----------
+    tab : _Tables
+        The sweep's tables of a lattice.
+
+    Returns
+    -------
+    (L + 1,) int64 array
+
+    Raises
+    ------
+    InvalidParameterError
+        Where a word of ``L`` cells in base ``W`` overflows int64.
+    """
+    L, W = tab.L, tab.W
+    if W ** L > _INT64_MAX:
+        raise InvalidParameterError(
+            f"the factored sweep writes a word in base {W} over L = {L} cells, which overflows"
+            f" int64 (at most L = {_max_cells(W)} for this model)")
+    return np.array([W ** y for y in range(L + 1)] if W ** (L + 1) <= _INT64_MAX
+                    else [W ** y for y in range(L)] + [0], dtype=np.int64)
+
+
+def state_words(tab: _Tables, B: int, keys: np.ndarray) -> np.ndarray:
+    """The sweep's first words of states given by their keys (digits in base ``B``).
+
+    Parameters
+    ----------
+    tab : _Tables
+    B : int
+        The keys' base, ``top_vmax + 2``.
+    keys : (n,) int64 array
+
+    Returns
+    -------
+    (n,) int64 array
+    """
+    digit_of = np.zeros(B, np.int64)          # key digit -> old word digit
+    for dgt in range(1, B):
+        digit_of[dgt] = 1 + tab.cls[dgt - 1]
+    words = np.empty(len(keys), np.int64)
+    _state_words(np.ascontiguousarray(keys, dtype=np.int64), B, tab.L, tab.W, digit_of, words)
+    return words
 
 
 def _max_cells(W: int) -> int:
