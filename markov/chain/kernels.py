@@ -32,7 +32,7 @@ __all__ = ["digits_of", "cars_of", "gap", "term", "rotate", "shift_bits",
            "canonical", "canonical_shift", "merge_velocities", "merge_velocity_keys",
            "as_digit_map", "orbit_size", "rotate_mask", "smallest_rotation", "ahead_velocity",
            "row_length", "successor_row", "PARALLEL_CODE", "RANDOM_SEQUENTIAL_CODE",
-           "ORDERED_SEQUENTIAL_CODE"]
+           "ORDERED_SEQUENTIAL_CODE", "hash_slot"]
 
 
 # ------------------------------------------------------------------ decoding
@@ -468,3 +468,24 @@ def successor_row(key, length, vmax, pw, update, count, new_velocity, weight, we
                 out_ids[e, weight_id[v, g, a, k]] = 1
             e += 1
     return e
+
+
+_HASH_MULT = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: 2**64 / golden ratio
+
+
+@njit(cache=True, inline="always")
+def hash_slot(key, hbits):
+    """Home slot of a non-negative int64 key in an open-addressing table of ``2**hbits``
+    slots: the top ``hbits`` bits of ``key`` times 2^64 / golden ratio (Fibonacci hashing).
+
+    Parameters
+    ----------
+    key : int64
+    hbits : int64
+        ``1 <= hbits <= 63``.
+
+    Returns
+    -------
+    int64
+    """
+    return np.int64((np.uint64(key) * _HASH_MULT) >> np.uint64(64 - hbits))

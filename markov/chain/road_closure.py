@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from markov._jit import njit, prange
+from markov.chain.kernels import hash_slot
 from markov.chain.lattice import Lattice
 
 __all__ = ["closure", "Sweep"]
@@ -34,14 +35,6 @@ _EXPAND_CHUNK = 1 << 18
 
 
 @njit(cache=True)
-def _slot(k, bits):
-    """Knuth's multiplicative hash of a non-negative int64, ``bits <= 32`` bits (no
-    intermediate exceeds 2^63)."""
-    a = ((k & 0xFFFFFFFF) ^ ((k >> 32) * 0x9E37)) & 0xFFFFFFFF
-    return ((a * 0x61C88647) & 0xFFFFFFFF) >> (32 - bits)
-
-
-@njit(cache=True)
 def _intern(tkeys, tvals, bits, count, items, ids, first):
     """``ids[i]``: the number of ``items[i]`` in the table, a new one numbered from
     ``count`` in the order met; ``first[:m]`` the indices of the new ones; returns ``m``."""
@@ -49,7 +42,7 @@ def _intern(tkeys, tvals, bits, count, items, ids, first):
     m = 0
     for i in range(items.shape[0]):
         k = items[i]
-        h = _slot(k, bits)
+        h = hash_slot(k, bits)
         while True:
             t = tkeys[h]
             if t == k:
@@ -80,7 +73,7 @@ def _rehash(tkeys, tvals, bits, nkeys, nvals):
         k = tkeys[i]
         if k == -1:
             continue
-        h = _slot(k, bits)
+        h = hash_slot(k, bits)
         while nkeys[h] != -1:
             h = (h + 1) & mask
         nkeys[h] = k

@@ -28,6 +28,7 @@ from markov.chain.kernels import (
     as_digit_map,
     canonical,
     canonical_shift,
+    hash_slot,
     merge_velocities,
     shift_bits,
     successor_row,
@@ -42,20 +43,12 @@ _BLOCK = 2048  # states per prange task: small enough to balance two threads
 _NO_PHASE = np.empty(0, np.float64)   # the plain product: no momentum-sector phase
 
 
-_HASH_MULT = np.uint64(0x9E3779B97F4A7C15)  # Fibonacci hashing: 2**64 / golden ratio
-
-
-@njit(cache=True, inline="always")
-def _slot(key, hbits):
-    """Home slot of a key in a table of ``2**hbits`` slots (top bits of key * golden)."""
-    return np.int64((np.uint64(key) * _HASH_MULT) >> np.uint64(64 - hbits))
-
 
 @njit(cache=True, inline="always")
 def _rank(tkeys, tvals, hbits, key):
     """Index of ``key`` among the states, or -1: open addressing, linear probing."""
     mask = (np.int64(1) << hbits) - 1
-    h = _slot(key, hbits)
+    h = hash_slot(key, hbits)
     while tkeys[h] != -1:
         if tkeys[h] == key:
             return np.int64(tvals[h])
@@ -67,7 +60,7 @@ def _rank(tkeys, tvals, hbits, key):
 def _fill_table(keys, hbits, tkeys, tvals):
     mask = (np.int64(1) << hbits) - 1
     for i in range(keys.shape[0]):
-        h = _slot(keys[i], hbits)
+        h = hash_slot(keys[i], hbits)
         while tkeys[h] != -1:
             h = (h + 1) & mask
         tkeys[h] = keys[i]
