@@ -240,3 +240,22 @@ def test_plot_relaxation_shows_progress_when_forced_on(tmp_path, monkeypatch):
     assert res.exit_code == 0, res.output
     assert "relaxation, p = 0.3" in res.output and "relaxation, p = 0.6" in res.output
     assert "spectrum" in res.output   # the panel's ring, sector by sector
+
+
+def test_spectrum_cli_lumped_velocities_and_no_lump():
+    """The default merges v1 = v2 (said in the output); --no-lump keeps every velocity:
+    more states, the same lambda_2; a road refuses --no-lump in one line."""
+    lumped = run("spectrum", "-L", "10", "-N", "5", "--vmax", "2", "--p", "0.5", "--count", "2",
+                 "--json")
+    full = run("spectrum", "-L", "10", "-N", "5", "--vmax", "2", "--p", "0.5", "--count", "2",
+               "--json", "--no-lump")
+    assert lumped.exit_code == 0 and full.exit_code == 0, lumped.output + full.output
+    a, b = json.loads(lumped.output), json.loads(full.output)
+    assert max(a["sector_sizes"].values()) < max(b["sector_sizes"].values())
+    assert any("velocities lumped (v1 = v2)" in note for note in a["notes"])
+    assert not b["notes"]
+    assert a["relaxation_time"] == pytest.approx(b["relaxation_time"], rel=1e-10)
+    text = run("spectrum", "-L", "10", "-N", "5", "--vmax", "2", "--p", "0.5", "--count", "1")
+    assert "velocities lumped (v1 = v2)" in text.output
+    road = run("spectrum", "-L", "5", "--road", "--no-lump")
+    assert road.exit_code == 2 and "--no-lump" in road.output

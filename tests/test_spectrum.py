@@ -258,3 +258,63 @@ def test_random_sequential_goes_matrix_free_only_when_the_matrices_do_not_fit(mo
     assert relaxation_spectrum(ring, count=1).operator == "matrix"
     monkeypatch.setattr(spectrum, "_fits", lambda *args: False)
     assert relaxation_spectrum(ring, count=1).operator == "matrix-free"
+
+
+LUMPED = [
+    Ring(8, 4, 1, 0.3),
+    Ring(8, 3, 2, 0.4),
+    Ring(9, 3, 3, 0.25),
+    Ring(8, 3, 2, 0.3, update="ordered-sequential"),
+    Ring(7, 3, 1, 0.4, update="ordered-sequential"),
+    Ring(8, 3, model=load_model("vdr", {"vmax": 2, "p": 0.2, "p0": 0.6})),
+    Ring(9, 3, model=load_model("tt", {"vmax": 2, "p": 0.3, "pt": 0.6})),
+    Ring(7, 3, update="ordered-sequential", model=load_model("fi", {"vmax": 2, "p": 0.3})),
+]
+
+
+@pytest.mark.parametrize("ring", LUMPED, ids=repr)
+def test_lumped_velocities_keep_every_nonzero_eigenvalue(ring):
+    """Merged velocities have identical rows of P (P = V R): the lumped chain R V has the
+    same nonzero eigenvalues with their multiplicities, so the power sums tr(P_k^m),
+    m >= 1, of every sector agree exactly; only eigenvalues 0 go."""
+    from markov.solvers.ring_chain import velocity_lumping
+
+    velocities = velocity_lumping(ring).digit_map()
+    lumped = RingChain(ring).keys
+    full = _keys(ring)
+    assert len(lumped) < len(full)
+    for k in range(ring.length):
+        A = sector_matrix(ring, lumped, k, velocities=velocities)[0].toarray()
+        B = sector_matrix(ring, full, k)[0].toarray()
+        pa, pb = np.eye(len(A)), np.eye(len(B))
+        for _ in range(20):
+            pa, pb = pa @ A, pb @ B
+            assert abs(np.trace(pa) - np.trace(pb)) < 1e-12 * max(1.0, abs(np.trace(pb)))
+    a = relaxation_spectrum(ring, count=3)
+    b = relaxation_spectrum(ring, count=6, lump_velocities=False)
+    assert a.relaxation_time == pytest.approx(b.relaxation_time, rel=1e-10)
+    assert any("velocities lumped" in note for note in a.notes)
+    assert not b.notes
+    for e in a.eigenvalues:
+        if abs(e.value) > 1e-6:
+            assert min(abs(e.value - f.value) for f in b.eigenvalues
+                       if f.sector == e.sector) < 1e-10
+
+
+@pytest.mark.parametrize("ring", [Ring(11, 5, 2, 0.5), Ring(10, 4, 1, 0.3),
+                                  Ring(10, 4, model=load_model("vdr", {"vmax": 3, "p0": 0.6}))],
+                         ids=repr)
+def test_factored_sector_operator_with_lumped_velocities(ring):
+    from markov.chain.factored import FactoredOperator
+    from markov.solvers.ring_chain import velocity_lumping
+
+    velocities = velocity_lumping(ring).digit_map()
+    keys = RingChain(ring).keys
+    op = FactoredOperator(ring, keys, lump=True, shifts=True, velocities=velocities)
+    rng = np.random.default_rng(5)
+    for k in range(ring.length):
+        A, states = sector_operator(ring, keys, k, free=op)
+        Pk, states_m = sector_matrix(ring, keys, k, velocities=velocities)
+        assert np.array_equal(states, states_m)
+        x = rng.standard_normal(len(states)) + 1j * rng.standard_normal(len(states))
+        assert np.abs(A.matvec(x) - Pk.T @ x).max() < 1e-13

@@ -14,7 +14,10 @@ cells forward (:func:`markov.chain.kernels.canonical_shift`).  A class whose orb
 has ``d < L`` members (a periodic configuration) carries only the sectors with
 ``k d = 0 (mod L)``; it is left out of the others.  Sector 0 is the lumped
 chain itself; the union of the sectors' eigenvalues is the spectrum of the
-unlumped chain on the recurrent class.  For a real ``P``, ``P_{L-k}`` is the
+unlumped chain on the recurrent class.  With the velocities the rule cannot
+tell apart merged as well (the default under parallel and ordered-sequential
+update) the sectors keep every nonzero eigenvalue and lose only zeros: see
+:func:`relaxation_spectrum`, ``lump_velocities``.  For a real ``P``, ``P_{L-k}`` is the
 complex conjugate of ``P_k``: sectors above ``L/2`` are computed from their
 mirror.
 
@@ -242,12 +245,13 @@ class _ShiftedRows:
     prob: np.ndarray
 
 
-def _shifted_rows(ring: Ring, keys: np.ndarray) -> _ShiftedRows:
+def _shifted_rows(ring: Ring, keys: np.ndarray,
+                  velocities: np.ndarray | None = None) -> _ShiftedRows:
     n = len(keys)
     pw, bits = powers(ring.length, ring.vmax), shift_bits(ring.vmax)
     parts = []
     for start in range(0, n, _CHUNK):
-        rows = successors(ring, keys[start:start + _CHUNK], lump=False)
+        rows = successors(ring, keys[start:start + _CHUNK], lump=False, velocities=velocities)
         succ = rows.keys.copy()
         shift = np.empty(len(succ), np.int16)
         _shift_keys(succ, ring.length, pw, bits, shift)
@@ -258,7 +262,8 @@ def _shifted_rows(ring: Ring, keys: np.ndarray) -> _ShiftedRows:
 
 
 def sector_matrix(ring: Ring, keys: np.ndarray, k: int, _rows: _ShiftedRows | None = None,
-                  _sizes: np.ndarray | None = None) -> tuple[sp.csr_array, np.ndarray]:
+                  _sizes: np.ndarray | None = None, velocities: np.ndarray | None = None
+                  ) -> tuple[sp.csr_array, np.ndarray]:
     """``P_k`` on the classes of sector ``k``, and their indices into ``keys``.
 
     Parameters
@@ -268,6 +273,10 @@ def sector_matrix(ring: Ring, keys: np.ndarray, k: int, _rows: _ShiftedRows | No
         The canonical keys of a closed set (the recurrent class).
     k : int
         Momentum, ``0 <= k < L``.
+    velocities : int64 array, optional
+        Digit map of merged velocities
+        (:meth:`markov.model.lumping.VelocityClasses.digit_map`) the keys are
+        written with; ``None``: every velocity.
 
     Returns
     -------
@@ -289,7 +298,7 @@ def sector_matrix(ring: Ring, keys: np.ndarray, k: int, _rows: _ShiftedRows | No
     """
     k = ensure_int("sector", k, 0, ring.length - 1)
     keys = np.ascontiguousarray(keys, dtype=np.int64)
-    rows = _shifted_rows(ring, keys) if _rows is None else _rows
+    rows = _shifted_rows(ring, keys, velocities) if _rows is None else _rows
     states = sector_states(ring, keys, k, _sizes)
     index = np.full(len(keys), -1, np.int64)
     index[states] = np.arange(len(states))
@@ -314,7 +323,8 @@ class _SectorOperator(spla.LinearOperator):
 
 
 def sector_operator(ring: Ring, keys: np.ndarray, k: int, free=None,
-                    _rows: _ShiftedRows | None = None, _sizes: np.ndarray | None = None):
+                    _rows: _ShiftedRows | None = None, _sizes: np.ndarray | None = None,
+                    velocities: np.ndarray | None = None):
     """``A_k = P_k^T`` as a ``LinearOperator`` (``A_k @ x`` is ``x P_k``), and its states.
 
     Parameters
@@ -326,6 +336,9 @@ def sector_operator(ring: Ring, keys: np.ndarray, k: int, free=None,
         A matrix-free operator of the chain (the factored one built with
         ``shifts=True``): the product goes through its ``sector_apply``;
         otherwise the sector matrix is assembled.
+    velocities : int64 array, optional
+        Digit map of merged velocities the keys are written with (the sector
+        matrix's; a matrix-free operator carries its own).
 
     Returns
     -------
@@ -335,7 +348,7 @@ def sector_operator(ring: Ring, keys: np.ndarray, k: int, free=None,
     if free is not None:
         states = sector_states(ring, keys, k, _sizes)
         return _SectorOperator(free, k, states), states
-    Pk, states = sector_matrix(ring, keys, k, _rows, _sizes)
+    Pk, states = sector_matrix(ring, keys, k, _rows, _sizes, velocities)
     return spla.aslinearoperator(Pk.T.tocsr()), states
 
 
@@ -403,7 +416,8 @@ def _check_memory(ring: Ring, keys: np.ndarray, free: bool, count: int, limit: f
 
 def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 1e-10,
                         keys: np.ndarray | None = None, operator: str = "auto",
-                        maxiter: int = 20_000, max_memory: float | None = None) -> Spectrum:
+                        maxiter: int = 20_000, max_memory: float | None = None,
+                        lump_velocities: bool = True) -> Spectrum:
     """The ``count`` leading eigenvalues (after 1) of every momentum sector asked.
 
     Parameters
@@ -417,11 +431,10 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
     tol : float
         ARPACK's relative accuracy of the eigenvalues.
     keys : (n,) int64 array, optional
-        The canonical keys of the recurrent class with every velocity, if
-        already found (one closed class: the caller vouches for it), e.g.
-        ``RingChain(ring, lump_velocities=False).keys``; not the keys of a
-        chain with its velocities lumped (the default), whose successors lie
-        outside them.
+        The canonical keys of the recurrent class, if already found (one
+        closed class: the caller vouches for it), e.g. ``RingChain(ring,
+        lump_velocities=lump_velocities).keys``: with the velocities merged as
+        ``lump_velocities`` says.
     operator : {"auto", "matrix", "matrix-free"}
         ``auto``: sector matrices, but matrix-free for parallel rings above
         :data:`FACTORED_SECTOR_STATES` states and for random-sequential rings
@@ -432,6 +445,19 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
     max_memory : float, optional
         Bytes allowed (default 75 % of physical memory): the route is refused
         before it is built when its arrays would not fit.
+    lump_velocities : bool
+        Work on the chain with the velocities the rule cannot tell apart
+        merged (:func:`markov.solvers.ring_chain.velocity_lumping`: parallel
+        and ordered-sequential update), where there are any.  Exact for every
+        nonzero eigenvalue: configurations that differ only by merged
+        velocities have the same row of ``P``, so ``P = V R`` (``V`` the
+        classes' indicator, ``R`` the shared rows) and the lumped chain is
+        ``R V``, whose nonzero eigenvalues are ``V R``'s with their
+        multiplicities, sector by sector (both commute with the rotation).
+        Only eigenvalues 0 are lost; the notes say so.  Where a sector of the
+        lumped chain has no more states than eigenvalues asked (a small ring),
+        the full chain is solved instead, so that its eigenvalues 0 are listed.
+        ``False`` keeps every velocity.
 
     Returns
     -------
@@ -451,7 +477,7 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
     2.88539
     """
     from markov.choices import OPERATORS
-    from markov.solvers.ring_chain import RingChain
+    from markov.solvers.ring_chain import RingChain, velocity_lumping
     from markov.validate import ensure_tol
 
     if not isinstance(ring, Ring):
@@ -465,9 +491,10 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
     from markov.memory import memory_limit
 
     limit = memory_limit(max_memory)
+    lumping = velocity_lumping(ring) if lump_velocities else None
+    velocities = None if lumping is None else lumping.digit_map()
     if keys is None:
-        # the sectors are taken with every velocity kept
-        chain = RingChain(ring, max_memory=max_memory, lump_velocities=False)
+        chain = RingChain(ring, max_memory=max_memory, lump_velocities=lumping is not None)
         keys = chain.keys
         if chain.unverified:
             # a large chain of a model not proven irreducible: the stationary solve
@@ -479,6 +506,10 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
         # no car or no empty cell: one configuration, nothing moves
         return Spectrum(ring, (), {k: int(k == 0) for k in wanted}, "dense",
                         time.perf_counter() - start, notes=("a single configuration",))
+    notes = () if lumping is None else (
+        f"velocities lumped ({lumping.describe()}): every nonzero eigenvalue is the full"
+        " chain's (identical rows of P); the eigenvalues 0 of the merged velocities are"
+        " not listed",)
     free = operator == "matrix-free" or (operator == "auto" and ring.update == PARALLEL
                                          and n > FACTORED_SECTOR_STATES)
     if operator == "auto" and ring.update == RANDOM_SEQUENTIAL and not _fits(ring, keys, count,
@@ -495,13 +526,13 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
     if free and ring.update == PARALLEL:
         from markov.chain.factored import FactoredOperator
 
-        free_op = FactoredOperator(ring, keys, lump=True, shifts=True)
+        free_op = FactoredOperator(ring, keys, lump=True, shifts=True, velocities=velocities)
     elif free:
         from markov.chain.sequential import SequentialOperator
 
         free_op = SequentialOperator(ring, keys, lump=True)
     else:
-        rows = _shifted_rows(ring, keys)
+        rows = _shifted_rows(ring, keys, velocities)
     # sectors above L/2 are the complex conjugates of their mirror L - k
     mirror = sorted({min(k, (ring.length - k) % ring.length) for k in wanted})
     found, sector_sizes, route = [], {}, "dense"
@@ -517,6 +548,13 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
         if m == 0:
             continue
         want = min(count + (k == 0), m)
+        if velocities is not None and want == m:
+            # every eigenvalue of the lumped sector asked: the full chain's sector may
+            # hold eigenvalues 0 besides them, which only the full chain lists (a small
+            # ring: a sector of a large one holds every aperiodic class)
+            bar.close()
+            return relaxation_spectrum(ring, count, sectors, tol, None, operator, maxiter,
+                                       max_memory, lump_velocities=False)
         A, _ = sector_operator(ring, keys, k, free_op, _rows=rows, _sizes=sizes)
         if m > DENSE_SECTOR_STATES and want < m - 1:
             route = "matrix-free" if free_op is not None else "matrix"
@@ -530,4 +568,4 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
     found.sort(key=lambda e: (-round(abs(e.value), 12), e.sector, np.angle(e.value)))
     products = free_op.products if free_op is not None else 0
     return Spectrum(ring, tuple(found), dict(sorted(sector_sizes.items())), route,
-                    time.perf_counter() - start, products)
+                    time.perf_counter() - start, products, notes)

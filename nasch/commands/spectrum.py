@@ -59,6 +59,9 @@ def _sectors(text: str):
               help="ARPACK's relative accuracy of the eigenvalues.")
 @click.option("--max-memory", type=float, default=None,
               help="Refuse rings needing more than this many GiB (default 75% of RAM).")
+@click.option("--no-lump", is_flag=True,
+              help="Keep every velocity (by default those the rule cannot tell apart are"
+                   " one state: the same nonzero eigenvalues, without the 0s).")
 @click.option("--show", type=int, default=10, show_default=True,
               help="Eigenvalues listed in the text output (all are in --json).")
 @click.option("--json", "as_json", is_flag=True, help="Machine-readable output.")
@@ -66,7 +69,7 @@ def _sectors(text: str):
 @handle_errors
 def spectrum(length_text, cars, density, model, params, road, alpha, beta, entry, exit_, v_in,
              stretches, ramps, vmax, p, update, count, sector_text, operator, tol, max_memory,
-             show, as_json):
+             no_lump, show, as_json):
     """Relaxation spectrum: leading eigenvalues of P in every momentum sector.
 
     The chain of a ring commutes with rotations, so P splits into momentum
@@ -76,6 +79,12 @@ def spectrum(length_text, cars, density, model, params, road, alpha, beta, entry
     steps (sub-steps for random-sequential update) for the slowest of them,
     with its sector and its oscillation arg(lambda_2).  With several lengths
     tau(L) is fitted to A L^z.
+
+    Velocities the rule cannot tell apart are one state (parallel and
+    ordered-sequential update; NaSch: vmax - 1 and vmax): their rows of P are
+    identical, so every nonzero eigenvalue is the full chain's, sector by
+    sector; only eigenvalues 0 are not listed (docs/dynamics.md).  --no-lump
+    keeps every velocity.
 
     \b
     Example:
@@ -95,6 +104,9 @@ def spectrum(length_text, cars, density, model, params, road, alpha, beta, entry
     from ..relaxation import fit_power_law
 
     if road or stretches:
+        if no_lump:
+            raise InvalidParameterError("--no-lump is a ring's: a road's spectrum keeps every"
+                                        " velocity")
         return _road_spectrum(length_text, cars, density, model, params, road, alpha, beta,
                               entry, exit_, v_in, stretches, ramps, vmax, p, update, count,
                               sector_text, operator, tol, max_memory, show, as_json)
@@ -126,7 +138,8 @@ def spectrum(length_text, cars, density, model, params, road, alpha, beta, entry
             for k in sectors:
                 ensure_int("--sector", k, 0, ring.length - 1)
     results = [relaxation_spectrum(ring, count=count, sectors=sectors, tol=tol,
-                                   operator=operator, max_memory=limit) for ring in rings]
+                                   operator=operator, max_memory=limit,
+                                   lump_velocities=not no_lump) for ring in rings]
     fit = None
     taus = [s.relaxation_time for s in results]
     if len(rings) > 1 and all(math.isfinite(t) and t > 0 for t in taus):
@@ -156,6 +169,8 @@ def _echo_ring(ring, s, show: int) -> None:
                f" update={ring.update}: {len(sizes)} sector{'s' if len(sizes) != 1 else ''},"
                f" {max(sizes.values()) if sizes else 0:,} states in the largest,"
                f" {s.operator}, {s.seconds:.2f} s")
+    for note in s.notes:
+        click.echo(f"  {note}")
     lam = s.second
     if lam is None:
         click.echo("  no eigenvalue besides the stationary 1 (a single configuration)")
@@ -215,6 +230,8 @@ def _road_spectrum(length_text, cars, density, model, params, road, alpha, beta,
     click.echo(f"  exit {system.exit}: {d['exit_convention']}")
     click.echo(f"  {s.states:,} states (one sector: a road has no rotation), {s.operator},"
                f" {s.seconds:.2f} s; a chain step is {d['chain_step']}")
+    for note in s.notes:
+        click.echo(f"  {note}")
     lam = s.second
     if lam is None:
         click.echo("  no eigenvalue besides the stationary 1 (a single configuration)")
