@@ -230,8 +230,6 @@ def _road_spectrum(length_text, cars, density, model, params, road, alpha, beta,
     click.echo(f"  exit {system.exit}: {d['exit_convention']}")
     click.echo(f"  {s.states:,} states (one sector: a road has no rotation), {s.operator},"
                f" {s.seconds:.2f} s; a chain step is {d['chain_step']}")
-    for note in s.notes:
-        click.echo(f"  {note}")
     lam = s.second
     if lam is None:
         click.echo("  no eigenvalue besides the stationary 1 (a single configuration)")
