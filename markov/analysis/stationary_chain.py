@@ -446,14 +446,13 @@ def scgf_values(sc: StationaryChain, inc: Increments, s_values,
 def _ncv(count: int) -> int:
     """ARPACK's Krylov vectors for ``count`` eigenvalues.
 
-    ``count + 10`` rather than ``count + 20``: ARPACK's own vector work (the
-    reorthogonalisation against every Krylov vector, one BLAS thread) was 44 %
-    of a ring's sector spectrum; the smaller basis needs 3-6 % more products
-    and took the ring L = 20, N = 10, vmax 2 (two eigenvalues in every sector)
-    from 55.3 to 42.7 s, L = 18 with four from 14.8 to 9.9 s (2026-12-05, the
-    2-core VM, one run each; ``count + 8``: 49.3 s).
+    Not ``count + 10``: it took the ring L = 20, N = 10, vmax 2 (two eigenvalues
+    in every sector) from 55.3 to 42.7 s once under load, but a previous
+    alternating measurement on a quiet machine found no gain at L = 20, and
+    VDR L = 14, N = 4 (p = 0.1, p0 = 0.75) did not converge with it in 20,000
+    restarts (2026-12-05).
     """
-    return max(2 * count + 1, count + 10)
+    return max(2 * count + 1, count + 20)
 
 
 def leading(A, count: int, tol: float, maxiter: int, dense_limit: int = DENSE_SECTOR_STATES):
