@@ -318,3 +318,29 @@ def test_factored_sector_operator_with_lumped_velocities(ring):
         assert np.array_equal(states, states_m)
         x = rng.standard_normal(len(states)) + 1j * rng.standard_normal(len(states))
         assert np.abs(A.matvec(x) - Pk.T @ x).max() < 1e-13
+
+
+def test_narrow_arpack_basis_falls_back_to_the_wide_one(monkeypatch):
+    """VDR L = 14, N = 4, p = 0.1: ARPACK with count + 10 vectors does not converge in one
+    sector (moduli clustered beyond the two asked); the wide basis answers, and the answer
+    equals the one with the wide basis only, and with no restart allowed on the narrow."""
+    import markov.analysis.stationary_chain as sc
+
+    ring = Ring(14, 4, model=load_model("vdr", {"vmax": 2, "p": 0.1, "p0": 0.75}))
+    calls = []
+    eigs = sc.spla.eigs
+
+    def counted(*args, **kwargs):
+        calls.append(kwargs["ncv"])
+        return eigs(*args, **kwargs)
+
+    monkeypatch.setattr(sc.spla, "eigs", counted)
+    spec = relaxation_spectrum(ring, count=2, operator="matrix-free")
+    assert min(calls) < 20 <= max(calls)          # both bases were used
+    monkeypatch.setattr(sc, "NARROW_RESTARTS", 1)
+    wide = relaxation_spectrum(ring, count=2, operator="matrix-free")
+    assert spec.relaxation_time == pytest.approx(wide.relaxation_time, rel=1e-10)
+    assert len(spec.eigenvalues) == len(wide.eigenvalues)
+    for a in spec.eigenvalues:      # as sets: a real sector's conjugate pair ties in modulus
+        assert min(abs(a.value - b.value) for b in wide.eigenvalues
+                   if b.sector == a.sector) < 1e-9      # ARPACK's tol 1e-10

@@ -395,7 +395,7 @@ def _check_memory(ring: Ring, keys: np.ndarray, free: bool, count: int, limit: f
     from markov.chain.transition import successor_counts
 
     n = len(keys)
-    vectors = 16 * n * (_ncv(count + 1) + 4)    # ARPACK's complex basis and work vectors
+    vectors = 16 * n * (_ncv(count + 1, wide=True) + 4)   # ARPACK's complex basis, work
     if free and ring.update == PARALLEL:
         from markov.chain.factored import link_bytes_per_word
 

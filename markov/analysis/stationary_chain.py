@@ -443,16 +443,15 @@ def scgf_values(sc: StationaryChain, inc: Increments, s_values,
 # --- the spectrum of one sector -------------------------------------------------------------
 
 
-def _ncv(count: int) -> int:
-    """ARPACK's Krylov vectors for ``count`` eigenvalues.
+#: ARPACK restarts with the narrow basis before the wide one (:func:`leading`); a ring's
+#: sector needs about 11 (L = 20, two eigenvalues).
+NARROW_RESTARTS = 300
 
-    Not ``count + 10``: it took the ring L = 20, N = 10, vmax 2 (two eigenvalues
-    in every sector) from 55.3 to 42.7 s once under load, but a previous
-    alternating measurement on a quiet machine found no gain at L = 20, and
-    VDR L = 14, N = 4 (p = 0.1, p0 = 0.75) did not converge with it in 20,000
-    restarts (2026-12-05).
-    """
-    return max(2 * count + 1, count + 20)
+
+def _ncv(count: int, wide: bool = False) -> int:
+    """ARPACK's Krylov vectors for ``count`` eigenvalues: ``count + 10``, or ``count + 20``
+    (``wide``) where that did not converge (see :func:`leading`)."""
+    return max(2 * count + 1, count + (20 if wide else 10))
 
 
 def leading(A, count: int, tol: float, maxiter: int, dense_limit: int = DENSE_SECTOR_STATES):
@@ -485,12 +484,21 @@ def leading(A, count: int, tol: float, maxiter: int, dense_limit: int = DENSE_SE
         else:
             v0 = np.random.default_rng(12345).standard_normal(m) + 0j
             try:
-                vals, vecs = spla.eigs(A, k=count, which="LM", tol=tol, maxiter=maxiter,
-                                       v0=v0, ncv=min(m, _ncv(count)))
-            except spla.ArpackNoConvergence as exc:
-                raise ConvergenceError(
-                    f"ARPACK found {len(exc.eigenvalues)} of {count} eigenvalues in"
-                    f" {maxiter} iterations", maxiter, np.inf) from None
+                # the narrow basis first: ARPACK's own work (reorthogonalisation on one
+                # BLAS thread) grows with the basis and was 60 % of a sector spectrum
+                vals, vecs = spla.eigs(A, k=count, which="LM", tol=tol,
+                                       maxiter=min(maxiter, NARROW_RESTARTS), v0=v0,
+                                       ncv=min(m, _ncv(count)))
+            except spla.ArpackNoConvergence:
+                # moduli clustered beyond the wanted ones (a conjugate pair split by
+                # count): the wide basis, with every restart allowed
+                try:
+                    vals, vecs = spla.eigs(A, k=count, which="LM", tol=tol, maxiter=maxiter,
+                                           v0=v0, ncv=min(m, _ncv(count, wide=True)))
+                except spla.ArpackNoConvergence as exc:
+                    raise ConvergenceError(
+                        f"ARPACK found {len(exc.eigenvalues)} of {count} eigenvalues in"
+                        f" {maxiter} iterations", maxiter, np.inf) from None
         order = np.lexsort((np.angle(vals), -np.abs(vals)))[:count]
         out = []
         for i in order:
