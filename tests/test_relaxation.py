@@ -244,7 +244,7 @@ def test_plot_relaxation_shows_progress_when_forced_on(tmp_path, monkeypatch):
 
 def test_spectrum_cli_lumped_velocities_and_no_lump():
     """The default merges v1 = v2 (said in the output); --no-lump keeps every velocity:
-    more states, the same lambda_2; a road refuses --no-lump in one line."""
+    more states, the same lambda_2; on a road too (vmax 1: the occupations, 2^L)."""
     lumped = run("spectrum", "-L", "10", "-N", "5", "--vmax", "2", "--p", "0.5", "--count", "2",
                  "--json")
     full = run("spectrum", "-L", "10", "-N", "5", "--vmax", "2", "--p", "0.5", "--count", "2",
@@ -257,5 +257,10 @@ def test_spectrum_cli_lumped_velocities_and_no_lump():
     assert a["relaxation_time"] == pytest.approx(b["relaxation_time"], rel=1e-10)
     text = run("spectrum", "-L", "10", "-N", "5", "--vmax", "2", "--p", "0.5", "--count", "1")
     assert "velocities lumped (v1 = v2)" in text.output
-    road = run("spectrum", "-L", "5", "--road", "--no-lump")
-    assert road.exit_code == 2 and "--no-lump" in road.output
+    road = run("spectrum", "-L", "8", "--road", "--vmax", "1", "--count", "2")
+    full = run("spectrum", "-L", "8", "--road", "--vmax", "1", "--count", "2", "--no-lump")
+    assert road.exit_code == 0 and full.exit_code == 0, road.output + full.output
+    assert "256 states" in road.output and "velocities lumped (v0 = v1)" in road.output
+    assert "velocities lumped" not in full.output
+    lam = [line for line in road.output.splitlines() if "lambda_2 =" in line]
+    assert lam and lam == [line for line in full.output.splitlines() if "lambda_2 =" in line]

@@ -432,3 +432,30 @@ def test_cli_random_sequential_gives_both_clocks_and_per_chain_step_tau():
                                               / d["exit_variance_per_time_step"], rel=1e-12)
     text = CliRunner().invoke(main, args).output
     assert "continuous time" in text and "of the cars leaving per time step" in text
+
+
+@pytest.mark.parametrize("road", [
+    Road(6, _nasch(1, 0.3), "parallel", 0.4, 0.7),
+    Road(5, _nasch(2, 0.3), "ordered-sequential", 0.5, 0.6, entry="reservoir", exit="wall"),
+    Road(5, load_model("vdr", {"vmax": 2, "p": 0.2, "p0": 0.6}), "parallel", 0.6, 0.5,
+         entry="insert", exit="wall"),
+    Road(6, load_model("fi", {"vmax": 2, "p": 0.3}), "parallel", 0.3, 0.8, entry="site1"),
+], ids=repr)
+def test_road_spectrum_with_lumped_velocities(road):
+    """Merged velocities have identical rows of P: the lumped road's power sums tr(P^m)
+    equal the full road's (same nonzero eigenvalues with multiplicities), and so do the
+    leading eigenvalues and tau; the note says so."""
+    lumped, full = RoadChain(road), RoadChain(road, lump=False)
+    assert lumped.n_states < full.n_states
+    A, B = lumped.matrix.toarray(), full.matrix.toarray()
+    pa, pb = np.eye(len(A)), np.eye(len(B))
+    for _ in range(20):
+        pa, pb = pa @ A, pb @ B
+        assert abs(np.trace(pa) - np.trace(pb)) < 1e-12 * max(1.0, np.trace(pb))
+    a = rd.road_spectrum(road, count=3)
+    b = rd.road_spectrum(road, count=6, lump_velocities=False)
+    assert a.states == lumped.n_states and b.states == full.n_states
+    assert a.notes and "velocities lumped" in a.notes[0] and not b.notes
+    assert a.relaxation_time == pytest.approx(b.relaxation_time, rel=1e-10)
+    for v in a.eigenvalues:
+        assert min(abs(v - w) for w in b.eigenvalues) < 1e-10

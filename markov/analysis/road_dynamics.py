@@ -96,6 +96,8 @@ class RoadSpectrum:
     steps_per_time_step : int
     operator : {"dense", "arpack"}
     seconds : float
+    notes : tuple of str
+        E.g. that the velocities the rule cannot tell apart were merged.
     """
 
     road: Road
@@ -105,6 +107,7 @@ class RoadSpectrum:
     steps_per_time_step: int
     operator: str
     seconds: float
+    notes: tuple = ()
 
     @property
     def second(self) -> complex | None:
@@ -151,11 +154,13 @@ class RoadSpectrum:
                 "steps_per_time_step": self.steps_per_time_step,
                 "relaxation_time_continuous": self.continuous_time_relaxation_time,
                 "oscillation": self.oscillation, "sectors": "one (a road has no rotation)",
-                "states": self.states, "operator": self.operator, "seconds": self.seconds}
+                "states": self.states, "operator": self.operator, "seconds": self.seconds,
+                "notes": list(self.notes)}
 
 
 def road_spectrum(system, count: int = 4, tol: float = 1e-10, maxiter: int = 20_000,
-                  solution: RoadSolution | None = None) -> RoadSpectrum:
+                  solution: RoadSolution | None = None,
+                  lump_velocities: bool = True) -> RoadSpectrum:
     """The ``count`` eigenvalues of largest modulus of a road's ``P`` after the stationary 1.
 
     Parameters
@@ -168,6 +173,14 @@ def road_spectrum(system, count: int = 4, tol: float = 1e-10, maxiter: int = 20_
         ARPACK's relative accuracy.
     maxiter : int
     solution : RoadSolution, optional
+        Its solution with every velocity, if solved (used where the velocities are kept).
+    lump_velocities : bool
+        Take the eigenvalues of the chain with the velocities the rule cannot
+        tell apart merged (parallel and ordered-sequential update): their rows
+        of ``P`` are identical, so every nonzero eigenvalue is the full
+        chain's with its multiplicity and only eigenvalues 0 are lost (as on a
+        ring, :func:`markov.analysis.spectrum.relaxation_spectrum`); the full
+        chain where the lumped one has no more states than eigenvalues asked.
 
     Returns
     -------
@@ -188,17 +201,39 @@ def road_spectrum(system, count: int = 4, tol: float = 1e-10, maxiter: int = 20_
     count = ensure_int("count", count, 1, 1000)
     tol = ensure_tol(tol)
     start = time.perf_counter()
-    sv = prepare_road(system, solution)
-    n = len(sv.pi)
+    lumped = _lumped_chain(system) if lump_velocities else None
+    if lumped is not None and count + 1 < lumped.n_states:
+        road, P = lumped.system, lumped.matrix
+        S = lumped.solution().steps_per_time_step     # refuses several closed classes
+        notes = (f"velocities lumped ({lumped.lattice.lumping.describe()}): every nonzero"
+                 " eigenvalue is the full chain's (identical rows of P); the eigenvalues 0"
+                 " of the merged velocities are not listed",)
+    else:
+        # every velocity kept; a small lumped chain too, so that its zeros are listed
+        sv = prepare_road(system, solution)
+        road, P, S, notes = sv.road, sv.P, sv.S, ()
+    n = P.shape[0]
     if n == 1:
-        return RoadSpectrum(sv.road, (), (), 1, sv.S, "dense", time.perf_counter() - start)
+        return RoadSpectrum(road, (), (), 1, S, "dense", time.perf_counter() - start, notes)
     want = min(count + 1, n)
     # complex, as the ring's sector matrices: _leading starts ARPACK from a complex vector
-    A = spla.aslinearoperator(sv.P.T.tocsr().astype(np.complex128))
+    A = spla.aslinearoperator(P.T.tocsr().astype(np.complex128))
     pairs = drop_stationary(leading(A, want, tol, maxiter), count)
     route = "dense" if n <= DENSE_SECTOR_STATES or want >= n - 1 else "arpack"
-    return RoadSpectrum(sv.road, tuple(v for v, _ in pairs), tuple(r for _, r in pairs), n,
-                        sv.S, route, time.perf_counter() - start)
+    return RoadSpectrum(road, tuple(v for v, _ in pairs), tuple(r for _, r in pairs), n,
+                        S, route, time.perf_counter() - start, notes)
+
+
+def _lumped_chain(system) -> RoadChain | None:
+    """The road's chain with its velocities lumped, or None where nothing merges."""
+    if isinstance(system, RoadChain):
+        chain = system if system.lattice.lumping is not None else RoadChain(
+            system.system, max_memory=system.max_memory)
+    elif isinstance(system, Road):
+        chain = RoadChain(system)
+    else:
+        return None                   # prepare_road names the bad input
+    return chain if chain.lattice.lumping is not None and not chain.system.periodic else None
 
 
 # ---------------------------------------------------------------- sensitivity

@@ -95,7 +95,8 @@ def spectrum(length_text, cars, density, model, params, road, alpha, beta, entry
 
     With --road (docs/roads.md, "Dynamics of a road"): the road has no
     rotation, so one sector: the leading eigenvalues of its P, and tau in
-    time steps (a random-sequential chain step is one of L + 1 sub-steps).
+    time steps (a random-sequential chain step is one of L + 1 sub-steps);
+    its velocities are lumped as a ring's.
     """
     from markov.model.ring import Ring
     from markov.analysis.spectrum import relaxation_spectrum
@@ -104,12 +105,9 @@ def spectrum(length_text, cars, density, model, params, road, alpha, beta, entry
     from ..relaxation import fit_power_law
 
     if road or stretches:
-        if no_lump:
-            raise InvalidParameterError("--no-lump is a ring's: a road's spectrum keeps every"
-                                        " velocity")
         return _road_spectrum(length_text, cars, density, model, params, road, alpha, beta,
                               entry, exit_, v_in, stretches, ramps, vmax, p, update, count,
-                              sector_text, operator, tol, max_memory, show, as_json)
+                              sector_text, operator, tol, max_memory, no_lump, show, as_json)
     if any(x is not None for x in (alpha, beta, entry, exit_, v_in)) or ramps:
         build_system(2, 1, build_model(model, params, vmax=vmax, p=p), update, road=False,
                      alpha=alpha, beta=beta, entry=entry, exit_=exit_, v_in=v_in, ramps=ramps)
@@ -191,7 +189,7 @@ def _echo_ring(ring, s, show: int) -> None:
 
 def _road_spectrum(length_text, cars, density, model, params, road, alpha, beta, entry, exit_,
                    v_in, stretches, ramps, vmax, p, update, count, sector_text, operator, tol,
-                   max_memory, show, as_json) -> None:
+                   max_memory, no_lump, show, as_json) -> None:
     """``--road``: the leading eigenvalues of one road's P (one sector)."""
     from markov.analysis.road_dynamics import road_spectrum
     from markov.solvers.road_chain import RoadChain
@@ -220,7 +218,7 @@ def _road_spectrum(length_text, cars, density, model, params, road, alpha, beta,
                           road=True, alpha=alpha, beta=beta, entry=entry, exit_=exit_,
                           v_in=v_in, stretches=stretches, ramps=ramps)
     chain = RoadChain(system, max_memory=None if max_memory is None else max_memory * 2**30)
-    s = road_spectrum(chain, count=count, tol=tol)
+    s = road_spectrum(chain, count=count, tol=tol, lump_velocities=not no_lump)
     if as_json:
         emit_json(s.to_dict())
         return
@@ -230,6 +228,8 @@ def _road_spectrum(length_text, cars, density, model, params, road, alpha, beta,
     click.echo(f"  exit {system.exit}: {d['exit_convention']}")
     click.echo(f"  {s.states:,} states (one sector: a road has no rotation), {s.operator},"
                f" {s.seconds:.2f} s; a chain step is {d['chain_step']}")
+    for note in s.notes:
+        click.echo(f"  {note}")
     lam = s.second
     if lam is None:
         click.echo("  no eigenvalue besides the stationary 1 (a single configuration)")
