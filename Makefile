@@ -48,6 +48,7 @@ bench-large: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/bandwidth.py
 	$(BIN)/python benchmarks/blas_threads.py
 	$(BIN)/python benchmarks/solver_vectors.py --large
+	$(BIN)/python benchmarks/spectrum_sectors.py --large
 
 bench-coverage: $(BENCH_STAMP)
 	$(BIN)/python benchmarks/error_coverage.py
