@@ -78,6 +78,7 @@ import numpy as np
 from markov._jit import njit, prange
 from markov.chain.encoding import powers, unique_keys
 from markov.chain.kernels import (
+    _cttz,
     ahead_velocity,
     as_digit_map,
     canonical,
@@ -86,7 +87,6 @@ from markov.chain.kernels import (
     gap,
     rotate_mask,
     shift_bits,
-    term,
 )
 from markov.chain.operator import ChainOperator
 from markov.errors import InvalidParameterError
@@ -401,6 +401,8 @@ def _word_width(ring: Ring, rule: LevelRule | None = None) -> tuple[int, int]:
 def _frame_word(key, length, vmax, w, lump, row_id, horizon, pos, vel, u):
     """Level-0 word of a state (positions in its frame, the row of every car) and the frame's rotation."""
     n = cars_of(key, length, vmax + 2, pos, vel)
+    if n == 0:
+        return np.int64(0), 0
     mask = np.int64(0)
     for i in range(n):
         u[i] = row_id[vel[i], min(gap(pos, n, i, length), horizon), ahead_velocity(vel, n, i)]
@@ -409,17 +411,17 @@ def _frame_word(key, length, vmax, w, lump, row_id, horizon, pos, vel, u):
     shift = n * w
     best = np.int64(-1)
     best_r = 0
-    for r in range(length if lump else 1):
+    # the smallest rotation of a mask has cell 0 occupied (rotating an empty cell 0 to
+    # the top makes it smaller), so only the rotations r = pos[k0] are tried
+    for k0 in range(n if lump else 1):
+        r = pos[k0] if lump else 0
         rotated = rotate_mask(mask, r, length)
         if best >= 0 and rotated > (best >> shift):
             continue
-        # cars in the frame start with the first car at or above cell r
-        k0 = 0
-        while k0 < n and pos[k0] < r:
-            k0 += 1
         word = rotated << shift
-        for t in range(n):
-            word |= np.int64(u[(k0 + t) % n]) << (t * w)
+        for t in range(n):   # car k0 (at cell r) is the frame's first
+            k = k0 + t if k0 + t < n else k0 + t - n
+            word |= np.int64(u[k]) << (t * w)
         if best < 0 or word < best:
             best = word
             best_r = r
@@ -662,14 +664,14 @@ def _moved_key(word, length, ncars, w, pw, bits, lump, digit_map):
     vmask = (np.int64(1) << w) - 1
     key = np.int64(0)
     t = 0
-    for x in range(length):
-        if (mask >> x) & 1:
-            v = (word >> (t * w)) & vmask
-            if merge:
-                key += digit_map[v + 1] * pw[(x + v) % length]
-            else:
-                key += term(x, v, length, pw)
-            t += 1
+    while mask:   # the occupied cells, lowest first
+        low = mask & -mask
+        mask ^= low
+        x = _cttz(low)
+        v = (word >> (t * w)) & vmask
+        y = x + v if x + v < length else x + v - length   # no division: v < L
+        key += (digit_map[v + 1] if merge else v + 1) * pw[y]
+        t += 1
     return canonical(key, length, pw, bits) if lump else key
 
 
