@@ -76,7 +76,7 @@ from functools import lru_cache
 import numpy as np
 
 from markov._jit import njit, prange
-from markov.chain.encoding import powers, unique_keys
+from markov.chain.encoding import powers, stable_argsort, unique_keys
 from markov.chain.kernels import (
     _cttz,
     ahead_velocity,
@@ -1041,7 +1041,7 @@ class FactoredOperator(ChainOperator):
             word_shift = np.empty(len(words), np.int16)
             _moved_shifts(words, ring.length, ring.cars, w, pw, bits, digit_map, word_shift)
         del words
-        order = np.argsort(targets, kind="stable")
+        order = stable_argsort(targets)   # numpy's timsort: 2x the time on these
         offsets_last = np.empty(n + 1, dtype=np.int64)
         if _segments(targets[order], self.keys, offsets_last):
             raise RuntimeError("a successor lies outside the state set: it is not closed")
