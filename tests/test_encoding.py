@@ -71,3 +71,18 @@ def test_stable_argsort_is_numpys(n, bits):
         values[: n // 4] = ((values[0] >> 20) << 20) + rng.integers(0, 1 << 20, n // 4)
         values[-1] = -values[-1]                                      # a negative value
     assert np.array_equal(stable_argsort(values), np.argsort(values, kind="stable"))
+
+
+def test_new_keys_and_merge_keys_are_numpys():
+    from markov.chain.encoding import merge_keys, new_keys
+
+    rng = np.random.default_rng(5)
+    for m, n in ((0, 0), (0, 5), (5, 0), (300, 1000), (1000, 300)):
+        visited = np.unique(rng.integers(0, 2000, m))
+        candidates = np.sort(rng.integers(0, 2000, n))            # repeats
+        new = new_keys(visited, candidates)
+        assert np.array_equal(new, np.setdiff1d(candidates, visited))
+        keys, values = merge_keys(visited, new, -visited, -new)
+        assert np.array_equal(keys, np.union1d(visited, new))
+        assert np.array_equal(values, -keys)
+        assert merge_keys(visited, new)[1] is None
