@@ -279,28 +279,40 @@ def stable_argsort(values: np.ndarray) -> np.ndarray:
     if span > 63 or index_bits > 40:
         return np.argsort(values, kind="stable")
     low = max(0, span - (63 - index_bits))   # the bits left to the runs
-    order = values - lo
-    order >>= low
-    order <<= index_bits
-    order |= np.arange(n, dtype=np.int64)
+    order = np.empty(n, np.int64)
+    _pack(values, lo, low, index_bits, order)
     order.sort()
-    order &= (1 << index_bits) - 1
     if low:
-        _sort_runs(values, order, lo, low)
+        _sort_runs(values, order, index_bits)
+    else:
+        order &= (1 << index_bits) - 1
     return order
 
 
 @njit(cache=True)
-def _sort_runs(values, order, lo, low):
-    """Sort each run of ``order`` with equal ``(values - lo) >> low`` by value, stably."""
+def _pack(values, lo, low, index_bits, out):
+    """``out[i] = (values[i] - lo) >> low << index_bits | i``: one pass, one array."""
+    for i in range(values.shape[0]):
+        out[i] = (((values[i] - lo) >> low) << index_bits) | i
+
+
+@njit(cache=True)
+def _sort_runs(values, order, index_bits):
+    """Unpack the sorted words of :func:`stable_argsort` into indices and sort each run of
+    one high part by value, stably."""
     n = order.shape[0]
+    mask = (np.int64(1) << index_bits) - 1
     start = 0
     while start < n:
-        high = (values[order[start]] - lo) >> low
+        high = order[start] >> index_bits
+        order[start] &= mask
         end = start + 1
-        while end < n and (values[order[end]] - lo) >> low == high:
+        while end < n and order[end] >> index_bits == high:
+            order[end] &= mask
             end += 1
-        if end - start <= 32:   # insertion sort: stable, the run is in index order
+        if end - start == 1:
+            pass
+        elif end - start <= 32:   # insertion sort: stable, the run is in index order
             for a in range(start + 1, end):
                 o = order[a]
                 v = values[o]

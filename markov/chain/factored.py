@@ -1102,7 +1102,7 @@ class FactoredOperator(ChainOperator):
             words = _level0(ring, self.keys, w, self.lump, rule, state_shift)
         else:
             words = level0
-        perm = np.argsort(words, kind="stable").astype(np.int32)
+        perm = stable_argsort(words).astype(np.int32)
         words = words[perm]
         first = np.flatnonzero(np.concatenate(([True], words[1:] != words[:-1])))
         offsets0 = np.append(first, n).astype(np.int64)
@@ -1124,7 +1124,7 @@ class FactoredOperator(ChainOperator):
             word_shift = np.empty(len(words), np.int16)
             _moved_shifts(words, ring.length, ring.cars, w, pw, bits, digit_map, word_shift)
         del words
-        order = stable_argsort(targets)   # numpy's timsort: 2x the time on these
+        order = stable_argsort(targets)   # numpy's stable argsort (timsort): 2x the time
         offsets_last = np.empty(n + 1, dtype=np.int64)
         if _segments(targets[order], self.keys, offsets_last):
             raise RuntimeError("a successor lies outside the state set: it is not closed")
