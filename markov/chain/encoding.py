@@ -364,7 +364,8 @@ def new_keys(sorted_set: np.ndarray, candidates: np.ndarray) -> np.ndarray:
 
 @njit(cache=True)
 def _merge_into(a, a_val, b, b_val, out, out_val):
-    """Merge the sorted disjoint ``a``, ``b`` into ``out``, values alongside if ``out_val`` is not empty."""
+    """Merge the sorted disjoint ``a``, ``b`` into ``out``; their values alongside into
+    ``out_val`` unless it is empty."""
     values = out_val.shape[0] > 0
     i = 0
     j = 0

@@ -32,7 +32,8 @@ from markov.memory import gib, memory_limit, search_bytes_per_state
 from markov.model.ring import PARALLEL, Ring
 from markov.progress import progress_bar
 
-__all__ = ["recurrent_keys", "recurrent_search", "all_keys", "lump_velocity_keys", "count_all", "contains_nasch_support"]
+__all__ = ["recurrent_keys", "recurrent_search", "all_keys", "lump_velocity_keys", "count_all",
+           "contains_nasch_support"]
 
 # States per call of the successor kernels: bounds the frontier's transient
 # arrays (words of every level, successor keys) to a few hundred MB.
