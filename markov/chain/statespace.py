@@ -35,8 +35,8 @@ from markov.progress import progress_bar
 __all__ = ["recurrent_keys", "recurrent_search", "all_keys", "lump_velocity_keys", "count_all",
            "contains_nasch_support"]
 
-# States per call of the successor kernels: bounds the frontier's transient
-# arrays (words of every level, successor keys) to a few hundred MB.
+# States per call of the row generators (sequential update, and parallel rings whose
+# words pass 62 bits): bounds the frontier's successor keys to a few hundred MB.
 _CHUNK = 1 << 22
 
 
