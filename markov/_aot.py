@@ -43,6 +43,9 @@ __all__ = ["KERNELS", "LIMIT", "entry", "type_name", "build", "fingerprint", "ca
 #: output slots (no sums across threads), so a serial copy gives numba's result.
 KERNELS = (
     "markov.chain.encoding._canonical_many",
+    # the search's round: its new states and their merge into the visited ones
+    "markov.chain.encoding._difference",
+    "markov.chain.encoding._merge_into",
     "markov.chain.factored._frame_words",
     "markov.chain.factored._next_level",
     "markov.chain.factored._moved_keys",

@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 from markov import InvalidParameterError
 from markov.chain.kernels import orbit_size
 from markov.chain.encoding import (canonical_keys, check_encodable, compact_jam_key, decode, encode,
-                             from_text, max_length, powers, to_text)
+                             from_text, max_length, powers, stable_argsort, to_text)
 
 
 @st.composite
@@ -55,3 +55,34 @@ def test_overflow_guard():
     check_encodable(limit, 2)
     with pytest.raises(InvalidParameterError, match="64-bit key, which holds rings of up to L"):
         check_encodable(limit + 1, 2)
+
+
+@pytest.mark.parametrize("n, bits", [(0, 8), (1, 8), (2, 3), (1000, 4), (5000, 48),
+                                     (70_000, 62), (3000, 63)])
+def test_stable_argsort_is_numpys(n, bits):
+    """Packed words and sorted runs give numpy's stable argsort element for element:
+    many ties (few bits), runs longer than the insertion sort's, the whole int64 span."""
+    rng = np.random.default_rng(n + bits)
+    values = rng.integers(0, 1 << bits, n, dtype=np.int64)
+    if n > 10:
+        m = n // 3
+        values[0:3 * m:3] = values[1:3 * m:3]                         # ties
+        # a quarter within 2**20 of one value: long runs of one high part
+        values[: n // 4] = ((values[0] >> 20) << 20) + rng.integers(0, 1 << 20, n // 4)
+        values[-1] = -values[-1]                                      # a negative value
+    assert np.array_equal(stable_argsort(values), np.argsort(values, kind="stable"))
+
+
+def test_new_keys_and_merge_keys_are_numpys():
+    from markov.chain.encoding import merge_keys, new_keys
+
+    rng = np.random.default_rng(5)
+    for m, n in ((0, 0), (0, 5), (5, 0), (300, 1000), (1000, 300)):
+        visited = np.unique(rng.integers(0, 2000, m))
+        candidates = np.sort(rng.integers(0, 2000, n))            # repeats
+        new = new_keys(visited, candidates)
+        assert np.array_equal(new, np.setdiff1d(candidates, visited))
+        keys, values = merge_keys(visited, new, -visited, -new)
+        assert np.array_equal(keys, np.union1d(visited, new))
+        assert np.array_equal(values, -keys)
+        assert merge_keys(visited, new)[1] is None

@@ -377,3 +377,47 @@ def test_sector_apply_on_the_sector_states_alone(update):
         full[states] = x
         np.testing.assert_allclose(op.sector_apply(x, k, states),
                                    op.sector_apply(full, k)[states], rtol=1e-14, atol=1e-16)
+
+
+@pytest.mark.parametrize("name", ["nasch", "vdr", "kkw", "tt"])
+def test_search_hands_the_build_its_level0_words(name):
+    """The search's level-0 words are the build's, state for state, and the operator
+    built from them is the operator built without them, array for array."""
+    from markov.chain.factored import FrontierSearch, _level0, _model_rule
+    from markov.chain.statespace import recurrent_search
+    from markov.solvers.ring_chain import velocity_lumping
+
+    for L, N, vmax in ((10, 5, 2), (9, 4, 1), (8, 3, 3)):
+        ring = Ring(L, N, model=_model(name, vmax))
+        lumping = velocity_lumping(ring)
+        for lump, velocities in ((True, None), (False, None),
+                                 (True, None if lumping is None else lumping.digit_map())):
+            keys, words = recurrent_search(ring, lump, velocities=velocities)
+            assert np.array_equal(keys, recurrent_keys(ring, lump, velocities=velocities))
+            assert recurrent_search(ring, lump, velocities=velocities, words=False)[1] is None
+            w = word_bits(ring)[0]
+            assert np.array_equal(words, _level0(ring, keys, w, lump, _model_rule(ring.model)))
+            assert np.array_equal(words, FrontierSearch(ring, lump, velocities).words(keys))
+            a = FactoredOperator(ring, keys, lump, velocities=velocities)
+            b = FactoredOperator(ring, keys, lump, velocities=velocities, level0=words)
+            assert a.level_sizes == b.level_sizes
+            arrays = [(op._perm, op._offsets0, op._offsets_last,
+                       *(x for link in op._links for x in link)) for op in (a, b)]
+            assert all(np.array_equal(x, y) for x, y in zip(*arrays))
+
+
+def test_frontier_search_expands_each_word_once():
+    """Successive frontiers give the successors of their words not expanded before; all
+    together, the successors of every state."""
+    from markov.chain.factored import FrontierSearch
+
+    ring = Ring(10, 5, 2, 0.5)
+    keys = all_keys(ring, lump=True)
+    search = FrontierSearch(ring, True)
+    parts = np.array_split(np.random.default_rng(3).permutation(keys), 4)
+    found = [search.successors(search.words(np.sort(part))) for part in parts]
+    assert all(np.all(np.diff(f) >= 0) for f in found)
+    assert np.array_equal(unique_keys(np.concatenate(found)),
+                          frontier_successors(ring, keys, True))
+    assert np.array_equal(search.expanded, unique_keys(search.words(keys)))
+    assert search.successors(search.words(keys)).size == 0    # nothing left to expand

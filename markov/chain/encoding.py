@@ -34,7 +34,8 @@ from markov._jit import njit, prange
 from markov.chain.kernels import canonical, digits_of, shift_bits
 from markov.errors import InvalidParameterError
 
-# base, powers, compact_jam_key and unique_keys serve the other modules of markov
+# base, powers, compact_jam_key, unique_keys, stable_argsort, new_keys and merge_keys
+# serve the other modules of markov
 __all__ = ["EMPTY", "EMPTY_DIGIT", "max_length", "check_encodable", "encode", "decode",
            "from_text", "to_text", "canonical_keys"]
 
@@ -247,3 +248,159 @@ def unique_keys(keys: np.ndarray) -> np.ndarray:
     keep[0] = True
     np.not_equal(out[1:], out[:-1], out=keep[1:])
     return out[keep]
+
+
+
+def stable_argsort(values: np.ndarray) -> np.ndarray:
+    """``np.argsort(values, kind="stable")`` of int64 values, by ``np.sort`` of packed words.
+
+    numpy's stable argsort of int64 is a timsort; its plain ``np.sort`` is a
+    vectorised quicksort, several times faster.  The word ``high << b | i``
+    (``i`` the index, ``b`` its bits, ``high`` the top ``63 - b`` bits of the
+    value) sorts by ``high`` with ties in index order; the runs of equal
+    ``high`` (a few values each) are then sorted by the whole value, stably.
+
+    Parameters
+    ----------
+    values : (n,) int64 array
+
+    Returns
+    -------
+    (n,) int64 array
+        The permutation, equal element for element to numpy's stable argsort.
+    """
+    values = np.ascontiguousarray(values, dtype=np.int64)
+    n = values.shape[0]
+    if n < 2:
+        return np.arange(n, dtype=np.int64)
+    lo, hi = int(values.min()), int(values.max())
+    index_bits = (n - 1).bit_length()
+    span = (hi - lo).bit_length()
+    if span > 63 or index_bits > 40:
+        return np.argsort(values, kind="stable")
+    low = max(0, span - (63 - index_bits))   # the bits left to the runs
+    order = np.empty(n, np.int64)
+    _pack(values, lo, low, index_bits, order)
+    order.sort()
+    if low:
+        _sort_runs(values, order, index_bits)
+    else:
+        order &= (1 << index_bits) - 1
+    return order
+
+
+@njit(cache=True)
+def _pack(values, lo, low, index_bits, out):
+    """``out[i] = (values[i] - lo) >> low << index_bits | i``: one pass, one array."""
+    for i in range(values.shape[0]):
+        out[i] = (((values[i] - lo) >> low) << index_bits) | i
+
+
+@njit(cache=True)
+def _sort_runs(values, order, index_bits):
+    """Unpack the sorted words of :func:`stable_argsort` into indices and sort each run of
+    one high part by value, stably."""
+    n = order.shape[0]
+    mask = (np.int64(1) << index_bits) - 1
+    start = 0
+    while start < n:
+        high = order[start] >> index_bits
+        order[start] &= mask
+        end = start + 1
+        while end < n and order[end] >> index_bits == high:
+            order[end] &= mask
+            end += 1
+        if end - start == 1:
+            pass
+        elif end - start <= 32:   # insertion sort: stable, the run is in index order
+            for a in range(start + 1, end):
+                o = order[a]
+                v = values[o]
+                b = a
+                while b > start and values[order[b - 1]] > v:
+                    order[b] = order[b - 1]
+                    b -= 1
+                order[b] = o
+        else:
+            run = order[start:end].copy()
+            order[start:end] = run[np.argsort(values[run], kind="mergesort")]
+        start = end
+
+
+@njit(cache=True)
+def _difference(sorted_set, candidates, out):
+    """:func:`new_keys` into ``out``; returns how many."""
+    m = sorted_set.shape[0]
+    i = 0
+    k = 0
+    for t in range(candidates.shape[0]):
+        c = candidates[t]
+        if t > 0 and c == candidates[t - 1]:
+            continue
+        while i < m and sorted_set[i] < c:
+            i += 1
+        if i < m and sorted_set[i] == c:
+            continue
+        out[k] = c
+        k += 1
+    return k
+
+
+def new_keys(sorted_set: np.ndarray, candidates: np.ndarray) -> np.ndarray:
+    """The distinct ``candidates`` not in ``sorted_set``: one pass over both, no search.
+
+    Parameters
+    ----------
+    sorted_set : (m,) int64 array, sorted, distinct
+    candidates : (n,) int64 array, sorted (repeats allowed)
+
+    Returns
+    -------
+    (k,) int64 array, sorted, distinct
+    """
+    out = np.empty(candidates.shape[0], np.int64)
+    return out[:_difference(sorted_set, candidates, out)].copy()
+
+
+@njit(cache=True)
+def _merge_into(a, a_val, b, b_val, out, out_val):
+    """Merge the sorted disjoint ``a``, ``b`` into ``out``; their values alongside into
+    ``out_val`` unless it is empty."""
+    values = out_val.shape[0] > 0
+    i = 0
+    j = 0
+    for k in range(out.shape[0]):
+        if j >= b.shape[0] or (i < a.shape[0] and a[i] < b[j]):
+            out[k] = a[i]
+            if values:
+                out_val[k] = a_val[i]
+            i += 1
+        else:
+            out[k] = b[j]
+            if values:
+                out_val[k] = b_val[j]
+            j += 1
+
+
+def merge_keys(a: np.ndarray, b: np.ndarray, a_values: np.ndarray | None = None,
+               b_values: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """The union of two sorted disjoint key arrays, and their values carried along.
+
+    Parameters
+    ----------
+    a, b : int64 arrays, sorted, with no key in both
+    a_values, b_values : int64 arrays shaped like ``a`` and ``b``, optional
+        One value per key (both or neither).
+
+    Returns
+    -------
+    keys : (len(a) + len(b),) int64 array, sorted
+    values : int64 array or None
+        The values in the order of ``keys``; ``None`` without values.
+    """
+    out = np.empty(a.shape[0] + b.shape[0], np.int64)
+    carry = a_values is not None
+    out_val = np.empty(out.shape[0] if carry else 0, np.int64)
+    empty = np.empty(0, np.int64)
+    _merge_into(a, a_values if carry else empty, b, b_values if carry else empty, out, out_val)
+    return out, (out_val if carry else None)

@@ -76,8 +76,9 @@ from functools import lru_cache
 import numpy as np
 
 from markov._jit import njit, prange
-from markov.chain.encoding import powers, unique_keys
+from markov.chain.encoding import merge_keys, new_keys, powers, stable_argsort
 from markov.chain.kernels import (
+    _cttz,
     ahead_velocity,
     as_digit_map,
     canonical,
@@ -86,7 +87,6 @@ from markov.chain.kernels import (
     gap,
     rotate_mask,
     shift_bits,
-    term,
 )
 from markov.chain.operator import ChainOperator
 from markov.errors import InvalidParameterError
@@ -95,7 +95,7 @@ from markov.model.ring import PARALLEL, Ring
 from markov.model.table import RuleTable, cached_table
 
 __all__ = ["FactoredOperator", "LevelRule", "level_rule", "word_bits", "factored_fits",
-           "link_bytes_per_word", "frontier_successors"]
+           "link_bytes_per_word", "frontier_successors", "FrontierSearch"]
 
 _MAX_WORD_BITS = 62
 
@@ -401,6 +401,8 @@ def _word_width(ring: Ring, rule: LevelRule | None = None) -> tuple[int, int]:
 def _frame_word(key, length, vmax, w, lump, row_id, horizon, pos, vel, u):
     """Level-0 word of a state (positions in its frame, the row of every car) and the frame's rotation."""
     n = cars_of(key, length, vmax + 2, pos, vel)
+    if n == 0:
+        return np.int64(0), 0
     mask = np.int64(0)
     for i in range(n):
         u[i] = row_id[vel[i], min(gap(pos, n, i, length), horizon), ahead_velocity(vel, n, i)]
@@ -409,17 +411,17 @@ def _frame_word(key, length, vmax, w, lump, row_id, horizon, pos, vel, u):
     shift = n * w
     best = np.int64(-1)
     best_r = 0
-    for r in range(length if lump else 1):
+    # the smallest rotation of a mask has cell 0 occupied (rotating an empty cell 0 to
+    # the top makes it smaller), so only the rotations r = pos[k0] are tried
+    for k0 in range(n if lump else 1):
+        r = pos[k0] if lump else 0
         rotated = rotate_mask(mask, r, length)
         if best >= 0 and rotated > (best >> shift):
             continue
-        # cars in the frame start with the first car at or above cell r
-        k0 = 0
-        while k0 < n and pos[k0] < r:
-            k0 += 1
         word = rotated << shift
-        for t in range(n):
-            word |= np.int64(u[(k0 + t) % n]) << (t * w)
+        for t in range(n):   # car k0 (at cell r) is the frame's first
+            k = k0 + t if k0 + t < n else k0 + t - n
+            word |= np.int64(u[k]) << (t * w)
         if best < 0 or word < best:
             best = word
             best_r = r
@@ -662,14 +664,14 @@ def _moved_key(word, length, ncars, w, pw, bits, lump, digit_map):
     vmask = (np.int64(1) << w) - 1
     key = np.int64(0)
     t = 0
-    for x in range(length):
-        if (mask >> x) & 1:
-            v = (word >> (t * w)) & vmask
-            if merge:
-                key += digit_map[v + 1] * pw[(x + v) % length]
-            else:
-                key += term(x, v, length, pw)
-            t += 1
+    while mask:   # the occupied cells, lowest first
+        low = mask & -mask
+        mask ^= low
+        x = _cttz(low)
+        v = (word >> (t * w)) & vmask
+        y = x + v if x + v < length else x + v - length   # no division: v < L
+        key += (digit_map[v + 1] if merge else v + 1) * pw[y]
+        t += 1
     return canonical(key, length, pw, bits) if lump else key
 
 
@@ -707,13 +709,97 @@ def _segments(sorted_values, targets, offsets):
     return missing + (m - k)
 
 
+#: Level-0 words walked through the levels at a time by the search: bounds its levels'
+#: transient arrays (about 60 words of level N per word of level 0 at L = 24).
+_WORD_CHUNK = 1 << 19
+
+
+class FrontierSearch:
+    """The step of the recurrent-class search through the levels, each level-0 word once.
+
+    The states of one level-0 word have the same successors, and the
+    frontiers of a breadth-first search share most of their words (NaSch
+    vmax 2, L = 22, lumped: 245,605 words over the rounds, 99,490 distinct),
+    so the words expanded before are remembered and skipped.
+
+    Parameters
+    ----------
+    ring : Ring
+        Parallel update, its words within 62 bits (:func:`factored_fits`).
+    lump : bool
+        Canonical rotation keys.
+    velocities : int64 array, optional
+        Digit map of merged velocities
+        (:meth:`markov.model.lumping.VelocityClasses.digit_map`); ``None``
+        keeps every velocity.
+
+    Attributes
+    ----------
+    expanded : int64 array, sorted
+        The level-0 words whose successors were given.
+    """
+
+    def __init__(self, ring: Ring, lump: bool, velocities: np.ndarray | None = None):
+        self.ring = ring
+        self.lump = bool(lump)
+        self.w = word_bits(ring)[0]
+        self.rule = _model_rule(ring.model)
+        self.digit_map = as_digit_map(velocities)
+        self.expanded = np.empty(0, np.int64)
+
+    def words(self, keys: np.ndarray) -> np.ndarray:
+        """Level-0 words of states, in their order (what the operator's build reads).
+
+        Parameters
+        ----------
+        keys : (n,) int64 array
+
+        Returns
+        -------
+        (n,) int64 array
+        """
+        keys = np.ascontiguousarray(keys, dtype=np.int64)
+        return _level0(self.ring, keys, self.w, self.lump, self.rule)
+
+    def successors(self, words: np.ndarray) -> np.ndarray:
+        """Successor keys of the level-0 words not expanded before, which become expanded.
+
+        Parameters
+        ----------
+        words : (n,) int64 array
+            Level-0 words (:meth:`words`), any order, repeats allowed.
+
+        Returns
+        -------
+        (m,) int64 array
+            Sorted, with repeats.
+        """
+        ring = self.ring
+        fresh = new_keys(self.expanded, np.sort(words))
+        self.expanded = merge_keys(self.expanded, fresh)[0]
+        pw, bits = powers(ring.length, ring.vmax), shift_bits(ring.vmax)
+        parts = []
+        for lo in range(0, fresh.size, _WORD_CHUNK):
+            level = fresh[lo:lo + _WORD_CHUNK]
+            for j in range(ring.cars):
+                level = _step(level, j, self.w, self.rule, False)[0]
+            out = np.empty_like(level)
+            _moved_keys(level, ring.length, ring.cars, self.w, pw, bits, self.lump,
+                        self.digit_map, out)
+            out.sort()
+            parts.append(out)
+        if len(parts) <= 1:
+            return parts[0] if parts else fresh
+        return np.sort(np.concatenate(parts))
+
+
 def frontier_successors(ring: Ring, keys: np.ndarray, lump: bool,
                         velocities: np.ndarray | None = None) -> np.ndarray:
     """Sorted distinct successor states of a set of states (parallel update, any model).
 
     The support of ``x P`` for ``x`` supported on ``keys``, found through the
     levels (merged at every level) instead of one key per transition: the
-    step of the recurrent-class search.
+    step of the recurrent-class search (:class:`FrontierSearch`).
 
     Parameters
     ----------
@@ -731,16 +817,8 @@ def frontier_successors(ring: Ring, keys: np.ndarray, lump: bool,
     -------
     (m,) int64 array, sorted
     """
-    w, _ = word_bits(ring)
-    rule = _model_rule(ring.model)
-    keys = np.ascontiguousarray(keys, dtype=np.int64)
-    words = unique_keys(_level0(ring, keys, w, lump, rule))
-    for j in range(ring.cars):
-        words = _step(words, j, w, rule, False)[0]
-    out = np.empty_like(words)
-    _moved_keys(words, ring.length, ring.cars, w, powers(ring.length, ring.vmax),
-                shift_bits(ring.vmax), bool(lump), as_digit_map(velocities), out)
-    return unique_keys(out)
+    search = FrontierSearch(ring, lump, velocities)
+    return new_keys(np.empty(0, np.int64), search.successors(search.words(keys)))
 
 
 @njit(cache=True)
@@ -957,6 +1035,9 @@ class FactoredOperator(ChainOperator):
         Digit map of merged velocities
         (:meth:`markov.model.lumping.VelocityClasses.digit_map`) the keys and
         successors are written with; ``None`` keeps every velocity.
+    level0 : (n,) int64 array, optional
+        The level-0 words of ``keys`` (:meth:`FrontierSearch.words`), which the
+        search has made already: not computed again (read, not changed).
 
     Attributes
     ----------
@@ -988,7 +1069,8 @@ class FactoredOperator(ChainOperator):
     """
 
     def __init__(self, ring: Ring, keys: np.ndarray, lump: bool, _levels=None,
-                 shifts: bool = False, velocities: np.ndarray | None = None):
+                 shifts: bool = False, velocities: np.ndarray | None = None,
+                 level0: np.ndarray | None = None):
         if ring.update != PARALLEL:
             raise InvalidParameterError("the factored operator is for parallel update")
         if ring.cars < 1:
@@ -996,7 +1078,7 @@ class FactoredOperator(ChainOperator):
         super().__init__(ring, keys, lump)
         self.velocities = None if velocities is None else as_digit_map(velocities)
         if _levels is None:
-            _levels = self._build(_model_rule(ring.model), shifts and lump)
+            _levels = self._build(_model_rule(ring.model), shifts and lump, level0)
         (self.rule, self._perm, self._offsets0, self._links, self._offsets_last,
          self.level_sizes, self._shifts) = _levels
         self._buffers = (np.empty(max(self.level_sizes)), np.empty(max(self.level_sizes)))
@@ -1005,7 +1087,7 @@ class FactoredOperator(ChainOperator):
         self.derivative_split = None   # set by derivative_apply
         self._split = None             # (dweight, operator with rows split by it)
 
-    def _build(self, rule: LevelRule, shifts: bool = False):
+    def _build(self, rule: LevelRule, shifts: bool = False, level0: np.ndarray | None = None):
         ring = self.ring
         w, total = _word_width(ring, rule)
         if total > _MAX_WORD_BITS:
@@ -1016,8 +1098,11 @@ class FactoredOperator(ChainOperator):
         if n >= 2**31:
             raise InvalidParameterError("the factored operator indexes states with int32")
         state_shift = np.empty(n, np.int16) if shifts else None
-        words = _level0(ring, self.keys, w, self.lump, rule, state_shift)
-        perm = np.argsort(words, kind="stable").astype(np.int32)
+        if level0 is None or shifts:   # the frames' rotations are made with the words
+            words = _level0(ring, self.keys, w, self.lump, rule, state_shift)
+        else:
+            words = level0
+        perm = stable_argsort(words).astype(np.int32)
         words = words[perm]
         first = np.flatnonzero(np.concatenate(([True], words[1:] != words[:-1])))
         offsets0 = np.append(first, n).astype(np.int64)
@@ -1039,7 +1124,7 @@ class FactoredOperator(ChainOperator):
             word_shift = np.empty(len(words), np.int16)
             _moved_shifts(words, ring.length, ring.cars, w, pw, bits, digit_map, word_shift)
         del words
-        order = np.argsort(targets, kind="stable")
+        order = stable_argsort(targets)   # numpy's stable argsort (timsort): 2x the time
         offsets_last = np.empty(n + 1, dtype=np.int64)
         if _segments(targets[order], self.keys, offsets_last):
             raise RuntimeError("a successor lies outside the state set: it is not closed")

@@ -49,13 +49,26 @@ def digits_of(key, length, b, out):
 def cars_of(key, length, b, pos, vel):
     """Positions and velocities of the cars of ``key`` in cell order; returns their number."""
     n = 0
-    for x in range(length):
+    x = 0
+    if b & (b - 1) == 0:   # B = 2**bits (vmax 2, 6): shifts instead of divisions
+        bits = _cttz(b)
+        while key:
+            d = key & (b - 1)
+            key >>= bits
+            if d > 0:
+                pos[n] = x
+                vel[n] = d - 1
+                n += 1
+            x += 1
+        return n
+    while key:             # the cells above the last car are empty
         d = key % b
         key //= b
         if d > 0:
             pos[n] = x
             vel[n] = d - 1
             n += 1
+        x += 1
     return n
 
 
@@ -64,8 +77,9 @@ def gap(pos, n, i, length):
     """Empty cells ahead of car ``i`` of ``n`` (a lone car sees ``L - 1``)."""
     if n == 1:
         return length - 1
-    j = i + 1 if i + 1 < n else 0
-    return (pos[j] - pos[i] - 1) % length
+    if i + 1 < n:
+        return pos[i + 1] - pos[i] - 1
+    return pos[0] + length - pos[i] - 1   # the last car sees the first across the seam
 
 
 # ------------------------------------------------------------------ the step

@@ -21,6 +21,8 @@ from markov.chain.encoding import (
     check_encodable,
     compact_jam_key,
     encode,
+    merge_keys,
+    new_keys,
     powers,
     unique_keys,
 )
@@ -30,10 +32,11 @@ from markov.memory import gib, memory_limit, search_bytes_per_state
 from markov.model.ring import PARALLEL, Ring
 from markov.progress import progress_bar
 
-__all__ = ["recurrent_keys", "all_keys", "lump_velocity_keys", "count_all", "contains_nasch_support"]
+__all__ = ["recurrent_keys", "recurrent_search", "all_keys", "lump_velocity_keys", "count_all",
+           "contains_nasch_support"]
 
-# States per call of the successor kernels: bounds the frontier's transient
-# arrays (words of every level, successor keys) to a few hundred MB.
+# States per call of the row generators (sequential update, and parallel rings whose
+# words pass 62 bits): bounds the frontier's successor keys to a few hundred MB.
 _CHUNK = 1 << 22
 
 
@@ -88,30 +91,24 @@ def contains_nasch_support(ring: Ring) -> bool:
     return True
 
 
-def _merge(visited: np.ndarray, new: np.ndarray) -> np.ndarray:
-    merged = np.concatenate([visited, new])
-    merged.sort(kind="stable")  # two sorted runs: timsort merges them in linear time
-    return merged
-
-
-def _not_in(sorted_set: np.ndarray, candidates: np.ndarray) -> np.ndarray:
-    idx = np.searchsorted(sorted_set, candidates)
-    idx[idx == len(sorted_set)] = 0
-    return candidates[sorted_set[idx] != candidates]
-
-
 def _successor_set(ring: Ring, frontier: np.ndarray, lump: bool,
                    velocities: np.ndarray | None = None) -> np.ndarray:
-    """Sorted distinct successors of the frontier states (the support of ``x P``)."""
+    """Sorted distinct successors of the frontier states (the support of ``x P``), for
+    the rings without a :class:`markov.chain.factored.FrontierSearch`."""
     if ring.update == PARALLEL:
-        from markov.chain.factored import factored_fits, frontier_successors
-
-        if factored_fits(ring):
-            return frontier_successors(ring, frontier, lump, velocities)
         return _row_successors(ring, frontier, lump, velocities)
     from markov.chain.sequential import successor_keys
 
     return unique_keys(successor_keys(ring, frontier, lump, velocities)[1])
+
+
+def _level_search(ring: Ring, lump: bool, velocities: np.ndarray | None):
+    """The search's step through the factored levels, where the ring has them, else ``None``."""
+    if ring.update != PARALLEL:
+        return None
+    from markov.chain.factored import FrontierSearch, factored_fits
+
+    return FrontierSearch(ring, lump, velocities) if factored_fits(ring) else None
 
 
 def lump_velocity_keys(ring: Ring, keys: np.ndarray, lump: bool,
@@ -204,16 +201,53 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
 
     Notes
     -----
-    Breadth-first search from the compact jam over the support of the
-    successor relation.  Parallel update walks the per-car levels of
-    :func:`markov.chain.factored.frontier_successors` (successors merged at every
-    level, about three words per state) instead of ``2**k`` keys per state.
+    :func:`recurrent_search`, without the level-0 words.
 
     Examples
     --------
     >>> from markov.model.ring import Ring
     >>> len(recurrent_keys(Ring(3, 1, 1, 0.5), lump=False))   # 1 car, v in {0, 1}
     6
+    """
+    return recurrent_search(ring, lump, max_memory, per_state, start, velocities,
+                            words=False)[0]
+
+
+def recurrent_search(ring: Ring, lump: bool = True, max_memory: float | None = None,
+                     per_state: float | None = None, start: int | None = None,
+                     velocities: np.ndarray | None = None,
+                     words: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+    """:func:`recurrent_keys`, and the level-0 words of the states the search made.
+
+    Parameters
+    ----------
+    ring, lump, max_memory, per_state, start, velocities
+        As :func:`recurrent_keys`.
+    words : bool
+        Keep the level-0 words (:meth:`markov.chain.factored.FrontierSearch.words`)
+        of the states, for the operator's build
+        (:class:`markov.chain.factored.FactoredOperator`, ``level0``).
+
+    Returns
+    -------
+    keys : (n,) int64 array, sorted
+    level0 : (n,) int64 array or None
+        The level-0 words of ``keys``, in their order; ``None`` unless
+        ``words`` and the ring has factored levels (parallel update, words
+        within 62 bits).
+
+    Raises
+    ------
+    StateSpaceTooLargeError
+        As soon as the states found so far, times ``per_state``, exceed the limit.
+
+    Notes
+    -----
+    Breadth-first search from the compact jam over the support of the
+    successor relation, one linear pass over the sorted visited states a
+    round.  Parallel update walks the per-car levels of each level-0 word
+    once (:class:`markov.chain.factored.FrontierSearch`: successors merged at
+    every level) instead of ``2**k`` keys per state.
     """
     check_encodable(ring.length, ring.vmax)
     limit = memory_limit(max_memory)
@@ -231,15 +265,24 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
         top = min(ring.vmax, ring.length - 1)
         start = encode([top] + [-1] * (ring.length - 1), ring.vmax)
     visited = lump_velocity_keys(ring, np.array([start], dtype=np.int64), lump, velocities)
-    frontier = visited
+    levels = _level_search(ring, lump, velocities)
+    level0 = None if levels is None else levels.words(visited)
+    frontier, frontier_words = visited, level0
+    keep = words and levels is not None
     with progress_bar(None, "recurrent class", "state") as bar:
         while frontier.size:
-            found = [_successor_set(ring, frontier[lo:lo + _CHUNK], lump, velocities)
-                     for lo in range(0, frontier.size, _CHUNK)]
-            new = _not_in(visited, found[0] if len(found) == 1
-                          else unique_keys(np.concatenate(found)))
-            visited = _merge(visited, new)
-            frontier = new
+            if levels is not None:
+                found = levels.successors(frontier_words)   # sorted, with repeats
+            else:
+                parts = [_successor_set(ring, frontier[lo:lo + _CHUNK], lump, velocities)
+                         for lo in range(0, frontier.size, _CHUNK)]
+                found = parts[0] if len(parts) == 1 else np.sort(np.concatenate(parts))
+            new = new_keys(visited, found)
+            del found
+            new_words = None if levels is None else levels.words(new)
+            visited, level0 = merge_keys(visited, new, level0 if keep else None,
+                                         new_words if keep else None)
+            frontier, frontier_words = new, new_words
             bar.update(new.size)
             if visited.size * per_state > limit:
                 raise StateSpaceTooLargeError(
@@ -248,7 +291,7 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
                     f"{', velocities lumped' if velocities is not None else ''});"
                     f" at about {per_state:.0f} bytes per state that exceeds the memory"
                     f" limit of {gib(limit)}")
-    return visited
+    return visited, level0
 
 
 def all_keys(ring: Ring, lump: bool = False, max_memory: float | None = None,

@@ -28,7 +28,7 @@ from markov.chain.classes import (
     search_all_fits,
 )
 from markov.chain.encoding import compact_jam_key
-from markov.chain.statespace import count_all, recurrent_keys
+from markov.chain.statespace import count_all, recurrent_keys, recurrent_search
 from markov.chain.transition import successor_counts, transition_matrix
 from markov.choices import METHODS, OPERATORS, PRODUCT_METHODS
 from markov.errors import InvalidParameterError, NoUniqueStationaryStateError
@@ -343,6 +343,8 @@ class RingChain:
         self.operator = _ensure_operator(operator)
         self.state_bound = state_bound
         self.build_seconds = 0.0
+        # the search's level-0 words of reachable, until the factored operator takes them
+        self._level0: np.ndarray | None = None
         # True while the reachable set stands for one class that is not yet checked
         self.unverified = False
         #: How the closed classes were found (:class:`markov.chain.classes.ClassCensus`),
@@ -487,9 +489,9 @@ class RingChain:
                             dtype=np.int64)
         else:
             self._precheck()
-            keys = recurrent_keys(self.ring, self.lump, self.max_memory,
-                                  per_state=self._guard_bytes_per_state(), start=self.start,
-                                  velocities=self.velocities)
+            keys, self._level0 = recurrent_search(
+                self.ring, self.lump, self.max_memory, per_state=self._guard_bytes_per_state(),
+                start=self.start, velocities=self.velocities)
         self.build_seconds += time.perf_counter() - start
         return keys
 
@@ -751,7 +753,11 @@ class RingChain:
         if self.ring.update == PARALLEL:
             from markov.chain.factored import FactoredOperator
 
-            op = FactoredOperator(self.ring, keys, self.lump, velocities=self.velocities)
+            # the search's level-0 words, when its states are the class solved
+            level0 = self._level0 if keys is self.__dict__.get("reachable") else None
+            self._level0 = None
+            op = FactoredOperator(self.ring, keys, self.lump, velocities=self.velocities,
+                                  level0=level0)
         else:
             from markov.chain.sequential import SequentialOperator
 
@@ -763,6 +769,7 @@ class RingChain:
     def matrix(self) -> sp.csr_array:
         """Row-stochastic transition matrix on :attr:`keys`."""
         keys = self.keys
+        self._level0 = None   # the factored operator's, not the matrix's
         start = time.perf_counter()
         P = transition_matrix(self.ring, keys, self.lump, self.velocities)
         self.build_seconds += time.perf_counter() - start
