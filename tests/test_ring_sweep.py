@@ -6,7 +6,8 @@ from markov import InvalidParameterError, Ring, RingChain
 from markov.analysis.sensitivity import weight_derivatives
 from markov.chain.encoding import compact_jam_key, unique_keys
 from markov.chain.factored import FactoredOperator, frontier_successors
-from markov.chain.ring_sweep import RingSweepOperator, sweep_fits, sweep_successors
+from markov.chain.ring_sweep import (RingSweepOperator, occupation_classes, sweep_fits,
+                                    sweep_successors)
 from markov.chain.sequential import successor_keys
 from markov.chain.statespace import all_keys, lump_velocity_keys, recurrent_keys
 from markov.chain.transition import transition_matrix
@@ -137,3 +138,18 @@ def test_bad_input_is_refused():
     assert not sweep_fits(Ring(8, 0, 1, 0.5))
     assert not sweep_fits(Ring(40, 20, 2, 0.5))      # 7**40 overflows
     assert sweep_fits(Ring(32, 16, 1, 0.5), velocity_lumping(Ring(32, 16, 1, 0.5)).digit_map())
+
+
+@pytest.mark.parametrize("L, N", [(16, 8), (20, 10), (13, 4)])
+def test_ring_chain_takes_the_sweep_at_vmax1_lumped(L, N):
+    ring = Ring(L, N, 1, 0.25)
+    chain = RingChain(ring, operator="matrix-free")     # velocities lumped by default
+    assert chain.sweep and not RingChain(Ring(L, N, 2, 0.25)).sweep
+    assert not RingChain(ring, lump_velocities=False).sweep
+    sol = chain.solution("bicgstab", tol=1e-14)
+    assert isinstance(chain.transition_operator, RingSweepOperator)
+    assert sol.operator == "matrix-free" and sol.n_states == occupation_classes(L, N, True)
+    assert sol.level_sizes == tuple(chain.transition_operator.level_sizes)
+    full = RingChain(ring, lump_velocities=False).solution(method="bicgstab", tol=1e-14)
+    assert sol.flux == pytest.approx(full.flux, abs=1e-12)
+    np.testing.assert_allclose(sol.c_v, full.c_v, atol=1e-12)

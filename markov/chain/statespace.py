@@ -105,7 +105,10 @@ def _successor_set(ring: Ring, frontier: np.ndarray, lump: bool,
     """Sorted distinct successors of the frontier states (the support of ``x P``)."""
     if ring.update == PARALLEL:
         from markov.chain.factored import factored_fits, frontier_successors
+        from markov.chain.ring_sweep import sweep_successors, use_sweep
 
+        if use_sweep(ring, velocities):
+            return sweep_successors(ring, frontier, lump, velocities)
         if factored_fits(ring):
             return frontier_successors(ring, frontier, lump, velocities)
         return _row_successors(ring, frontier, lump, velocities)
@@ -207,7 +210,9 @@ def recurrent_keys(ring: Ring, lump: bool = True, max_memory: float | None = Non
     Breadth-first search from the compact jam over the support of the
     successor relation.  Parallel update walks the per-car levels of
     :func:`markov.chain.factored.frontier_successors` (successors merged at every
-    level, about three words per state) instead of ``2**k`` keys per state.
+    level, about three words per state) instead of ``2**k`` keys per state, or,
+    with every velocity in one class, the stages of
+    :func:`markov.chain.ring_sweep.sweep_successors` (:func:`~markov.chain.ring_sweep.use_sweep`).
 
     Examples
     --------
