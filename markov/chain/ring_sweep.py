@@ -369,18 +369,53 @@ def sweep_successors(ring: Ring, keys: np.ndarray, lump: bool,
     return words
 
 
-def _group(child: np.ndarray, parent: np.ndarray, code: np.ndarray):
-    """Links grouped by child: ``(children sorted, indptr, parent, code)``; a child's
-    links keep their order (parents ascending)."""
-    order = np.argsort(child, kind="stable")
-    child = child[order]
-    parent = parent[order]
-    code = code[order]
-    del order
-    start = np.flatnonzero(np.concatenate(([True], child[1:] != child[:-1])))
-    indptr = np.append(start, len(child))
-    idt = np.int32 if len(child) <= _INT32_MAX else np.int64
-    return child[start], indptr.astype(idt), parent, code
+@njit(cache=True, parallel=True)
+def _locate(sorted_values, items, out):
+    """``out[i]``: the index of ``items[i]`` in ``sorted_values`` (``-1``: absent)."""
+    m = sorted_values.shape[0]
+    for i in prange(items.shape[0]):
+        x = items[i]
+        lo, hi = 0, m
+        while lo < hi:
+            mid = (lo + hi) >> 1
+            if sorted_values[mid] < x:
+                lo = mid + 1
+            else:
+                hi = mid
+        out[i] = lo if lo < m and sorted_values[lo] == x else -1
+
+
+@njit(cache=True)
+def _counting_sort(target, parent, code, m, indptr, out_parent, out_code):
+    """Links grouped by ``target`` (``0..m-1``) in their order: a target's parents ascend."""
+    for q in range(target.shape[0]):
+        indptr[target[q] + 1] += 1
+    for t in range(m):
+        indptr[t + 1] += indptr[t]
+    pos = indptr[:m].copy()
+    for q in range(target.shape[0]):
+        t = target[q]
+        out_parent[pos[t]] = parent[q]
+        out_code[pos[t]] = code[q]
+        pos[t] += 1
+
+
+def _group(target: np.ndarray, parent: np.ndarray, code: np.ndarray, m: int):
+    """Links grouped by their target ``0..m-1``: ``(indptr, parent, code)`` (a counting
+    sort, linear: a stable argsort of 2e7 words took 14 s)."""
+    indptr = np.zeros(m + 1, np.int64)
+    out_parent = np.empty_like(parent)
+    out_code = np.empty_like(code)
+    _counting_sort(target, parent, code, m, indptr, out_parent, out_code)
+    if indptr[-1] <= _INT32_MAX:
+        indptr = indptr.astype(np.int32)
+    return indptr, out_parent, out_code
+
+
+def _targets(sorted_values: np.ndarray, items: np.ndarray) -> np.ndarray:
+    out = np.empty(len(items), np.int32 if len(sorted_values) <= _INT32_MAX else np.int64)
+    _locate(sorted_values, items, out)
+    return out
 
 
 def _build(tab: SweepTables, keys: np.ndarray, lump: bool):
@@ -409,25 +444,20 @@ def _build(tab: SweepTables, keys: np.ndarray, lump: bool):
         code = np.concatenate(ks)
         del cs, ps, ks
         if last:
-            idx = np.searchsorted(keys, child)
-            idx[idx == n] = 0
-            if not np.array_equal(keys[idx], child):
-                raise RuntimeError("a successor lies outside the state set: it is not closed")
-            del child
-            # a state of the set may have no predecessor in it (a transient start)
-            indptr = np.zeros(n + 1, np.int64)
-            np.cumsum(np.bincount(idx, minlength=n), out=indptr[1:])
-            order = np.argsort(idx, kind="stable")
-            parent, code = parent[order], code[order]
-            del order, idx
-            if indptr[-1] <= _INT32_MAX:
-                indptr = indptr.astype(np.int32)
-            words = None
+            targets = keys
         else:
-            words, indptr, parent, code = _group(child, parent, code)
-            del child
-            if len(words) > _INT32_MAX:
+            targets = unique_keys(child)
+            if len(targets) > _INT32_MAX:
                 raise InvalidParameterError("the ring sweep indexes words with int32")
+        idx = _targets(targets, child)
+        del child
+        if idx.size and idx.min() < 0:
+            raise RuntimeError("a successor lies outside the state set: it is not closed")
+        # a state of the set may have no predecessor in it (a transient start)
+        indptr, parent, code = _group(idx, parent, code, len(targets))
+        del idx
+        words = targets
+        if not last:
             sizes.append(len(words))
         links.append((indptr, parent, code))
     sizes.append(n)
