@@ -54,7 +54,7 @@ import numpy as np
 from markov._jit import njit, prange
 from markov.chain.encoding import powers, unique_keys
 from markov.chain.factored import LevelRule, _model_rule, _reweigh, _slot_derivatives, level_rule
-from markov.chain.kernels import as_digit_map, canonical, shift_bits
+from markov.chain.kernels import as_digit_map, canonical, shift_bits, smallest_rotation
 from markov.chain.operator import ChainOperator
 from markov.errors import InvalidParameterError
 from markov.model.ring import PARALLEL, Ring
@@ -261,13 +261,25 @@ def _expand(words, last, L, W, K, pw, rep, cls, row_id, H, count, new_velocity, 
             c = base + (1 + K + cls[v]) * pw[(x + v) % L]
             if last:
                 key = np.int64(0)
+                mask = np.int64(0)
                 rest = c
                 for z in range(L):
                     dz = rest % W
                     rest //= W
                     if dz > 0:
                         key += (rep[dz - 1 - K] + 1) * pwB[z]
-                out_child[i, j] = canonical(key, L, pwB, bits) if lump else key
+                        mask |= np.int64(1) << z
+                if lump and K == 1:
+                    # one class: the key is the occupancy read in base B, whose smallest
+                    # rotation is the mask's (a shift each, not L divisions)
+                    mask = smallest_rotation(mask, L)
+                    key = np.int64(0)
+                    for z in range(L):
+                        if (mask >> z) & 1:
+                            key += (rep[0] + 1) * pwB[z]
+                elif lump:
+                    key = canonical(key, L, pwB, bits)
+                out_child[i, j] = key
             else:
                 if lump and y > 0:   # the next old car onto cell 0
                     c = c // pw[y] + (c % pw[y]) * pw[L - y]
@@ -412,6 +424,27 @@ def _group(target: np.ndarray, parent: np.ndarray, code: np.ndarray, m: int):
     return indptr, out_parent, out_code
 
 
+@njit(cache=True)
+def _renumber(idx, rank):
+    """``rank[t]``: the order in which ``t`` first occurs in ``idx``; then ``idx`` by rank."""
+    r = 0
+    for q in range(idx.shape[0]):
+        t = idx[q]
+        if rank[t] < 0:
+            rank[t] = r
+            r += 1
+        idx[q] = rank[t]
+
+
+def _first_seen(idx: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """Renumber ``idx`` in place by first occurrence; the targets in that order."""
+    rank = np.full(len(targets), -1, idx.dtype)
+    _renumber(idx, rank)
+    out = np.empty_like(targets)
+    out[rank] = targets
+    return out
+
+
 def _targets(sorted_values: np.ndarray, items: np.ndarray) -> np.ndarray:
     out = np.empty(len(items), np.int32 if len(sorted_values) <= _INT32_MAX else np.int64)
     _locate(sorted_values, items, out)
@@ -453,6 +486,10 @@ def _build(tab: SweepTables, keys: np.ndarray, lump: bool):
         del child
         if idx.size and idx.min() < 0:
             raise RuntimeError("a successor lies outside the state set: it is not closed")
+        if not last:
+            # the words numbered in the order of their first parent: a product then reads
+            # every word's first parent in order, only the others at random
+            targets = _first_seen(idx, targets)
         # a state of the set may have no predecessor in it (a transient start)
         indptr, parent, code = _group(idx, parent, code, len(targets))
         del idx
