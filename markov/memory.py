@@ -33,7 +33,8 @@ from markov.errors import StateSpaceTooLargeError
 
 __all__ = ["DEFAULT_MEMORY_FRACTION", "LEVEL_WORDS_PER_STATE", "available_memory",
            "memory_limit", "solver_vectors", "search_bytes_per_state",
-           "factored_bytes_per_state", "rows_bytes_per_state", "matrix_bytes",
+           "factored_bytes_per_state", "sweep_bytes_per_state", "rows_bytes_per_state",
+           "matrix_bytes",
            "road_factored_bytes", "check_fits"]
 
 DEFAULT_MEMORY_FRACTION = 0.75
@@ -159,6 +160,35 @@ def factored_bytes_per_state(method: str, words_per_state: float = LEVEL_WORDS_P
     last = 8                                   # int64 offsets of the states
     buffers = 2 * 8 * 1.05                     # the largest level, twice
     return _KEY + links + level0 + last + buffers + 8 * solver_vectors(method)
+
+
+#: The ring sweep's words of stages ``1..N`` per state and car, and links per
+#: word (NaSch vmax 1, velocities lumped, N = L / 2: 1.23 and 1.54 at L = 24,
+#: 1.24 and 1.53 at L = 26).
+SWEEP_WORDS_PER_CAR = 1.3
+SWEEP_LINKS_PER_WORD = 1.6
+
+
+def sweep_bytes_per_state(method: str, cars: int) -> float:
+    """Peak bytes per state of the ring's sweep (:mod:`markov.chain.ring_sweep`) and a solver.
+
+    Per word an int32 row pointer, per link an int32 parent and an int16
+    outcome slot; two stage buffers of a product (the largest stage, about
+    twice the states); the keys and the solver's vectors.
+
+    Parameters
+    ----------
+    method : str
+        Stationary solver (its work vectors, :func:`solver_vectors`).
+    cars : int
+        ``N``: the stages.
+
+    Returns
+    -------
+    float
+    """
+    links = SWEEP_WORDS_PER_CAR * cars * (4 + 6 * SWEEP_LINKS_PER_WORD)
+    return _KEY + links + 2 * 8 * 2 + 8 * solver_vectors(method)
 
 
 def rows_bytes_per_state(method: str, threads: int = 2) -> float:

@@ -171,6 +171,7 @@ def test_cli_solve_operator_and_method_options():
 
 
 def test_refused_before_enumerating_when_the_count_predicts_too_many_states(monkeypatch):
+    from markov.chain.ring_sweep import occupation_classes
     from markov.goe.census import recurrent_class_bound, recurrent_class_count
 
     monkeypatch.setattr("markov.solvers.ring_chain.recurrent_keys",
@@ -186,10 +187,17 @@ def test_refused_before_enumerating_when_the_count_predicts_too_many_states(monk
                        match=f"at least {lower:,} states.*velocities lumped"):
         RingChain(ring, max_memory=1e9, state_bound=recurrent_class_bound,
                   lump_velocities=True).keys
-    # and the command line, lumping by default, refuses vmax 1 L = 32 as before (it had
-    # run out of memory when the bound was divided by the merge)
-    out = CliRunner().invoke(main, ["solve", "-L", "32", "-N", "16", "--vmax", "1"])
-    assert out.exit_code == 2 and "velocities lumped" in out.output
+    # vmax 1, velocities lumped: the sweep's states are the occupations (Burnside), so
+    # L = 32 passes the default limit, not 1 GiB, and L = 38 (9.2e8 classes) no limit
+    assert occupation_classes(32, 16, True) == 18_784_170
+    RingChain(Ring(32, 16, 1, 0.5), state_bound=recurrent_class_bound)._precheck()
+    out = CliRunner().invoke(main, ["solve", "-L", "32", "-N", "16", "--vmax", "1",
+                                    "--max-memory", "1"])
+    assert out.exit_code == 2 and "at least 18,784,170 states" in out.output
+    assert "velocities lumped" in out.output
+    out = CliRunner().invoke(main, ["solve", "-L", "38", "-N", "19", "--vmax", "1"])
+    assert out.exit_code == 2
+    assert f"at least {occupation_classes(38, 19, True):,} states" in out.output
     # the command line passes the bound (--no-lump: every state, every velocity)
     total = recurrent_class_count(24, 12, 2)
     out = CliRunner().invoke(main, ["solve", "-L", "24", "-N", "12", "--p", "0.5",

@@ -94,8 +94,14 @@ def contains_nasch_support(ring: Ring) -> bool:
 def _successor_set(ring: Ring, frontier: np.ndarray, lump: bool,
                    velocities: np.ndarray | None = None) -> np.ndarray:
     """Sorted distinct successors of the frontier states (the support of ``x P``), for
-    the rings without a :class:`markov.chain.factored.FrontierSearch`."""
+    the rings without a :class:`markov.chain.factored.FrontierSearch`: the sweep's stages
+    (:func:`markov.chain.ring_sweep.sweep_successors`, every velocity in one class), else
+    the row generators."""
     if ring.update == PARALLEL:
+        from markov.chain.ring_sweep import sweep_successors, use_sweep
+
+        if use_sweep(ring, velocities):
+            return sweep_successors(ring, frontier, lump, velocities)
         return _row_successors(ring, frontier, lump, velocities)
     from markov.chain.sequential import successor_keys
 
@@ -107,8 +113,11 @@ def _level_search(ring: Ring, lump: bool, velocities: np.ndarray | None):
     if ring.update != PARALLEL:
         return None
     from markov.chain.factored import FrontierSearch, factored_fits
+    from markov.chain.ring_sweep import use_sweep
 
-    return FrontierSearch(ring, lump, velocities) if factored_fits(ring) else None
+    if use_sweep(ring, velocities) or not factored_fits(ring):
+        return None          # the sweep's stages, or the row generators (_successor_set)
+    return FrontierSearch(ring, lump, velocities)
 
 
 def lump_velocity_keys(ring: Ring, keys: np.ndarray, lump: bool,
@@ -247,7 +256,9 @@ def recurrent_search(ring: Ring, lump: bool = True, max_memory: float | None = N
     successor relation, one linear pass over the sorted visited states a
     round.  Parallel update walks the per-car levels of each level-0 word
     once (:class:`markov.chain.factored.FrontierSearch`: successors merged at
-    every level) instead of ``2**k`` keys per state.
+    every level) instead of ``2**k`` keys per state, or, with every velocity
+    in one class, the stages of :func:`markov.chain.ring_sweep.sweep_successors`
+    (:func:`~markov.chain.ring_sweep.use_sweep`).
     """
     check_encodable(ring.length, ring.vmax)
     limit = memory_limit(max_memory)

@@ -231,14 +231,28 @@ def expected_move(ring: Ring, keys: np.ndarray, pi: np.ndarray,
 @njit(cache=True)
 def _stepped_velocity_counts(keys, weights, length, vmax, count, new_velocity, weight, horizon,
                              out):
+    # compensated (Neumaier) sums over the states: summed in order, 1.3e6 terms (vmax 1,
+    # L = 24) had put the flux 3.5e-13 off the closed form
     pos = np.empty(length, np.int64)
     vel = np.empty(length, np.int64)
+    here = np.zeros(vmax + 1)
+    comp = np.zeros(vmax + 1)
     for i in range(keys.shape[0]):
         n = cars_of(keys[i], length, vmax + 2, pos, vel)
+        here[:] = 0.0
         for j in range(n):
             v, g, a = vel[j], min(gap(pos, n, j, length), horizon), ahead_velocity(vel, n, j)
             for k in range(count[v, g, a]):
-                out[new_velocity[v, g, a, k]] += weights[i] * weight[v, g, a, k]
+                here[new_velocity[v, g, a, k]] += weights[i] * weight[v, g, a, k]
+        for u in range(vmax + 1):
+            t = out[u] + here[u]
+            if abs(out[u]) >= abs(here[u]):
+                comp[u] += (out[u] - t) + here[u]
+            else:
+                comp[u] += (here[u] - t) + out[u]
+            out[u] = t
+    for u in range(vmax + 1):
+        out[u] += comp[u]
 
 
 def stepped_velocity_densities(ring: Ring, keys: np.ndarray, pi: np.ndarray) -> np.ndarray:

@@ -442,7 +442,18 @@ class RingChain:
         return RingChain(self.ring, self.lump, self.max_memory, self.operator, self.state_bound,
                          start=self._start_text, lump_velocities=False)
 
+    @cached_property
+    def sweep(self) -> bool:
+        """Whether the parallel ring is searched and solved through the ring's sweep
+        (:func:`markov.chain.ring_sweep.use_sweep`: every velocity in one class)
+        instead of the per-car levels."""
+        from markov.chain.ring_sweep import use_sweep
+
+        return use_sweep(self.ring, self.velocities)
+
     def _matrix_free_bytes_per_state(self, method: str) -> float:
+        if self.sweep:
+            return memory.sweep_bytes_per_state(method, self.ring.cars)
         if self.ring.update == PARALLEL:
             from markov.chain.factored import link_bytes_per_word
 
@@ -465,16 +476,29 @@ class RingChain:
         if count_all(self.ring) * per_state <= self.limit:
             return  # even every configuration would fit: no need to predict
         n = self.state_bound(self.ring, self.lump)
-        if n is None:
-            return
         r = self.ring
         velocities = ""
-        if self.lumping is not None:
+        if self.sweep:
+            # the sweep's stages grow with the lumped states: the bound of the full
+            # chain over the most states one lumped state holds, or (vmax 1, a rule
+            # with NaSch's outcomes: a car with room moves one cell or not) every
+            # occupation
+            from markov.chain.ring_sweep import occupation_classes
+            from markov.chain.statespace import contains_nasch_support
+
+            top = max(len(c) for c in self.lumping.classes)
+            n = None if n is None else -(-n // top**r.cars)
+            if r.vmax == 1 and contains_nasch_support(r):
+                n = max(n or 0, occupation_classes(r.length, r.cars, self.lump))
+            velocities = f", velocities lumped: {self.lumping.describe()}"
+        elif self.lumping is not None:
             # not divided by the merge: the search's successor words and the factored
             # levels still number about the rows of the full chain (vmax 1, L = 32, N = 16:
             # 1.9e7 lumped states, killed at 24 GB), so the full chain's bound is kept
             velocities = (f", velocities lumped: {self.lumping.describe()}, whose search"
                           " and levels grow with the states of every velocity")
+        if n is None:
+            return
         memory.check_fits(
             f"the recurrent class has at least {format_count(n)} states (L={r.length},"
             f" N={r.cars}, vmax={r.vmax}, lump={self.lump}{velocities}); at about"
@@ -747,10 +771,15 @@ class RingChain:
     @cached_property
     def transition_operator(self):
         """``x -> x P`` without a CSR matrix: :class:`markov.chain.factored.FactoredOperator`
-        for parallel update, :class:`markov.chain.sequential.SequentialOperator` otherwise."""
+        for parallel update (:class:`markov.chain.ring_sweep.RingSweepOperator` where
+        :attr:`sweep`), :class:`markov.chain.sequential.SequentialOperator` otherwise."""
         keys = self.keys
         start = time.perf_counter()
-        if self.ring.update == PARALLEL:
+        if self.sweep:
+            from markov.chain.ring_sweep import RingSweepOperator
+
+            op = RingSweepOperator(self.ring, keys, self.lump, velocities=self.velocities)
+        elif self.ring.update == PARALLEL:
             from markov.chain.factored import FactoredOperator
 
             # the search's level-0 words, when its states are the class solved
@@ -914,8 +943,8 @@ class Solution:
     operator : {"matrix", "matrix-free"}
         How ``x -> x P`` was applied.
     level_sizes : tuple of int or None
-        Words per level ``0..N`` of the factored operator (parallel update,
-        matrix-free), else ``None``.
+        Words per level ``0..N`` of the factored operator, or per stage of the
+        ring's sweep (parallel update, matrix-free), else ``None``.
     census : ClassCensus or None
         How the uniqueness of this closed class is known
         (:class:`markov.chain.classes.ClassCensus`); ``None`` for a loaded file.
