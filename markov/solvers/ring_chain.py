@@ -754,13 +754,14 @@ class RingChain:
             return "matrix"
         free_fits = self.matrix_free_bytes(_LIGHTEST) <= self.limit
         if self.operator == "auto":
-            matrix_fits = self.matrix_bytes() <= self.limit
             # without a factored word (L + N bits(vmax) > 62) only the matrix is left
             from markov.chain.factored import factored_fits, word_bits
 
             factored = self.ring.update != PARALLEL or factored_fits(self.ring)
-            if matrix_fits and (self.n_states <= AUTO_MATRIX_STATES or not free_fits
-                                or not factored):
+            # the matrix's size (a count of every transition: 2.8 s at L = 24) only
+            # where the matrix could be chosen
+            if ((self.n_states <= AUTO_MATRIX_STATES or not free_fits or not factored)
+                    and self.matrix_bytes() <= self.limit):
                 return "matrix"
             if not factored:
                 word_bits(self.ring)   # refuses, naming the bits
