@@ -21,7 +21,6 @@ import os
 import platform
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -50,23 +49,10 @@ COLUMNS = ["kind", "tool", "round", "seconds", "build_s", "solve_s", "search_s",
            "search_cpu", "levels_cpu", "cpu_s", "peak_MB", "flux", "load", "rc"]
 
 
-def _child(tree: Path, argv: list[str]) -> tuple[str, dict]:
-    """Run ``python ARGV`` from ``tree`` in a fresh process; its stdout and its own usage."""
-    env = dict(os.environ, PYTHONPATH=str(tree))
-    load = f"{os.getloadavg()[0]:.1f}"
-    t = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, *argv], cwd=tree, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    out = proc.stdout.read()
-    _, status, usage = os.wait4(proc.pid, 0)
-    return out, {"seconds": round(time.perf_counter() - t, 1),
-                 "cpu_s": round(usage.ru_utime + usage.ru_stime, 1),
-                 "peak_MB": round(usage.ru_maxrss / 1024), "load": load,
-                 "rc": os.waitstatus_to_exitcode(status)}
-
-
 def _solve(tree: Path) -> dict:
-    out, row = _child(tree, ["-m", "nasch", *ARGS, "--json", "--quiet"])
+    from common import run_child
+
+    out, row = run_child(tree, ["-m", "nasch", *ARGS, "--json", "--quiet"])
     try:
         d = json.loads(out)
     except ValueError:
@@ -77,7 +63,9 @@ def _solve(tree: Path) -> dict:
 
 
 def _phases(tree: Path) -> dict:
-    out, row = _child(tree, ["-c", PHASES])
+    from common import run_child
+
+    out, row = run_child(tree, ["-c", PHASES])
     try:
         d = json.loads(out)
     except ValueError:

@@ -1,4 +1,5 @@
-"""What the benchmark scripts share: the results' CSV file and the previous commit's worktree.
+"""What the benchmark scripts share: a case in a fresh process, the results' CSV file and
+the previous commit's worktree.
 
 Imported by the scripts run as ``python benchmarks/NAME.py`` (their folder is
 first on ``sys.path``), in the parent process only: a case run in a fresh
@@ -8,8 +9,44 @@ from __future__ import annotations
 
 import csv
 import io
+import os
 import subprocess
+import sys
+import time
 from pathlib import Path
+
+
+def run_child(tree: Path, argv: list[str]) -> tuple[str, dict]:
+    """``python ARGV`` from ``tree`` in a fresh process: its stdout and its own usage.
+
+    Parameters
+    ----------
+    tree : Path
+        The checkout whose package the child imports (``PYTHONPATH``, working folder).
+    argv : list of str
+        The interpreter's arguments, e.g. ``["-m", "nasch", "solve", ...]``.
+
+    Returns
+    -------
+    out : str
+        The child's stdout (stderr is dropped).
+    usage : dict
+        ``seconds`` (wall), ``cpu_s``, ``system_s``, ``page_faults``, ``peak_MB`` (the
+        child's own ``wait4`` usage), ``load`` (the 1-minute load average as it started)
+        and ``rc``.
+    """
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    load = f"{os.getloadavg()[0]:.1f}"
+    t = time.perf_counter()
+    proc = subprocess.Popen([sys.executable, *argv], cwd=tree, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    out = proc.stdout.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    return out, {"seconds": round(time.perf_counter() - t, 1),
+                 "cpu_s": round(usage.ru_utime + usage.ru_stime, 1),
+                 "system_s": round(usage.ru_stime, 1), "page_faults": usage.ru_minflt,
+                 "peak_MB": round(usage.ru_maxrss / 1024), "load": load,
+                 "rc": os.waitstatus_to_exitcode(status)}
 
 
 def write_csv(path: Path, rows: list[dict], columns: list[str]) -> None:

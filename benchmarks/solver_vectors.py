@@ -25,7 +25,6 @@ import os
 import platform
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -45,17 +44,9 @@ COLUMNS = ["case", "tool", "round", "seconds", "build_s", "solve_s", "products",
 
 def _run(tree: Path, args: list[str]) -> dict:
     """``nasch ARGS --json`` from ``tree`` in a fresh process, with its own usage."""
-    env = dict(os.environ, PYTHONPATH=str(tree))
-    t = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "nasch", *args, "--json", "--quiet"],
-                            cwd=tree, env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.DEVNULL, text=True)
-    out = proc.stdout.read()
-    _, status, usage = os.wait4(proc.pid, 0)
-    seconds = time.perf_counter() - t
-    row = {"seconds": round(seconds, 1), "system_s": round(usage.ru_stime, 1),
-           "page_faults": usage.ru_minflt, "peak_MB": round(usage.ru_maxrss / 1024),
-           "rc": os.waitstatus_to_exitcode(status)}
+    from common import run_child
+
+    out, row = run_child(tree, ["-m", "nasch", *args, "--json", "--quiet"])
     try:
         d = json.loads(out)
     except ValueError:

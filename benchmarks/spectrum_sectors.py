@@ -22,7 +22,6 @@ import os
 import platform
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -41,14 +40,10 @@ def _argv(L: int) -> list[str]:
 
 def _run(tree: Path, L: int) -> dict:
     """``nasch spectrum`` of the ring L from ``tree`` in a fresh process, with its own usage."""
-    env = dict(os.environ, PYTHONPATH=str(tree))
-    t = time.perf_counter()
-    proc = subprocess.Popen([sys.executable, "-m", "nasch", *_argv(L)], cwd=tree, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    out = proc.stdout.read()
-    _, status, usage = os.wait4(proc.pid, 0)
-    row = {"L": L, "seconds": round(time.perf_counter() - t, 1),
-           "peak_MB": round(usage.ru_maxrss / 1024), "rc": os.waitstatus_to_exitcode(status)}
+    from common import run_child
+
+    out, usage = run_child(tree, ["-m", "nasch", *_argv(L)])
+    row = {"L": L, **usage}
     try:
         d = json.loads(out)
     except ValueError:
