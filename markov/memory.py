@@ -158,7 +158,9 @@ def factored_bytes_per_state(method: str, words_per_state: float = LEVEL_WORDS_P
     links = link_bytes * words_per_state
     level0 = 4 + 8 * first_level               # int32 permutation, int64 offsets
     last = 8                                   # int64 offsets of the states
-    buffers = 2 * 8 * 1.05                     # the largest level, twice
+    # levels 0..N-1 in two buffers, one per parity (level N is summed into the
+    # states): 1.9 state vectors at L = 20, 2.2 at L = 24 (NaSch vmax 2, N = L / 2)
+    buffers = 2 * 8 * 1.05
     return _KEY + links + level0 + last + buffers + 8 * solver_vectors(method)
 
 

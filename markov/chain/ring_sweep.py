@@ -53,7 +53,8 @@ import numpy as np
 
 from markov._jit import njit, prange
 from markov.chain.encoding import powers, unique_keys
-from markov.chain.factored import LevelRule, _model_rule, _reweigh, _slot_derivatives, level_rule
+from markov.chain.factored import (LevelRule, _model_rule, _reweigh, _slot_derivatives,
+                                   level_buffers, level_rule)
 from markov.chain.kernels import as_digit_map, canonical, shift_bits, smallest_rotation
 from markov.chain.operator import ChainOperator
 from markov.errors import InvalidParameterError
@@ -551,6 +552,9 @@ class RingSweepOperator(ChainOperator):
             tab = _tables(ring, self.velocities)
             _built = (tab.rule,) + _build(tab, self.keys, self.lump)
         self.rule, self._links, self.level_sizes = _built
+        # stages 1..N-1 pass through two buffers kept between products (stage 0 is
+        # the input, stage N the output); fresh arrays each product fault in new pages
+        self._buffers = level_buffers([0, *self.level_sizes[1:]])
         self._split = None    # (dweight, operator with rows split by it)
 
     @property
@@ -562,7 +566,7 @@ class RingSweepOperator(ChainOperator):
     def nbytes(self) -> int:
         """Bytes held: the links and the two stage buffers of a product."""
         return (sum(a.nbytes for link in self._links for a in link)
-                + 16 * max(self.level_sizes))
+                + sum(buf.nbytes for buf in self._buffers))
 
     def with_params(self, **changes) -> "RingSweepOperator":
         """The same links with other probability parameters (rebuilt only when the
@@ -600,8 +604,8 @@ class RingSweepOperator(ChainOperator):
     def _product(self, x: np.ndarray, out: np.ndarray) -> None:
         z = x
         weight = self.rule.weight
-        for indptr, parent, code in self._links[:-1]:
-            nz = np.empty(indptr.shape[0] - 1)
+        for t, (indptr, parent, code) in enumerate(self._links[:-1]):
+            nz = self._buffers[(t + 1) % 2][:indptr.shape[0] - 1]
             _pull(indptr, parent, code, weight, z, nz)
             z = nz
         indptr, parent, code = self._links[-1]
