@@ -15,6 +15,7 @@ Usage::
     python benchmarks/solver_vectors.py --large       # and L = 26 (about 5 minutes more)
     python benchmarks/solver_vectors.py --previous 2c3153e   # against the commit before
                                                              # one BLAS thread as well
+    python benchmarks/solver_vectors.py --previous 2c3153e --out peak24   # elsewhere
 """
 from __future__ import annotations
 
@@ -57,13 +58,13 @@ def _run(tree: Path, args: list[str]) -> dict:
     return row
 
 
-def _write(rows: list, meta: dict) -> None:
+def _write(rows: list, meta: dict, out: str = "solver_vectors") -> None:
     from common import write_csv
     from markov.files import write_bytes_atomic
 
     RESULTS.mkdir(parents=True, exist_ok=True)
-    write_csv(RESULTS / "solver_vectors.csv", rows, COLUMNS)
-    lines = [f"# The solver's vectors: in-place BiCGSTAB against {meta['previous']}"
+    write_csv(RESULTS / f"{out}.csv", rows, COLUMNS)
+    lines = [f"# The solver's vectors: this checkout against {meta['previous']}"
              f" ({meta['date']})",
              "", f"- machine: {meta['machine']}", f"- load average at start: {meta['load0']}",
              f"- load average at end: {meta.get('load1', '')}",
@@ -72,7 +73,7 @@ def _write(rows: list, meta: dict) -> None:
              "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     lines += ["| " + " | ".join(str(r.get(c, "")) for c in COLUMNS) + " |" for r in rows]
     lines += [""] + [f"- {x}" for x in meta["ratios"]]
-    write_bytes_atomic(RESULTS / "solver_vectors.md", ("\n".join(lines) + "\n").encode())
+    write_bytes_atomic(RESULTS / f"{out}.md", ("\n".join(lines) + "\n").encode())
 
 
 def main() -> None:
@@ -82,6 +83,8 @@ def main() -> None:
     ap.add_argument("--previous", default=PREVIOUS,
                     help=f"the commit to compare with [{PREVIOUS}, the one before the change;"
                          " 2c3153e is the one before one BLAS thread too]")
+    ap.add_argument("--out", default="solver_vectors",
+                    help="results as benchmarks/results/OUT.{csv,md} [solver_vectors]")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT))
     from common import previous_worktree
@@ -99,7 +102,7 @@ def main() -> None:
         for rnd in range(1, args.rounds + 1):
             for tool, tree in (("previous", old), ("this", ROOT)):
                 rows.append({"case": name, "tool": tool, "round": rnd, **_run(tree, argv)})
-                _write(rows, meta)
+                _write(rows, meta, args.out)
         mine = [r for r in rows if r["case"] == name and r["rc"] == 0]
         for key in ("seconds", "solve_s", "peak_MB"):
             a = [r.get(key) for r in mine if r["tool"] == "previous"]
@@ -113,8 +116,8 @@ def main() -> None:
         argv = [a.replace("{N}", str(N // 2)) for a in argv]
         rows.append({"case": name, "tool": "this", "round": 1, **_run(ROOT, argv)})
     meta["load1"] = " ".join(f"{x:.2f}" for x in os.getloadavg())
-    _write(rows, meta)
-    print((RESULTS / "solver_vectors.md").read_text())
+    _write(rows, meta, args.out)
+    print((RESULTS / f"{args.out}.md").read_text())
 
 
 if __name__ == "__main__":

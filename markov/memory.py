@@ -112,9 +112,9 @@ def solver_vectors(method: str) -> int:
     int
     """
     # GMRES: scipy's work vectors plus three temporaries of the shifted system's
-    # product; BiCGSTAB in place (markov.solvers.bicgstab): x, r, r~, p, v, t, the
-    # caller's iterate and the residual's work vector
-    return {"gmres": GMRES_RESTART + 9, "bicgstab": 8, "power": 5,
+    # product; BiCGSTAB in place (markov.solvers.bicgstab): x, r, r~, p, v, t and the
+    # residual's work vector (r~ in float32; the start is overwritten, not kept)
+    return {"gmres": GMRES_RESTART + 9, "bicgstab": 7, "power": 5,
             "iterative": GMRES_RESTART + 9, "aggregation": 9,
             "direct": 4, "eigs": 24, "auto": GMRES_RESTART + 6}[method]
 
@@ -157,7 +157,7 @@ def factored_bytes_per_state(method: str, words_per_state: float = LEVEL_WORDS_P
     """
     links = link_bytes * words_per_state
     level0 = 4 + 8 * first_level               # int32 permutation, int64 offsets
-    last = 8                                   # int64 offsets of the states
+    last = 4                                   # int32 offsets of the states
     # levels 0..N-1 in two buffers, one per parity (level N is summed into the
     # states): 1.9 state vectors at L = 20, 2.2 at L = 24 (NaSch vmax 2, N = L / 2)
     buffers = 2 * 8 * 1.05

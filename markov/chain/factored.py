@@ -1155,6 +1155,8 @@ class FactoredOperator(ChainOperator):
         offsets_last = np.empty(n + 1, dtype=np.int64)
         if _segments(targets[order], self.keys, offsets_last):
             raise RuntimeError("a successor lies outside the state set: it is not closed")
+        # held through every product: int32 (words < 2**31, checked above), 49 MB less at L = 24
+        offsets_last = offsets_last.astype(np.int32)
         if rule.layout == "csr":
             links[-1] = _permute_rows(*links[-1], order)
         else:

@@ -10,6 +10,7 @@ system-and-user time at L = 26 (``docs/performance.md``, "The solver's vectors")
 
 Here the same iteration (van der Vorst's BiCGSTAB without a preconditioner, the
 recurrences and breakdown tests of scipy's) keeps six vectors ``x, r, r~, p, v, t``
+(``r~``, the fixed shadow residual, as float32: any fixed vector serves)
 and writes the product straight into ``v`` or ``t`` (``product(x, out)``); every
 vector update is one numba-parallel pass that also returns the dot products the next
 step needs (two threads, where numpy's ``a - b`` runs on one).
@@ -79,6 +80,15 @@ def _half_step(r, v, alpha):
 
 
 @njit(cache=True, parallel=True)
+def _dot(a, b):
+    """``a . b`` (``a`` float32 or float64), summed in float64."""
+    d = 0.0
+    for i in prange(a.shape[0]):
+        d += a[i] * b[i]
+    return d
+
+
+@njit(cache=True, parallel=True)
 def _full_step(x, p, r, t, rt, alpha, omega):
     """``x <- x + alpha p + omega r``, then ``r <- r - omega t``; returns ``r . r``, ``r~ . r``."""
     rr = 0.0
@@ -137,8 +147,10 @@ def bicgstab(product: Callable[[np.ndarray, np.ndarray], np.ndarray], x: np.ndar
     atol2 = (rtol * np.sqrt(n) * b) ** 2  # ||b||_2 = sqrt(n) / n
     r = product(x, np.empty(n))
     rr, _ = _start_residual(x, r, float(x.sum()) * c_of, b)
-    rt = r.copy()
-    rho = float(rr)                      # r~ . r with r~ = r
+    # The shadow residual r~ may be any fixed vector with r~ . r0 != 0; r0 rounded to
+    # float32 serves as well as r0 and holds half a vector (49 MB at L = 24).
+    rt = r.astype(np.float32)
+    rho = float(_dot(rt, r))             # r~ . r
     p = np.empty(n)
     v = np.empty(n)
     t = np.empty(n)

@@ -193,7 +193,8 @@ def _power_steps(product, x, tol, maxiter, count):
     return x, res
 
 
-def _krylov_steps(product, n, x, tol, maxiter, method, count, restart=GMRES_RESTART):
+def _krylov_steps(product, n, x, tol, maxiter, method, count, restart=GMRES_RESTART,
+                  copy=True):
     """BiCGSTAB or GMRES(restart) on ``(I - P^T + 1 1^T / n) pi = 1 / n``.
 
     The system is non-singular for an irreducible chain and its solution sums
@@ -203,14 +204,16 @@ def _krylov_steps(product, n, x, tol, maxiter, method, count, restart=GMRES_REST
     tightens ``rtol`` tenfold only if that falls short.  Asking for far less
     than the attainable accuracy up front makes GMRES stagnate for thousands
     of restarts.  BiCGSTAB runs in place (:mod:`markov.solvers.bicgstab`);
-    ``product(v, out)`` writes ``v P`` into ``out``.
+    ``product(v, out)`` writes ``v P`` into ``out``.  ``copy=False``: BiCGSTAB
+    overwrites ``x`` itself (the caller can make its start again).
     """
     if method == "gmres":
         ones_over_n = np.full(n, 1.0 / n)
         A = spla.LinearOperator((n, n), dtype=np.float64,
                                 matvec=lambda v: v - product(v) + ones_over_n * v.sum())
     work = np.empty(n)
-    x = np.array(x, dtype=np.float64)
+    if copy or method == "gmres":
+        x = np.array(x, dtype=np.float64)
     rtol, res = tol, np.inf
     for _ in range(8):
         left = maxiter - count[0]
@@ -373,7 +376,12 @@ def _iterate(product, n: int, method: str, tol: float, maxiter: int,
     stage : str
         The method that produced ``x``.
     """
-    x = np.full(n, 1.0 / n) if x0 is None else _normalise(np.asarray(x0, dtype=np.float64))
+    def start():
+        return np.full(n, 1.0 / n) if x0 is None else _normalise(np.asarray(x0, np.float64))
+
+    # The start is made again rather than kept beside BiCGSTAB's six vectors (at
+    # L = 24 one vector is 99 MB, 5 % of the peak): ``fresh`` says x is the start.
+    x, fresh = start(), True
     count = [0]
 
     def counted(v, out=None):
@@ -389,9 +397,11 @@ def _iterate(product, n: int, method: str, tol: float, maxiter: int,
             elif stage == "aggregation":
                 y, r = _aggregation_steps(counted, x, tol, maxiter, count, aggregates)
             else:
-                y, r = _krylov_steps(counted, n, x, tol, maxiter, stage, count)
+                y, r = _krylov_steps(counted, n, x, tol, maxiter, stage, count, copy=not fresh)
+                if fresh and stage == "bicgstab" and (y is None or r > res):
+                    x = start()   # overwritten by a stage whose result is not kept
             if y is not None and r <= res:
-                x, res = y, r
+                x, res, fresh = y, r, False
             if res <= tol:
                 return x, res, count[0], stage
         return x, res, count[0], stage
