@@ -16,6 +16,7 @@ Usage::
     python benchmarks/solver_vectors.py --previous 2c3153e   # against the commit before
                                                              # one BLAS thread as well
     python benchmarks/solver_vectors.py --previous 2c3153e --out peak24   # elsewhere
+    python benchmarks/solver_vectors.py --sweep --previous e85f778 --out sweep_buffers
 """
 from __future__ import annotations
 
@@ -38,6 +39,11 @@ CASES = [
                                             "--p", "0.25", "--alpha", "0.5", "--beta", "0.5",
                                             "--tol", "1e-10"], None),
 ]
+#: ``--sweep``: NaSch vmax 1 rings, solved through the ring's sweep (markov/chain/ring_sweep.py)
+SWEEP_CASES = [
+    (f"ring L = {L}, N = {L // 2}, vmax 1 (sweep)",
+     ["solve", "-L", str(L), "-N", str(L // 2), "--vmax", "1", "--p", "0.25", "--max-memory",
+      "20"], None) for L in (28, 30)]
 LARGE = ("ring L = 26, N = 13, vmax 2 (lumped)", ["solve", "-L", "26"] + RING, 26)
 COLUMNS = ["case", "tool", "round", "seconds", "build_s", "solve_s", "products", "system_s",
            "page_faults", "peak_MB", "residual", "flux", "rc"]
@@ -83,6 +89,8 @@ def main() -> None:
     ap.add_argument("--previous", default=PREVIOUS,
                     help=f"the commit to compare with [{PREVIOUS}, the one before the change;"
                          " 2c3153e is the one before one BLAS thread too]")
+    ap.add_argument("--sweep", action="store_true",
+                    help="the vmax 1 rings of the ring's sweep instead of the usual cases")
     ap.add_argument("--out", default="solver_vectors",
                     help="results as benchmarks/results/OUT.{csv,md} [solver_vectors]")
     args = ap.parse_args()
@@ -97,7 +105,7 @@ def main() -> None:
             "machine": f"{platform.machine()}, {os.cpu_count()} cores",
             "load0": " ".join(f"{x:.2f}" for x in os.getloadavg()), "ratios": []}
     rows: list[dict] = []
-    for name, argv, N in CASES:
+    for name, argv, N in (SWEEP_CASES if args.sweep else CASES):
         argv = [a.replace("{N}", str(N // 2)) if N else a for a in argv]
         for rnd in range(1, args.rounds + 1):
             for tool, tree in (("previous", old), ("this", ROOT)):
