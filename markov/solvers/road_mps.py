@@ -80,6 +80,13 @@ LADDER_START = 16
 #: few products suffice (the local solve stops at its tolerance), and the sweeps, not the
 #: local solve, decide how fast the state settles (docs/mps_solver_notes.md).
 KRYLOV = 12
+#: The local vector of each bond (:func:`markov.mps.stationary.stationary_mps` ``select``):
+#: the refined Ritz vector for the value 1, the unit vector of the Krylov space of least
+#: ``||(M - 1) x||``.  The Ritz vector nearest 1 (an eigenvector of the non-normal projected
+#: matrix, ill-conditioned) made J jump by up to 1e-3 between sweeps in the maximal-current
+#: phase (vmax 1, L = 200, chi 32 and 64), with jumps of the discarded weight to 1e-6
+#: (docs/mps_solver_notes.md, 2026-12-05).
+LOCAL_RULE = "refined"
 
 
 def _geometric_tail(values) -> float:
@@ -222,7 +229,8 @@ class MPSRoadSolution:
         How one closed class is known (:func:`_check_classes`).
     converged : bool
         Whether the sweeps at ``chi`` ended converged: the residual target ``tol`` met,
-        or J settled (:func:`flux_tail`) with the residual at its truncation floor.
+        or J settled (:func:`flux_tail`) with the residual at its truncation floor; and
+        a bar was given (False where J at ``chi / 2`` did not settle).
     stopped : str
         Why they ended (:class:`markov.mps.stationary.StationaryMPS` ``stopped``).
     tol : float
@@ -495,9 +503,9 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
     settled = full.converged or full.stopped == "caller"
     inflow = steps * expectation(p, base, mpo.count("entered"))
     spread = current_spread(road, flux, inflow, ramps, bonds)
+    bar = flux_error(flux, flux_half, tail, L, spread)
     return MPSRoadSolution(
-        system=road, bond_dimension=chi, flux=flux,
-        flux_error=flux_error(flux, flux_half, tail, L, spread),
+        system=road, bond_dimension=chi, flux=flux, flux_error=bar,
         flux_half=flux_half, inflow=inflow,
         ramp_inflows=ramps, bond_currents=bonds, density_profile=density,
         velocity_profile=vel, residual=full.residual, truncation_error=full.truncation_error,
@@ -505,7 +513,7 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         iterations=sum(r.iterations for r, _ in results), seconds=time.perf_counter() - t0,
         mpo_bond_dimension=max(mpo.bond_dimensions, default=1),
         velocities=_velocities(road, mpo, tables), closed_classes=classes,
-        converged=settled, tol=tol, stopped=full.stopped, state=p)
+        converged=settled and bar is not None, tol=tol, stopped=full.stopped, state=p)
 
 
 def _chain_steps(road: Road) -> int:
@@ -570,7 +578,7 @@ def _sweeps(mpo, chi: int, tol: float, max_sweeps: int, start, bar, on_sweep,
                             max_iterations=min(max_sweeps, WARM_UP_SWEEPS) if warm_up
                             else max_sweeps,
                             check_every=RESIDUAL_EVERY if residuals else 0, start=start,
-                            monitor=settled, ncv=KRYLOV, local_maxiter=1)
+                            monitor=settled, ncv=KRYLOV, local_maxiter=1, select=LOCAL_RULE)
     return result, fluxes
 
 
