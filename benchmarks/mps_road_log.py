@@ -22,13 +22,12 @@ def main(argv=None) -> None:
     ap.add_argument("--alpha", type=float, default=1.0)
     ap.add_argument("--beta", type=float, default=1.0)
     ap.add_argument("--chi", type=int, default=64)
-    ap.add_argument("--rule", default=None, help="road_mps.LOCAL_RULE (default: as shipped)")
+    ap.add_argument("--rule", default=None,
+                    help="local_rule of solve_road_mps (default: road_mps.LOCAL_RULE)")
     a = ap.parse_args(argv)
     from markov import Road, load_model
     from markov.solvers import road_mps
 
-    if a.rule:
-        road_mps.LOCAL_RULE = a.rule
     entry, exit_ = ("site1", "sink") if a.vmax == 1 else ("reservoir", "wall")
     road = Road(a.L, load_model("nasch", {"vmax": a.vmax, "p": 0.25}), "parallel",
                 a.alpha, a.beta, entry, exit_)
@@ -37,7 +36,7 @@ def main(argv=None) -> None:
     def log(sweep, j):
         print(f"SWEEP {sweep} {time.perf_counter() - t0:.1f} s J {j:.12f}", flush=True)
 
-    sol = road_mps.solve_road_mps(road, a.chi, on_sweep=log)
+    sol = road_mps.solve_road_mps(road, a.chi, on_sweep=log, local_rule=a.rule)
     d = sol.to_dict()
     print("RESULT " + json.dumps({k: d[k] for k in (
         "flux", "flux_error", "flux_half_bond", "current_spread", "residual",
