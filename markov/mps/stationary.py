@@ -904,8 +904,9 @@ def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter:
     ``rule="refined"``: instead of the Ritz vector, the unit vector ``x`` of the Krylov space
     of least ``||(M - 1) x||`` (the refined Ritz vector for the value 1, Jia 1997: a
     singular vector, well conditioned where the eigenvectors of a non-normal ``M`` are
-    not); it stops when that least value is below ``tol``. Where ``M`` has the eigenvalue 1
-    both rules give its eigenvector.
+    not); it stops when that least value is below ``tol``. ``rule="ritz-refined"``: the
+    least ``||(M - lam) x||``, ``lam`` the (real part of the) Ritz value nearest 1. Where
+    ``M`` has the eigenvalue 1 the rules give its eigenvector.
     """
     shape = theta.shape
     n = theta.size
@@ -1089,11 +1090,12 @@ def stationary_mps(
     local_tol, ncv, local_maxiter : float, int, int
         Ritz-residual tolerance, Krylov size and restarts of the local Arnoldi solve
         (``"dmrg"``).
-    select : {"nearest", "refined"}
+    select : {"nearest", "refined", "ritz-refined"}
         The local vector (``"dmrg"``): the Ritz vector of value nearest 1, or the refined
         Ritz vector for the value 1, the unit vector of the Krylov space of least
         ``||(M - 1) x||`` (:func:`_local_eigenvector`; steadier where the projected
-        matrix is far from normal: docs/mps_solver_notes.md, 2026-12-05).
+        matrix is far from normal: docs/mps_solver_notes.md, 2026-12-05), or the refined
+        Ritz vector for the Ritz value nearest 1.
     progress : callable, optional
         ``progress(iteration, mps, residual)`` after every check, ``mps`` normalised; a
         returned dict is merged into that check's history entry (e.g. the flux), and
