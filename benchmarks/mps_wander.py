@@ -30,7 +30,8 @@ def main(argv=None) -> None:
     ap.add_argument("--chis", default="32,64,128")
     ap.add_argument("--sweeps", default="20")
     ap.add_argument("--warm", type=int, default=12, help="sweeps at chi 16 first")
-    ap.add_argument("--select", default="nearest", help="local Ritz rule (stationary_mps)")
+    ap.add_argument("--select", default="nearest", help="local rule (stationary_mps select)")
+    ap.add_argument("--krylov", type=int, default=12, help="Krylov vectors a bond, one pass")
     a = ap.parse_args(argv)
     from markov import Road, load_model
     from markov.mps import stationary as st
@@ -60,12 +61,12 @@ def main(argv=None) -> None:
             j = st.expectation(p, base, left)
             print(json.dumps({"L": a.L, "vmax": a.vmax, "chi": chi, "sweep": it, "J": j,
                               "discarded": errs[-1], "t": round(time.perf_counter() - t0, 2),
-                              "select": a.select}), flush=True)
+                              "select": a.select, "krylov": a.krylov}), flush=True)
             return False
 
         kw = {} if a.select == "nearest" else {"select": a.select}
         r = st.stationary_mps(mpo.tensors, chi, tol=1e-10, max_iterations=n, start=start,
-                              check_every=0, ncv=12, local_maxiter=1, monitor=mon, **kw)
+                              check_every=0, ncv=a.krylov, local_maxiter=1, monitor=mon, **kw)
         start = r.mps
     sys.stdout.flush()
 
