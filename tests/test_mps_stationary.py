@@ -226,3 +226,53 @@ def test_progress_callback_and_warm_start():
     warm = stationary_mps(tasep_mpo(30, 0.3, 0.6), 16, tol=1e-10, start=longer)
     assert warm.converged
     assert math.isclose(bond_currents(warm.mps)[15], dehp_current(30, Fraction(3, 10), Fraction(3, 5)), rel_tol=1e-8)
+
+
+# ----------------------------------------------------------------- local rules
+
+
+@pytest.mark.parametrize("select", ["nearest", "refined", "ritz-refined"])
+def test_every_local_rule_finds_the_exact_vector_at_full_bond(select):
+    # where chi holds the whole vector the projected matrix has the eigenvalue 1 exactly,
+    # and the rules agree on its eigenvector
+    dims, rng = [2, 3, 2, 3, 2, 2], np.random.default_rng(11)
+    t = random_circuit(dims, rng)
+    res = stationary_mps(dense_to_mpo(t, dims), 36, tol=1e-12, select=select, ncv=12,
+                         local_maxiter=2, max_iterations=30)
+    assert res.converged and res.residual <= 1e-12
+    assert np.abs(mps_to_dense(res.mps) - dense_stationary(t)).max() < 1e-10
+
+
+@pytest.mark.parametrize("n", [30, 100])   # the dense block, and the Krylov space
+def test_refined_local_vectors_are_least_residual_vectors(n):
+    from markov.mps.stationary import _local_eigenvector
+
+    rng = np.random.default_rng(n)
+    m = rng.random((n, n)) ** 4
+    m /= m.sum(axis=0)                                  # stochastic: eigenvalue 1
+    theta = rng.random((1, n, 1, 1))
+
+    def mv(x):
+        return (m @ x.ravel()).reshape(x.shape)
+
+    # the full space (ncv = n): the refined vector for 1 is the stationary vector
+    got = _local_eigenvector(mv, theta, 1e-13, n, 1, "refined").ravel()
+    p = dense_stationary(m)
+    assert np.abs(got / got.sum() - p).max() < 1e-10
+    # without the eigenvalue 1 (0.9 M): the least ||(A - 1) x||, the last singular vector
+    a = 0.9 * m + 0.02 * rng.random((n, n))
+
+    def mva(x):
+        return (a @ x.ravel()).reshape(x.shape)
+
+    x = _local_eigenvector(mva, theta, 1e-13, n, 1, "refined").ravel()
+    v = np.linalg.svd(a - np.eye(n))[2][-1]
+    assert abs(abs(x @ v) - 1) < 1e-10
+    # ritz-refined: least ||(A - lam) x|| at the eigenvalue lam of A nearest 1
+    vals = np.linalg.eigvals(a)
+    lam = vals[np.argmin(abs(vals - 1))].real
+    x = _local_eigenvector(mva, theta, 1e-13, n, 1, "ritz-refined").ravel()
+    v = np.linalg.svd(a - lam * np.eye(n))[2][-1]
+    assert abs(abs(x @ v) - 1) < 1e-8
+    with pytest.raises(ValueError, match="select"):
+        stationary_mps(tasep_mpo(4, 0.5, 0.5), 4, select="largest")

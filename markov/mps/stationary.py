@@ -880,6 +880,10 @@ def _pick(vals: np.ndarray) -> int:
 CHECK_EVERY = 2
 
 
+#: The local rules of :func:`stationary_mps` (``select``).
+SELECT_RULES = ("nearest", "refined", "ritz-refined")
+
+
 def _ritz(h: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
     """Ritz values of the leading ``m x m`` Hessenberg block and the unit real Ritz vector
     nearest 1 (a complex pair on top: its real part)."""
@@ -888,13 +892,21 @@ def _ritz(h: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
     return vals, y / np.linalg.norm(y)
 
 
-def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter: int) -> np.ndarray:
-    """Eigenvector of the projected matrix for its eigenvalue nearest 1.
+def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter: int,
+                       rule: str = "nearest") -> np.ndarray:
+    """Eigenvector of the projected matrix ``M`` for its eigenvalue nearest 1.
 
     Explicitly restarted Arnoldi from the current two-site tensor (Krylov size ``ncv``, at
     most ``maxiter`` restarts, stop when the Ritz residual is below ``tol``); unlike ARPACK
     it always returns its best Ritz vector, so an unconverged local step still improves
     the sweep. Blocks of at most 64 entries are solved densely.
+
+    ``rule="refined"``: instead of the Ritz vector, the unit vector ``x`` of the Krylov space
+    of least ``||(M - 1) x||`` (the refined Ritz vector for the value 1, Jia 1997: a
+    singular vector, well conditioned where the eigenvectors of a non-normal ``M`` are
+    not); it stops when that least value is below ``tol``. ``rule="ritz-refined"``: the
+    least ``||(M - lam) x||``, ``lam`` the (real part of the) Ritz value nearest 1. Where
+    ``M`` has the eigenvalue 1 the rules give its eigenvector.
     """
     shape = theta.shape
     n = theta.size
@@ -905,10 +917,30 @@ def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter:
         eye = np.eye(n)
         for j in range(n):
             m[:, j] = matvec(eye[j].reshape(shape)).ravel()
-        vals, vecs = np.linalg.eig(m)
-        vec = vecs[:, _pick(vals)].real
+        if rule == "refined":
+            vec = _svd(m - eye)[2][-1]
+        elif rule == "ritz-refined":
+            vals = np.linalg.eigvals(m)
+            vec = _svd(m - vals[_pick(vals)].real * eye)[2][-1]
+        else:
+            vals, vecs = np.linalg.eig(m)
+            vec = vecs[:, _pick(vals)].real
     else:
         k = min(ncv, n)
+
+        def choose(h: np.ndarray, m: int) -> tuple[np.ndarray, float]:
+            """The vector's coefficients in the Krylov basis and its residual."""
+            if rule == "refined":
+                _, sv, vt = _svd(h[: m + 1, :m] - np.eye(m + 1, m))
+                return vt[-1], float(sv[-1])
+            if rule == "ritz-refined":
+                vals = np.linalg.eigvals(h[:m, :m])
+                lam = vals[_pick(vals)].real
+                _, sv, vt = _svd(h[: m + 1, :m] - lam * np.eye(m + 1, m))
+                return vt[-1], float(sv[-1])
+            _, y = _ritz(h, m)
+            return y, float(abs(h[m, m - 1] * y[-1]))
+
         for _ in range(max(1, maxiter)):
             basis = np.empty((k + 1, n))
             h = np.zeros((k + 1, k))
@@ -927,14 +959,14 @@ def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter:
                 basis[j + 1] = w / h[j + 1, j]
                 if j + 1 < k and (j + 1) % CHECK_EVERY == 0:
                     # near the fixed point a few products suffice: look before the space is full
-                    _, y = _ritz(h, j + 1)
-                    if abs(h[j + 1, j] * y[-1]) <= tol:
+                    _, res = choose(h, j + 1)
+                    if res <= tol:
                         m, done = j + 1, True
                         break
-            vals, y = _ritz(h, m)
+            y, res = choose(h, m)
             v = y @ basis[:m]
             v /= np.linalg.norm(v)
-            if done or abs(h[m, m - 1] * y[-1]) <= tol:
+            if done or res <= tol:
                 break
         vec = v
     if vec @ v0 < 0:  # the sign of the previous tensor
@@ -950,8 +982,10 @@ def _dmrg_sweep(
     local_tol: float,
     ncv: int,
     maxiter: int,
+    select: str = "nearest",
 ) -> tuple[list[np.ndarray], float]:
-    """One left-to-right and right-to-left two-site sweep; ``tensors`` right-canonical in."""
+    """One left-to-right and right-to-left two-site sweep; ``tensors`` right-canonical in;
+    ``select`` the local rule (:func:`_local_eigenvector`)."""
     n = len(tensors)
     ts = list(tensors)
     # right environments (bra, w, ket), right-canonical tensors
@@ -965,7 +999,7 @@ def _dmrg_sweep(
     theta = np.tensordot(ts[0], ts[1], axes=(2, 0))
     for i in range(n - 1):  # left to right, bond (i, i+1)
         mv = _effective_two_site(left[i], mpo[i], mpo[i + 1], right[i + 2])
-        theta = _local_eigenvector(mv, theta, local_tol, ncv, maxiter)
+        theta = _local_eigenvector(mv, theta, local_tol, ncv, maxiter, select)
         a, s, t, b = theta.shape
         u, sv, vt = _svd(theta.reshape(a * s, t * b))
         k, e = _truncate(sv, bond_dimension, cutoff)
@@ -982,7 +1016,7 @@ def _dmrg_sweep(
     theta = np.tensordot(ts[n - 2], ts[n - 1], axes=(2, 0))
     for i in range(n - 2, -1, -1):  # right to left, bond (i, i+1)
         mv = _effective_two_site(left[i], mpo[i], mpo[i + 1], right[i + 2])
-        theta = _local_eigenvector(mv, theta, local_tol, ncv, maxiter)
+        theta = _local_eigenvector(mv, theta, local_tol, ncv, maxiter, select)
         a, s, t, b = theta.shape
         u, sv, vt = _svd(theta.reshape(a * s, t * b))
         k, e = _truncate(sv, bond_dimension, cutoff)
@@ -1024,6 +1058,7 @@ def stationary_mps(
     local_tol: float = 1e-12,
     ncv: int = 40,
     local_maxiter: int = 4,
+    select: str = "nearest",
     progress: Callable[[int, MPS, float], dict | None] | None = None,
     monitor: Callable[[int, MPS], bool] | None = None,
 ) -> StationaryMPS:
@@ -1055,6 +1090,12 @@ def stationary_mps(
     local_tol, ncv, local_maxiter : float, int, int
         Ritz-residual tolerance, Krylov size and restarts of the local Arnoldi solve
         (``"dmrg"``).
+    select : {"nearest", "refined", "ritz-refined"}
+        The local vector (``"dmrg"``): the Ritz vector of value nearest 1, or the refined
+        Ritz vector for the value 1, the unit vector of the Krylov space of least
+        ``||(M - 1) x||`` (:func:`_local_eigenvector`; steadier where the projected
+        matrix is far from normal: docs/mps_solver_notes.md, 2026-12-05), or the refined
+        Ritz vector for the Ritz value nearest 1.
     progress : callable, optional
         ``progress(iteration, mps, residual)`` after every check, ``mps`` normalised; a
         returned dict is merged into that check's history entry (e.g. the flux), and
@@ -1079,6 +1120,8 @@ def stationary_mps(
         p = start.copy()
     if len(p) != len(mpo):
         raise ValueError(f"start of {len(p)} sites for an MPO of {len(mpo)}")
+    if select not in SELECT_RULES:
+        raise ValueError(f"select must be one of {SELECT_RULES}, not {select!r}")
     if method not in ("dmrg", "power"):
         raise ValueError(f"method must be 'dmrg' or 'power', not {method!r}")
     p = normalize(_right_canonical(p))
@@ -1090,7 +1133,8 @@ def stationary_mps(
     for it in range(1, max_iterations + 1):
         if method == "dmrg":
             rc = _right_canonical(p)
-            ts, err = _dmrg_sweep(mpo, rc.tensors, bond_dimension, cutoff, local_tol, ncv, local_maxiter)
+            ts, err = _dmrg_sweep(mpo, rc.tensors, bond_dimension, cutoff, local_tol, ncv,
+                                  local_maxiter, select)
             if log_total(MPS(ts))[0] < 0:  # an eigenvector's sign is free: take the positive sum
                 ts[0] = -ts[0]
             p = normalize(MPS(ts))

@@ -80,6 +80,13 @@ LADDER_START = 16
 #: few products suffice (the local solve stops at its tolerance), and the sweeps, not the
 #: local solve, decide how fast the state settles (docs/mps_solver_notes.md).
 KRYLOV = 12
+#: The local vector of each bond by default (``local_rule`` of :func:`solve_road_mps`;
+#: :func:`markov.mps.stationary.stationary_mps` ``select``): the Ritz vector of value nearest
+#: 1.  ``"refined"`` (the unit vector of the Krylov space of least ``||(M - 1) x||``) settles
+#: the maximal current of vmax 1 at L = 200-400 where this one jumps by up to 1e-3 between
+#: sweeps, but costs 3x a sweep and ends some low-density rungs earlier (a wider bar); at
+#: vmax 2 neither settles (docs/mps_solver_notes.md, 2026-12-05).
+LOCAL_RULE = "nearest"
 
 
 def _geometric_tail(values) -> float:
@@ -222,7 +229,8 @@ class MPSRoadSolution:
         How one closed class is known (:func:`_check_classes`).
     converged : bool
         Whether the sweeps at ``chi`` ended converged: the residual target ``tol`` met,
-        or J settled (:func:`flux_tail`) with the residual at its truncation floor.
+        or J settled (:func:`flux_tail`) with the residual at its truncation floor; and
+        a bar was given (False where J at ``chi / 2`` did not settle).
     stopped : str
         Why they ended (:class:`markov.mps.stationary.StationaryMPS` ``stopped``).
     tol : float
@@ -396,7 +404,7 @@ def mps_bytes(length: int, bond_dimension: int, site_dimension: int, mpo_bond: i
 def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
                    tol: float = DEFAULT_MPS_TOL, lump: bool = True, max_sweeps: int = 40,
                    start=None, max_memory: float | None = None,
-                   on_sweep=None) -> MPSRoadSolution:
+                   on_sweep=None, local_rule: str | None = None) -> MPSRoadSolution:
     """The stationary state of an open road as a matrix product state, with its error bar.
 
     Parameters
@@ -419,6 +427,10 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         Bytes allowed (default 75 % of physical memory): refused before the solve.
     on_sweep : callable, optional
         ``on_sweep(sweep, flux)`` after every sweep of either solve (a log of progress).
+    local_rule : {"nearest", "refined", "ritz-refined"}, optional
+        The local vector of each two-site step (``select`` of
+        :func:`markov.mps.stationary.stationary_mps`); default :data:`LOCAL_RULE`.
+        ``"refined"`` for the maximal current of long vmax 1 roads.
 
     Returns
     -------
@@ -463,7 +475,8 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
             final = c == chi
             previous = results[-1][1][-1] if results else None
             got = _sweeps(mpo, c, tol, max_sweeps, start, bar, on_sweep, previous,
-                          warm_up=len(levels) > 2 and c < chi // 2, residuals=final)
+                          warm_up=len(levels) > 2 and c < chi // 2, residuals=final,
+                          rule=LOCAL_RULE if local_rule is None else local_rule)
             results.append(got)
             start = got[0].mps
     (half, half_fluxes), (full, fluxes) = results[-2], results[-1]
@@ -495,9 +508,9 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
     settled = full.converged or full.stopped == "caller"
     inflow = steps * expectation(p, base, mpo.count("entered"))
     spread = current_spread(road, flux, inflow, ramps, bonds)
+    bar = flux_error(flux, flux_half, tail, L, spread)
     return MPSRoadSolution(
-        system=road, bond_dimension=chi, flux=flux,
-        flux_error=flux_error(flux, flux_half, tail, L, spread),
+        system=road, bond_dimension=chi, flux=flux, flux_error=bar,
         flux_half=flux_half, inflow=inflow,
         ramp_inflows=ramps, bond_currents=bonds, density_profile=density,
         velocity_profile=vel, residual=full.residual, truncation_error=full.truncation_error,
@@ -505,7 +518,7 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         iterations=sum(r.iterations for r, _ in results), seconds=time.perf_counter() - t0,
         mpo_bond_dimension=max(mpo.bond_dimensions, default=1),
         velocities=_velocities(road, mpo, tables), closed_classes=classes,
-        converged=settled, tol=tol, stopped=full.stopped, state=p)
+        converged=settled and bar is not None, tol=tol, stopped=full.stopped, state=p)
 
 
 def _chain_steps(road: Road) -> int:
@@ -534,7 +547,7 @@ def ladder(chi: int) -> list[int]:
 
 
 def _sweeps(mpo, chi: int, tol: float, max_sweeps: int, start, bar, on_sweep,
-            previous: float | None, warm_up: bool, residuals: bool):
+            previous: float | None, warm_up: bool, residuals: bool, rule: str = LOCAL_RULE):
     """Sweeps at bond dimension ``chi`` until J settles (or ``tol``): the result and J's
     values after each sweep.
 
@@ -570,7 +583,7 @@ def _sweeps(mpo, chi: int, tol: float, max_sweeps: int, start, bar, on_sweep,
                             max_iterations=min(max_sweeps, WARM_UP_SWEEPS) if warm_up
                             else max_sweeps,
                             check_every=RESIDUAL_EVERY if residuals else 0, start=start,
-                            monitor=settled, ncv=KRYLOV, local_maxiter=1)
+                            monitor=settled, ncv=KRYLOV, local_maxiter=1, select=rule)
     return result, fluxes
 
 
