@@ -88,3 +88,37 @@ def previous_worktree(root: Path, mark: str, commit: str) -> Path:
         subprocess.run(["git", "worktree", "add", "--detach", "--force", str(tree), commit],
                        cwd=root, check=True, capture_output=True)
     return tree
+
+
+def road_arguments(ap) -> None:
+    """``--vmax``, ``-L``, ``--alpha``, ``--beta`` of the long-road scripts
+    (``mps_wander.py``, ``mps_road_log.py``): the maximal current of L = 200 by default.
+
+    Parameters
+    ----------
+    ap : argparse.ArgumentParser
+    """
+    ap.add_argument("--vmax", type=int, default=1)
+    ap.add_argument("-L", type=int, default=200)
+    ap.add_argument("--alpha", type=float, default=1.0)
+    ap.add_argument("--beta", type=float, default=1.0)
+
+
+def nasch_road(vmax: int, length: int, alpha: float, beta: float):
+    """NaSch (p = 0.25, parallel) on an open road: ``site1``/``sink`` at vmax 1 (the
+    parallel TASEP), ``reservoir``/``wall`` above, as in ``mps_roads.py``.
+
+    Parameters
+    ----------
+    vmax, length : int
+    alpha, beta : float
+
+    Returns
+    -------
+    markov.Road
+    """
+    from markov import Road, load_model
+
+    entry, exit_ = ("site1", "sink") if vmax == 1 else ("reservoir", "wall")
+    return Road(length, load_model("nasch", {"vmax": vmax, "p": 0.25}), "parallel",
+                alpha, beta, entry, exit_)

@@ -14,23 +14,19 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import time  # noqa: E402
 
+from common import nasch_road, road_arguments  # noqa: E402
+
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--vmax", type=int, default=1)
-    ap.add_argument("-L", type=int, default=200)
-    ap.add_argument("--alpha", type=float, default=1.0)
-    ap.add_argument("--beta", type=float, default=1.0)
+    road_arguments(ap)
     ap.add_argument("--chi", type=int, default=64)
     ap.add_argument("--rule", default=None,
                     help="local_rule of solve_road_mps (default: road_mps.LOCAL_RULE)")
     a = ap.parse_args(argv)
-    from markov import Road, load_model
     from markov.solvers import road_mps
 
-    entry, exit_ = ("site1", "sink") if a.vmax == 1 else ("reservoir", "wall")
-    road = Road(a.L, load_model("nasch", {"vmax": a.vmax, "p": 0.25}), "parallel",
-                a.alpha, a.beta, entry, exit_)
+    road = nasch_road(a.vmax, a.L, a.alpha, a.beta)
     t0 = time.perf_counter()
 
     def log(sweep, j):

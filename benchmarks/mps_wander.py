@@ -20,26 +20,22 @@ import json  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 
+from common import nasch_road, road_arguments  # noqa: E402
+
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--vmax", type=int, default=1)
-    ap.add_argument("-L", type=int, default=200)
-    ap.add_argument("--alpha", type=float, default=1.0)
-    ap.add_argument("--beta", type=float, default=1.0)
+    road_arguments(ap)
     ap.add_argument("--chis", default="32,64,128")
     ap.add_argument("--sweeps", default="20")
     ap.add_argument("--warm", type=int, default=12, help="sweeps at chi 16 first")
     ap.add_argument("--select", default="nearest", help="local rule (stationary_mps select)")
     ap.add_argument("--krylov", type=int, default=12, help="Krylov vectors a bond, one pass")
     a = ap.parse_args(argv)
-    from markov import Road, load_model
     from markov.mps import stationary as st
     from markov.mps.road_mpo import road_mpo
 
-    entry, exit_ = ("site1", "sink") if a.vmax == 1 else ("reservoir", "wall")
-    road = Road(a.L, load_model("nasch", {"vmax": a.vmax, "p": 0.25}), "parallel",
-                a.alpha, a.beta, entry, exit_)
+    road = nasch_road(a.vmax, a.L, a.alpha, a.beta)
     mpo = road_mpo(road)
     base, left = mpo.count_base, mpo.count("left")
     errs = []
