@@ -139,11 +139,11 @@ def main() -> None:
     sys.path.insert(0, str(ROOT / "benchmarks"))
     trees = {"previous": _tree(args.previous), "this": ROOT,
              "reference": _tree(args.reference)}
+    from common import warm
+
     for tree in trees.values():       # compile each tree's kernels before timing: the
         # warm-up's rings are solved with the matrix, so the build is compiled apart
-        for argv in (["-m", "markov.warmup"], ["-c", PHASES, "14"]):
-            subprocess.run([sys.executable, *argv], cwd=tree,
-                           env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True)
+        warm(tree, ["-c", PHASES, "14"])
     meta = {"previous": args.previous, "reference": args.reference,
             "date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": f"{platform.machine()}, {os.cpu_count()} cores",

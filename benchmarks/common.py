@@ -122,3 +122,19 @@ def nasch_road(vmax: int, length: int, alpha: float, beta: float):
     entry, exit_ = ("site1", "sink") if vmax == 1 else ("reservoir", "wall")
     return Road(length, load_model("nasch", {"vmax": vmax, "p": 0.25}), "parallel",
                 alpha, beta, entry, exit_)
+
+
+def warm(tree: Path, *argvs: list[str]) -> None:
+    """Compile ``tree``'s kernels before anything is timed: ``python -m markov.warmup``,
+    then each ``python ARGV`` of ``argvs`` (for kernels the warm-up does not reach).
+
+    Parameters
+    ----------
+    tree : Path
+        The checkout (``PYTHONPATH``, working folder).
+    *argvs : list of str
+        More interpreter arguments to run once, e.g. a small case of the benchmark.
+    """
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    for argv in (["-m", "markov.warmup"], *argvs):
+        subprocess.run([sys.executable, *argv], cwd=tree, env=env, capture_output=True)

@@ -25,7 +25,6 @@ import datetime as dt
 import json
 import os
 import platform
-import subprocess
 import sys
 from pathlib import Path
 
@@ -95,12 +94,11 @@ def main() -> None:
                     help="results as benchmarks/results/OUT.{csv,md} [solver_vectors]")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT))
-    from common import previous_worktree
+    from common import previous_worktree, warm
 
     old = previous_worktree(ROOT, f"solver-{args.previous}", args.previous)
     for tree in (old, ROOT):       # compile each tree's kernels before timing
-        subprocess.run([sys.executable, "-m", "markov.warmup"], cwd=tree,
-                       env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True)
+        warm(tree)
     meta = {"previous": args.previous, "date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": f"{platform.machine()}, {os.cpu_count()} cores",
             "load0": " ".join(f"{x:.2f}" for x in os.getloadavg()), "ratios": []}

@@ -20,7 +20,6 @@ import datetime as dt
 import json
 import os
 import platform
-import subprocess
 import sys
 from pathlib import Path
 
@@ -80,14 +79,11 @@ def main() -> None:
                     help=f"the commit to compare with [{PREVIOUS}]")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT))
-    from common import previous_worktree
+    from common import previous_worktree, warm
 
     old = previous_worktree(ROOT, f"solver-{args.previous}", args.previous)
     for tree in (old, ROOT):       # compile each tree's kernels before timing
-        subprocess.run([sys.executable, "-m", "markov.warmup"], cwd=tree,
-                       env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True)
-        subprocess.run([sys.executable, "-m", "nasch", *_argv(12)], cwd=tree,
-                       env=dict(os.environ, PYTHONPATH=str(tree)), capture_output=True)
+        warm(tree, ["-m", "nasch", *_argv(12)])
     meta = {"previous": args.previous,
             "date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": f"{platform.machine()}, {os.cpu_count()} cores",
