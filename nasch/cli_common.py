@@ -304,6 +304,58 @@ def _ignore_unraisable(unraisable) -> None:
     """``sys.unraisablehook`` after a Ctrl-C: the interrupted work's finalisers stay silent."""
 
 
+class _Resender:
+    """Sends SIGINT again until the command has caught its KeyboardInterrupt.
+
+    Python can drop the KeyboardInterrupt that a Ctrl-C raises: inside a
+    ctypes callback (llvmlite calls one while numba compiles), a finaliser, or
+    C code that clears the error (seen in an ``abc.register`` while numpy
+    loaded).  The work then goes on and prints its result.  So from the first
+    Ctrl-C until the command catches the interrupt, a thread sends the signal
+    again every 0.1 s; the handler ignores a repeat while a KeyboardInterrupt
+    is already on its way up (an ``except`` or ``finally`` block cleaning up).
+    """
+
+    PERIOD = 0.1
+
+    def __init__(self):
+        import threading
+
+        self.lock = threading.Lock()
+        self.pending = False
+        self.thread = None
+
+    def start(self) -> None:
+        import threading
+
+        with self.lock:
+            self.pending = True
+            if self.thread is None:
+                self.thread = threading.Thread(target=self._run, daemon=True)
+                self.thread.start()
+
+    def stop(self) -> None:
+        with self.lock:
+            self.pending = False
+
+    def _run(self) -> None:
+        import time
+
+        while True:
+            time.sleep(self.PERIOD)
+            with self.lock:
+                if not self.pending:
+                    self.thread = None
+                    return
+                os.kill(os.getpid(), signal.SIGINT)
+
+
+def _interrupt_in_flight() -> bool:
+    """True inside an ``except`` or ``finally`` block that a KeyboardInterrupt entered."""
+    exc = sys.exc_info()[1]
+    return exc is not None and _caused_by_interrupt(exc)
+
+
 class NaschGroup(click.Group):
     """The ``nasch`` group: lazily imported subcommands and one-line errors.
 
@@ -354,9 +406,13 @@ class NaschGroup(click.Group):
         # weakref callback ("Exception ignored in ..."): remember every Ctrl-C,
         # so that one landing there still ends the command with 130.
         seen = []
+        resender = _Resender()
 
         def on_sigint(signum, frame):
+            if seen and _interrupt_in_flight():
+                return   # a repeat while the first interrupt unwinds through cleanup
             seen.append(signum)
+            resender.start()
             if _in_compiler(frame):
                 _interrupted_compile[0] = True
             # The interrupt can land inside numba's compiler (the first run of a
@@ -391,6 +447,7 @@ class NaschGroup(click.Group):
             else:
                 raise
         finally:
+            resender.stop()
             if previous is not None:
                 signal.signal(signal.SIGINT, previous)
         if seen:
