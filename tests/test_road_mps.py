@@ -86,8 +86,16 @@ def test_refined_local_rule_against_the_exact_chain_at_the_maximal_current(vmax,
     assert mps.flux == pytest.approx(exact.flux, abs=close)
     assert mps.flux_error < 10 * close
     assert np.allclose(mps.density_profile, exact.density_profile, atol=10 * close)
-    with pytest.raises(ValueError, match="select"):
+    assert mps.local_rule == "refined" and mps.to_dict()["local_rule"] == "refined"
+    with pytest.raises(InvalidParameterError, match="local rule must be one of"):
         solve_road_mps(road, 8, local_rule="largest")
+
+
+def test_the_local_rules_are_the_sweeps():
+    from markov.mps.stationary import SELECT_RULES
+    from markov.solvers.road_mps import LOCAL_RULE, LOCAL_RULES
+
+    assert LOCAL_RULES == SELECT_RULES and LOCAL_RULE in LOCAL_RULES
 
 
 def test_parallel_tasep_on_the_special_line_at_L_60():
@@ -136,6 +144,20 @@ def test_cli_json_fields():
                 "velocities", "entry_convention", "exit_convention", "negative_marginal"):
         assert key in d, key
     assert d["method"] == "mps" and d["bond_dimension"] == 8 and len(d["density_profile"]) == 30
+    assert d["local_rule"] == "nearest"
+
+
+def test_cli_local_rule_is_passed_and_echoed():
+    args = ("--road", "-L", "14", "--vmax", "1", "--p", "0.25", "--alpha", "1", "--beta", "1",
+            "--method", "mps", "--bond-dimension", "16", "--local-rule", "refined")
+    r = _run(*args, "--json")
+    assert r.exit_code == 0, r.output
+    d = json.loads(r.output)
+    road = Road(14, _nasch(1, 0.25), "parallel", 1.0, 1.0, "site1", "sink")
+    api = solve_road_mps(road, 16, local_rule="refined")
+    assert d["local_rule"] == "refined" and d["flux"] == api.flux
+    r = _run(*args)
+    assert r.exit_code == 0 and "local rule refined" in r.output, r.output
 
 
 @pytest.mark.parametrize("args", [
@@ -144,6 +166,8 @@ def test_cli_json_fields():
     ("--road", "-L", "10", "--method", "mps", "--save", "x.npz"),
     ("--road", "-L", "10", "--method", "mps", "--fluctuations"),
     ("--road", "-L", "10", "--bond-dimension", "8"),
+    ("--road", "-L", "10", "--local-rule", "refined"),
+    ("--road", "-L", "10", "--method", "mps", "--local-rule", "largest"),
     ("--road", "-L", "10", "--method", "mps", "--bond-dimension", "1"),
     ("--road", "-L", "10", "--method", "mps", "--tol", "2"),
 ])

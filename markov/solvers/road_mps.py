@@ -87,6 +87,9 @@ KRYLOV = 12
 #: sweeps, but costs 3x a sweep and ends some low-density rungs earlier (a wider bar); at
 #: vmax 2 neither settles (docs/mps_solver_notes.md, 2026-12-05).
 LOCAL_RULE = "nearest"
+#: Every local rule (:data:`markov.mps.stationary.SELECT_RULES`; here for the command line,
+#: which lists them without importing the MPS machinery).
+LOCAL_RULES = ("nearest", "refined", "ritz-refined")
 
 
 def _geometric_tail(values) -> float:
@@ -235,6 +238,8 @@ class MPSRoadSolution:
         Why they ended (:class:`markov.mps.stationary.StationaryMPS` ``stopped``).
     tol : float
         The residual target.
+    local_rule : str
+        The local vector of each two-site step (:data:`LOCAL_RULES`).
     state : MPS
         The stationary vector (:mod:`markov.mps.stationary`).
     """
@@ -260,6 +265,7 @@ class MPSRoadSolution:
     converged: bool
     tol: float
     stopped: str
+    local_rule: str = LOCAL_RULE
     state: object = field(default=None, repr=False, compare=False)
 
     @property
@@ -306,6 +312,7 @@ class MPSRoadSolution:
             "iterations": self.iterations, "seconds": self.seconds,
             "velocities": self.velocities, "closed_classes": self.closed_classes,
             "converged": self.converged, "tol": self.tol, "stopped": self.stopped,
+            "local_rule": self.local_rule,
             "time_step": (f"{_chain_steps(self.system)} sub-steps"
                           if self.system.update == RANDOM_SEQUENTIAL else "one step"),
         })
@@ -455,6 +462,10 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         raise InvalidParameterError("the MPS solver takes an open road (a ring: the exact solver)")
     chi = ensure_int("bond dimension", bond_dimension, MIN_BOND_DIMENSION, MAX_BOND_DIMENSION)
     tol = ensure_tol(tol)
+    rule = LOCAL_RULE if local_rule is None else local_rule
+    if rule not in LOCAL_RULES:
+        raise InvalidParameterError(f"local rule must be one of {', '.join(LOCAL_RULES)},"
+                                    f" not {rule!r}")
     tables = _tables(road)
     classes = _check_classes(road, tables)
     t0 = time.perf_counter()
@@ -476,7 +487,7 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
             previous = results[-1][1][-1] if results else None
             got = _sweeps(mpo, c, tol, max_sweeps, start, bar, on_sweep, previous,
                           warm_up=len(levels) > 2 and c < chi // 2, residuals=final,
-                          rule=LOCAL_RULE if local_rule is None else local_rule)
+                          rule=rule)
             results.append(got)
             start = got[0].mps
     (half, half_fluxes), (full, fluxes) = results[-2], results[-1]
@@ -518,7 +529,8 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         iterations=sum(r.iterations for r, _ in results), seconds=time.perf_counter() - t0,
         mpo_bond_dimension=max(mpo.bond_dimensions, default=1),
         velocities=_velocities(road, mpo, tables), closed_classes=classes,
-        converged=settled and bar is not None, tol=tol, stopped=full.stopped, state=p)
+        converged=settled and bar is not None, tol=tol, stopped=full.stopped,
+        local_rule=rule, state=p)
 
 
 def _chain_steps(road: Road) -> int:

@@ -40,6 +40,12 @@ __all__ = ["solve"]
 @click.option("--bond-dimension", "chi", type=int, default=None, metavar="CHI",
               help="--method mps: the bond dimension of the state [64]; the error bar"
                    " compares it with CHI/2.")
+@click.option("--local-rule", type=click.Choice(("nearest", "refined", "ritz-refined")),
+              default=None, metavar="RULE",
+              help="--method mps: the local vector of each two-site step: nearest (the"
+                   " Ritz vector of value nearest 1, default), refined (least ||(M - 1) x||:"
+                   " settles vmax 1's maximal current at L = 200-400, 3x a sweep),"
+                   " ritz-refined (docs/mps_solver_notes.md).")
 @click.option("--operator", type=click.Choice(OPERATORS), default="auto", show_default=True,
               help="Assemble P, or apply x -> xP without storing it (parallel and"
                    " ordered-sequential roads: factored car by car).")
@@ -71,8 +77,8 @@ __all__ = ["solve"]
 @quiet_option
 @handle_errors
 def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, stretches, ramps,
-          vmax, p, update, start, every_class, method, chi, operator, tol, no_lump, max_memory,
-          top, save, sensitivity, fluctuations, lags, as_json):
+          vmax, p, update, start, every_class, method, chi, local_rule, operator, tol, no_lump,
+          max_memory, top, save, sensitivity, fluctuations, lags, as_json):
     """Exact stationary state of one ring: flux, c_v; --json adds the gap distribution.
 
     By default a state is a rotation class of the ring and its probability is
@@ -122,9 +128,10 @@ def solve(length, cars, model, params, road, alpha, beta, entry, exit_, v_in, st
                         road=road, alpha=alpha, beta=beta, entry=entry, exit_=exit_, v_in=v_in,
                         stretches=stretches, ramps=ramps)
     max_memory = ensure_max_memory(max_memory, "--max-memory", "GiB")
-    if method == "mps" or chi is not None:
-        return _solve_mps(ring, method, chi, start, every_class, operator, tol, no_lump,
-                          max_memory, top, save, sensitivity, fluctuations, lags, as_json)
+    if method == "mps" or chi is not None or local_rule is not None:
+        return _solve_mps(ring, method, chi, local_rule, start, every_class, operator, tol,
+                          no_lump, max_memory, top, save, sensitivity, fluctuations, lags,
+                          as_json)
     tol = DEFAULT_TOL if tol is None else tol
     if is_lattice_system(ring):
         return _solve_lattice(ring, start, every_class, method, operator, tol, no_lump,
@@ -306,14 +313,15 @@ def _solve_lattice(system, start, every_class, method, operator, tol, no_lump, m
         click.echo(f"wrote {save} ({full.n_states:,} states, every velocity)", err=True)
 
 
-def _solve_mps(system, method, chi, start, every_class, operator, tol, no_lump, max_memory,
-               top, save, sensitivity, fluctuations, lags, as_json) -> None:
+def _solve_mps(system, method, chi, local_rule, start, every_class, operator, tol, no_lump,
+               max_memory, top, save, sensitivity, fluctuations, lags, as_json) -> None:
     """``--method mps``: a long road as a matrix product state, every refusal first."""
     from markov.model.road import Road
     from markov.solvers import road_mps
 
     if method != "mps":
-        raise click.UsageError("--bond-dimension belongs to --method mps")
+        flag = "--bond-dimension" if chi is not None else "--local-rule"
+        raise click.UsageError(f"{flag} belongs to --method mps")
     if not isinstance(system, Road):
         raise click.UsageError("--method mps solves open roads (add --road); a ring is"
                                " solved exactly")
@@ -329,7 +337,8 @@ def _solve_mps(system, method, chi, start, every_class, operator, tol, no_lump, 
     chi = road_mps.DEFAULT_BOND_DIMENSION if chi is None else chi
     sol = road_mps.solve_road_mps(system, chi, road_mps.DEFAULT_MPS_TOL if tol is None else tol,
                                   lump=not no_lump,
-                                  max_memory=None if max_memory is None else max_memory * 2**30)
+                                  max_memory=None if max_memory is None else max_memory * 2**30,
+                                  local_rule=local_rule)
     data = sol.to_dict()
     if as_json:
         emit_json(data)
@@ -342,7 +351,7 @@ def _solve_mps(system, method, chi, start, every_class, operator, tol, no_lump, 
                f" {sol.mpo_bond_dimension}, residual {sol.residual:.2e} (||T p - p|| / ||p||),"
                f" discarded weight {sol.truncation_error:.1e}, most negative marginal"
                f" {sol.negative_marginal:.1e}, {sol.iterations} sweeps (ended: {sol.stopped}),"
-               f" {sol.seconds:.1f} s")
+               f" local rule {sol.local_rule}, {sol.seconds:.1f} s")
     click.echo(f"  states: velocities {sol.velocities}; closed classes: {sol.closed_classes};"
                f" per time step ({data['time_step']})")
     if sol.flux_error is None:
