@@ -330,7 +330,7 @@ class MPSRoadSolution:
         rec = system_record(self.system)
         rec.update(flux=self.flux, flux_error=self.flux_error, inflow=self.inflow,
                    mean_cars=self.mean_cars, bond_dimension=self.bond_dimension,
-                   residual=self.residual, method="mps")
+                   residual=self.residual, method="mps", local_rule=self.local_rule)
         return rec
 
 
