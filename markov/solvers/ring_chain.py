@@ -17,6 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from markov import memory
+from markov._pages import small_pages
 from markov.solvers.class_solutions import ClassSolution, ClassSolutions
 from markov.chain.classes import (
     ALL_CONFIGURATIONS,
@@ -513,9 +514,11 @@ class RingChain:
                             dtype=np.int64)
         else:
             self._precheck()
-            keys, self._level0 = recurrent_search(
-                self.ring, self.lump, self.max_memory, per_state=self._guard_bytes_per_state(),
-                start=self.start, velocities=self.velocities)
+            with small_pages():
+                keys, self._level0 = recurrent_search(
+                    self.ring, self.lump, self.max_memory,
+                    per_state=self._guard_bytes_per_state(), start=self.start,
+                    velocities=self.velocities)
         self.build_seconds += time.perf_counter() - start
         return keys
 
@@ -776,6 +779,13 @@ class RingChain:
         :attr:`sweep`), :class:`markov.chain.sequential.SequentialOperator` otherwise."""
         keys = self.keys
         start = time.perf_counter()
+        with small_pages():
+            op = self._build_operator(keys)
+        self.build_seconds += time.perf_counter() - start
+        return op
+
+    def _build_operator(self, keys: np.ndarray):
+        """The operator of :attr:`transition_operator` on ``keys``."""
         if self.sweep:
             from markov.chain.ring_sweep import RingSweepOperator
 
@@ -792,7 +802,6 @@ class RingChain:
             from markov.chain.sequential import SequentialOperator
 
             op = SequentialOperator(self.ring, keys, self.lump)
-        self.build_seconds += time.perf_counter() - start
         return op
 
     @cached_property

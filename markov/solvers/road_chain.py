@@ -21,6 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from markov import memory
+from markov._pages import small_pages
 from markov._jit import njit
 from markov.chain.classes import (ALL_CONFIGURATIONS, FROM_COMPACT_JAM, FROM_EMPTY_ROAD,
                                   FROM_START, PROVEN, SEARCH_ALL_MAX_EDGES, ClassCensus,
@@ -232,9 +233,10 @@ class RoadChain:
         from markov.chain.lattice import start_key
         from markov.chain.road_closure import closure
 
-        return closure(self.lattice, start_key(self.lattice) if start is None else start,
-                       record=record, limit=self.limit,
-                       per_state=memory.search_bytes_per_state())
+        with small_pages():
+            return closure(self.lattice, start_key(self.lattice) if start is None else start,
+                           record=record, limit=self.limit,
+                           per_state=memory.search_bytes_per_state())
 
     def _rows(self, keys: np.ndarray):
         if len(keys) <= _ROW_CHUNK:
@@ -363,11 +365,12 @@ class RoadChain:
         keys = self.keys
         t = time.perf_counter()
         sweep, self._sweep = self._sweep, None
-        if sweep is not None and keys is self.__dict__.get("reachable"):
-            op = RoadFactoredOperator.from_sweep(self.system, keys, sweep, self.lump,
-                                                 self.lattice)
-        else:
-            op = RoadFactoredOperator(self.system, keys, self.lump, self.lattice)
+        with small_pages():
+            if sweep is not None and keys is self.__dict__.get("reachable"):
+                op = RoadFactoredOperator.from_sweep(self.system, keys, sweep, self.lump,
+                                                     self.lattice)
+            else:
+                op = RoadFactoredOperator(self.system, keys, self.lump, self.lattice)
         del sweep
         self.build_seconds += time.perf_counter() - t
         return op
