@@ -32,7 +32,7 @@ here was assembled and checked as follows.
        1/a = q (1 - alpha) / (alpha p),   1/b = q / beta.
 
    The parameters were identified by fitting brute-force stationary vectors
-   (``L <= 7``, two parameter points, residual 1e-20 in ``log P``).  On the line
+   (``L = 6``, two parameter points: the sum of squared residuals of ``log P`` 4e-20).  On the line
    ``a + b = 1``, i.e. ``(1 - alpha)(1 - beta) = p``, the algebra has a
    one-dimensional representation (the parallel TASEP's special line).
 2. The parallel current and profile follow from the backward-sequential ones
