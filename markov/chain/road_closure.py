@@ -17,6 +17,14 @@ grouped by child (a counting sort), each stage's words numbered in sorted order 
 links sorted by parent: the layout and the numbers of the operator built from
 the keys (:meth:`RoadFactoredOperator.from_sweep`), so the products are the same
 to the last bit.
+
+Memory (issue 34): at the end of the search it holds the records (10 bytes a
+link) and the tables (8 bytes a slot: a word's number while the search runs is
+its slot, renumbered in the records when a table grows), about what the
+operator and the solver's vectors hold later.  The records are renumbered to
+the sorted numbers in place, a stage at a time, each table freed as soon as it
+is; the links are then placed a stage at a time, each stage's records freed
+(and given back to the system, :func:`_trim`) as its links are placed.
 """
 from __future__ import annotations
 
@@ -40,6 +48,11 @@ def _empty(tkeys):
         tkeys[i] = -1
 
 
+#: Largest load of a table, 4/5 (it then grows by a quarter: 1 / _GROW of its size), so
+#: that the load stays between 0.64 and 0.8: at most 3/4 and a growth by half held 6 %
+#: more at the peak (vmax 2 L = 16: 601 against 567 MB, the same time).
+_LOAD = (4, 5)
+_GROW = 4
 _MULT = np.uint64(0x9E3779B97F4A7C15)       # Fibonacci hashing: 2**64 / golden ratio
 
 
@@ -104,20 +117,20 @@ def _remap(ids, new):
 class _Words:
     """A stage's words: non-negative int64 keys in an open-addressing table (linear probing)
     whose slot is the word's number while the search runs, so that nothing is stored beside
-    the key (8 bytes a slot).  The table grows 1.5 times at a load of 3/4 (the load stays
-    between 1/2 and 3/4); the caller then renumbers what it recorded by the map returned."""
+    the key (8 bytes a slot).  The table grows by a quarter at a load of 4/5 (:data:`_LOAD`);
+    the caller then renumbers what it recorded by the map :meth:`make_room` returns."""
 
     def __init__(self):
         self.keys = np.full(1024, -1, np.int64)
         self.count = 0
 
     def make_room(self, more: int):
-        """Room for ``more`` new keys: the map old slot -> new slot where the table grew, else None."""
+        """Room for ``more`` new keys: where the table grew, the map old slot -> new slot."""
         size = len(self.keys)
-        if 4 * (self.count + more) <= 3 * size:
+        if (self.count + more) * _LOAD[1] <= _LOAD[0] * size:
             return None
-        while 4 * (self.count + more) > 3 * size:
-            size += size // 2
+        while (self.count + more) * _LOAD[1] > _LOAD[0] * size:
+            size += size // _GROW
         if size > _INT32_MAX:
             raise MemoryError("more than 2^31 words in one stage")
         keys = np.empty(size, np.int64)
@@ -142,10 +155,13 @@ class _Words:
         slots = np.empty(self.count, np.int32)
         _occupied(self.keys, keys, slots)
         order = np.argsort(keys)
-        keys = keys[order] if sorted_keys else None
         rank = np.empty(len(self.keys), np.int32)
         _scatter_ranks(order, slots, rank)
-        return (keys, rank) if sorted_keys else rank
+        del order, slots
+        if not sorted_keys:
+            return rank
+        keys.sort()                 # in place: no second copy beside the table
+        return keys, rank
 
 
 @njit(cache=True)
@@ -411,24 +427,28 @@ def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float 
         del new_states, new_state_ids
         _trim()          # the frontier's expansions back to the system
     bar.close()
-    keys, rank = states.ranks(sorted_keys=True)
-    del states
     if not record:
-        return keys, None
-    n = len(keys)
+        return states.ranks(sorted_keys=True)[0], None
     # number the states and each stage's words in sorted order, as the operator built
     # from the keys does (neighbouring words share parents: the product reads them 1.8x
     # faster than in the order met, vmax 2 L = 16); the recorded numbers are renumbered
-    # in place, a stage at a time, and each table freed as soon as it is
-    renumber(-1, rank)
+    # in place, a stage at a time, each table freed as soon as it is (the states' last:
+    # the largest stages' tables are gone by then)
     sizes = []
     for s_ in range(L + 1):
         sizes.append(stages[s_].count)
         rank = stages[s_].ranks()
         stages[s_] = None
         renumber(s_, rank)
-    del stages, rank
+        del rank
+        _trim()
+    del stages
+    keys, rank = states.ranks(sorted_keys=True)
+    del states
+    renumber(-1, rank)
+    del rank
     _trim()
+    n = len(keys)
     stage_lo = np.cumsum([n] + sizes).astype(np.int64)
     offset = [0] + [int(x) for x in stage_lo[:-1]]   # offset[f + 1]: the first node of f
     nodes = int(stage_lo[-1])
