@@ -53,6 +53,8 @@ def _empty(tkeys):
 #: more at the peak (vmax 2 L = 16: 601 against 567 MB, the same time).
 _LOAD = (4, 5)
 _GROW = 4
+#: Slots of a new table.
+_FIRST_SIZE = 1024
 _MULT = np.uint64(0x9E3779B97F4A7C15)       # Fibonacci hashing: 2**64 / golden ratio
 
 
@@ -121,7 +123,7 @@ class _Words:
     the caller then renumbers what it recorded by the map :meth:`make_room` returns."""
 
     def __init__(self):
-        self.keys = np.full(1024, -1, np.int64)
+        self.keys = np.full(_FIRST_SIZE, -1, np.int64)
         self.count = 0
 
     def make_room(self, more: int):
