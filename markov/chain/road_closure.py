@@ -28,6 +28,8 @@ is; the links are then placed a stage at a time, each stage's records freed
 """
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 
 from markov._jit import njit, prange
@@ -53,8 +55,16 @@ def _empty(tkeys):
 #: more at the peak (vmax 2 L = 16: 601 against 567 MB, the same time).
 _LOAD = (4, 5)
 _GROW = 4
+#: With a prediction of the states (:func:`closure`'s ``expect``) a table grows at once to
+#: hold its expected words at this load (then by a quarter if they were more than
+#: expected, 14 % more or over), at most :data:`_LEAP` times its size in one step.
+_AIM = 0.7
+_LEAP = 4
 #: Slots of a new table.
 _FIRST_SIZE = 1024
+#: Slots from which a new table is filled by both cores (a parallel region's start costs
+#: more than filling a smaller one, most of all while the other core is busy).
+_PARALLEL_EMPTY = 1 << 22
 _MULT = np.uint64(0x9E3779B97F4A7C15)       # Fibonacci hashing: 2**64 / golden ratio
 
 
@@ -109,10 +119,10 @@ def _rehash_slots(tkeys, nkeys, moved):
         moved[i] = h
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True)
 def _remap(ids, new):
     """``ids[q] = new[ids[q]]`` in place."""
-    for q in prange(ids.shape[0]):
+    for q in range(ids.shape[0]):
         ids[q] = new[ids[q]]
 
 
@@ -126,17 +136,31 @@ class _Words:
         self.keys = np.full(_FIRST_SIZE, -1, np.int64)
         self.count = 0
 
-    def make_room(self, more: int):
-        """Room for ``more`` new keys: where the table grew, the map old slot -> new slot."""
+    def make_room(self, more: int, scale: tuple | None = None):
+        """Room for ``more`` new keys: where the table grew, the map old slot -> new slot.
+
+        ``scale``: ``(early, ratio)``, the states expected over those found so far
+        (``ratio``, :func:`closure`) and whether fewer than half of them are found; the
+        table then grows to hold its count times ``ratio`` at a load of :data:`_AIM`, by
+        at most twice its size while ``early`` (the ratio overshoots then, by up to 2x).
+        Else (no prediction) it grows by a quarter."""
         size = len(self.keys)
-        if (self.count + more) * _LOAD[1] <= _LOAD[0] * size:
+        need = self.count + more
+        if need * _LOAD[1] <= _LOAD[0] * size:
             return None
-        while (self.count + more) * _LOAD[1] > _LOAD[0] * size:
+        old = size
+        while need * _LOAD[1] > _LOAD[0] * size:
             size += size // _GROW
+        if scale is not None:
+            early, ratio = scale
+            size = max(size, min(int(self.count * ratio / _AIM), (2 if early else _LEAP) * old))
         if size > _INT32_MAX:
             raise MemoryError("more than 2^31 words in one stage")
-        keys = np.empty(size, np.int64)
-        _empty(keys)
+        if size < _PARALLEL_EMPTY:
+            keys = np.full(size, -1, np.int64)
+        else:
+            keys = np.empty(size, np.int64)
+            _empty(keys)
         moved = np.empty(len(self.keys), np.int32)
         _rehash_slots(self.keys, keys, moved)
         self.keys = keys
@@ -152,36 +176,40 @@ class _Words:
 
     def ranks(self, sorted_keys: bool = False):
         """The rank of each slot's key among the keys (an empty slot's: undefined), and
-        first the keys in sorted order where ``sorted_keys``."""
+        first the keys in sorted order where ``sorted_keys``: the keys sorted (numpy's
+        sort, several times faster than its argsort) and each looked up in the table."""
         keys = np.empty(self.count, np.int64)
-        slots = np.empty(self.count, np.int32)
-        _occupied(self.keys, keys, slots)
-        order = np.argsort(keys)
+        _occupied(self.keys, keys)
+        keys.sort()
         rank = np.empty(len(self.keys), np.int32)
-        _scatter_ranks(order, slots, rank)
-        del order, slots
+        _rank_slots(self.keys, keys, rank)
         if not sorted_keys:
             return rank
-        keys.sort()                 # in place: no second copy beside the table
         return keys, rank
 
 
 @njit(cache=True)
-def _occupied(tkeys, keys, slots):
-    """The keys of a table and their slots, in slot order."""
+def _occupied(tkeys, keys):
+    """The keys of a table, in slot order."""
     m = 0
     for i in range(tkeys.shape[0]):
         if tkeys[i] != -1:
             keys[m] = tkeys[i]
-            slots[m] = i
             m += 1
 
 
 @njit(cache=True)
-def _scatter_ranks(order, slots, rank):
-    """``rank[slots[order[r]]] = r``."""
-    for r in range(order.shape[0]):
-        rank[slots[order[r]]] = r
+def _rank_slots(tkeys, keys, rank):
+    """``rank[slot of keys[r]] = r`` (every key of ``keys`` is in the table)."""
+    size = tkeys.shape[0]
+    for r in range(keys.shape[0]):
+        k = keys[r]
+        h = _home(k, size)
+        while tkeys[h] != k:
+            h += 1
+            if h == size:
+                h = 0
+        rank[h] = r
 
 
 @njit(cache=True)
@@ -279,7 +307,7 @@ class Sweep:
 
 
 def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float | None = None,
-            per_state: float = 0.0):
+            per_state: float = 0.0, expect: float | None = None):
     """Sorted keys of everything reachable from ``start``, and the sweep on them.
 
     Parameters
@@ -295,6 +323,10 @@ def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float 
         :func:`markov.chain.lattice.reachable_keys` does.
     per_state : float
         Bytes per state the caller will need.
+    expect : float, optional
+        The states expected (a prediction): each table then grows in one step to about
+        what it will hold (its words so far scaled by the states expected over those
+        found), not by a quarter at a time, each growth renumbering what was recorded.
 
     Returns
     -------
@@ -306,6 +338,12 @@ def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float 
     StateSpaceTooLargeError
         As soon as the states found, times ``per_state``, exceed ``limit``.
     """
+    with _small_pages():
+        return _closure(lattice, start, record, limit, per_state, expect)
+
+
+def _closure(lattice, start, record, limit, per_state, expect):
+    """:func:`closure` (numpy's large arrays in small pages)."""
     from markov.chain.road_factored import _Tables, _expand, _final, state_words, word_powers
     from markov.errors import StateSpaceTooLargeError
     from markov.memory import gib
@@ -328,6 +366,12 @@ def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float 
     states.make_room(1)
     frontier_ids, _ = states.intern(frontier)
     bar = progress_bar(None, "states", "state")
+
+    def scale():
+        """``(early, ratio)`` of :meth:`_Words.make_room` (None: no prediction)."""
+        if expect is None:
+            return None
+        return 2 * states.count < expect, max(1.0, expect / max(states.count, 1))
 
     def renumber(s, new, waiting=()):
         """Slots of stage ``s`` (-1: the states) renumbered by ``new`` wherever they are
@@ -380,7 +424,7 @@ def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float 
             table = stages[s]
             new_words, new_ids = [], []
             for c, p, cd, f in parts:
-                moved = table.make_room(len(c))
+                moved = table.make_room(len(c), scale())
                 if moved is not None:
                     renumber(s, moved, new_ids)
                     del moved
@@ -406,7 +450,7 @@ def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float 
                 keep = fraw.ravel() >= 0
                 fk = fk.ravel()[keep]
                 fraw = fraw.ravel()[keep]
-                moved = states.make_room(len(fk))
+                moved = states.make_room(len(fk), scale())
                 if moved is not None:
                     renumber(-1, moved, new_state_ids)
                     del moved
@@ -427,7 +471,6 @@ def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float 
         frontier_ids = np.concatenate(new_state_ids) if new_state_ids else \
             np.empty(0, np.int32)
         del new_states, new_state_ids
-        _trim()          # the frontier's expansions back to the system
     bar.close()
     if not record:
         return states.ranks(sorted_keys=True)[0], None
@@ -443,13 +486,11 @@ def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float 
         stages[s_] = None
         renumber(s_, rank)
         del rank
-        _trim()
     del stages
     keys, rank = states.ranks(sorted_keys=True)
     del states
     renumber(-1, rank)
     del rank
-    _trim()
     n = len(keys)
     stage_lo = np.cumsum([n] + sizes).astype(np.int64)
     offset = [0] + [int(x) for x in stage_lo[:-1]]   # offset[f + 1]: the first node of f
@@ -503,6 +544,28 @@ def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float 
     _sort_segments(indptr, parent, code)
     _sort_segments(findptr, fparent, fcode)
     return keys, Sweep(stage_lo, indptr, parent, code, findptr, fparent, fcode, post_w, post_inc)
+
+
+@contextlib.contextmanager
+def _small_pages():
+    """numpy's large arrays in 4 kB pages while the block runs (not transparent huge pages,
+    which numpy asks for from 4 MB): on the 2-core VM the kernel compacts memory to find
+    each huge page, at vmax 2 L = 16 1.4-1.9 s of system time against 0.35 s in small
+    pages, for 0.1 s more user time (``docs/performance.md``, 2026-12-05)."""
+    try:
+        from numpy._core.multiarray import _get_madvise_hugepage, _set_madvise_hugepage
+    except ImportError:         # numpy < 2
+        try:
+            from numpy.core.multiarray import _get_madvise_hugepage, _set_madvise_hugepage
+        except ImportError:
+            yield
+            return
+    was = _get_madvise_hugepage()
+    _set_madvise_hugepage(False)
+    try:
+        yield
+    finally:
+        _set_madvise_hugepage(was)
 
 
 def _trim() -> None:

@@ -232,9 +232,13 @@ class RoadChain:
         from markov.chain.lattice import start_key
         from markov.chain.road_closure import closure
 
+        # the predicted states size the search's tables (the prediction is the default
+        # start's)
+        est = self.prediction if start is None else None
         return closure(self.lattice, start_key(self.lattice) if start is None else start,
                        record=record, limit=self.limit,
-                       per_state=memory.search_bytes_per_state())
+                       per_state=memory.search_bytes_per_state(),
+                       expect=None if est is None else float(est.states))
 
     def _rows(self, keys: np.ndarray):
         if len(keys) <= _ROW_CHUNK:
