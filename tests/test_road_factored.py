@@ -234,8 +234,11 @@ def test_the_search_renumbers_its_records_as_its_tables_grow(update, monkeypatch
         keys, sweep = road_closure.closure(lat, start_key(lat))
         # tables grown a quarter at a time, and sized from a prediction of the states
         # (right, a third of them, three times as many: a wrong one costs memory only)
+        nw = np.diff(sweep.stage_lo)
         runs = [dict(expect=None), dict(expect=len(keys)), dict(expect=len(keys) / 3),
-                dict(expect=3.0 * len(keys))]
+                dict(expect=3.0 * len(keys)), dict(expect=len(keys), words=nw),
+                dict(expect=len(keys) / 2, words=nw / 4), dict(expect=2.0 * len(keys),
+                                                             words=3 * nw[::-1])]
         for kw in runs:
             with monkeypatch.context() as m:
                 m.setattr(road_closure, "_FIRST_SIZE", 8)
@@ -245,6 +248,24 @@ def test_the_search_renumbers_its_records_as_its_tables_grow(update, monkeypatch
                          "fcode", "post_w", "post_inc"):
                 a, b = getattr(got, attr), getattr(sweep, attr)
                 assert a.dtype == b.dtype and np.array_equal(a, b), (road, attr, kw)
+
+
+def test_a_long_road_sizes_its_search_from_a_short_one():
+    """RoadChain._stage_words: a stage's words per state on a road of 10 cells times the
+    predicted states, within 10 % of the words found (vmax 1 L = 16, vmax 2 L = 13)."""
+    from markov.solvers.road_chain import RoadChain
+
+    for road in (Road(16, load_model("nasch", {"vmax": 1, "p": 0.25}), "parallel", 0.3, 0.5,
+                      "site1", "sink"),
+                 Road(13, load_model("nasch", {"vmax": 2, "p": 0.25}), "parallel", 0.5, 0.5,
+                      "reservoir", "wall")):
+        chain = RoadChain(road)
+        assert chain.prediction is not None
+        keys = chain.keys
+        want = np.diff(chain._sweep.stage_lo).astype(float)
+        got = chain._stage_words(float(len(keys)))
+        assert got.shape == want.shape
+        assert np.abs(got / want - 1).max() < 0.1, (road, got / want)
 
 
 def test_a_chain_takes_the_recorded_sweep():

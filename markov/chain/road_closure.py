@@ -143,8 +143,13 @@ class _Words:
     quarter or to the size a prediction asks for (:meth:`make_room`); the caller then
     renumbers what it recorded by the map :meth:`make_room` returns."""
 
-    def __init__(self):
-        self.keys = np.full(_FIRST_SIZE, -1, np.int64)
+    def __init__(self, size: int = _FIRST_SIZE):
+        size = min(max(int(size), _FIRST_SIZE), _INT32_MAX)
+        if size < _PARALLEL_EMPTY:
+            self.keys = np.full(size, -1, np.int64)
+        else:
+            self.keys = np.empty(size, np.int64)
+            _empty(self.keys)
         self.count = 0
 
     def make_room(self, more: int, scale: tuple | None = None):
@@ -318,7 +323,8 @@ class Sweep:
 
 
 def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float | None = None,
-            per_state: float = 0.0, expect: float | None = None):
+            per_state: float = 0.0, expect: float | None = None,
+            words: np.ndarray | None = None):
     """Sorted keys of everything reachable from ``start``, and the sweep on them.
 
     Parameters
@@ -338,6 +344,9 @@ def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float 
         The states expected (a prediction): each table then grows in one step to about
         what it will hold (its words so far scaled by the states expected over those
         found), not by a quarter at a time, each growth renumbering what was recorded.
+    words : (L + 1,) array, optional
+        The words expected in each stage (with ``expect``): each stage's table is made that
+        large (at a load of 0.7) at the start, the states' from ``expect``.
 
     Returns
     -------
@@ -350,10 +359,10 @@ def closure(lattice: Lattice, start: int = 0, record: bool = True, limit: float 
         As soon as the states found, times ``per_state``, exceed ``limit``.
     """
     with _small_pages():
-        return _closure(lattice, start, record, limit, per_state, expect)
+        return _closure(lattice, start, record, limit, per_state, expect, words)
 
 
-def _closure(lattice, start, record, limit, per_state, expect):
+def _closure(lattice, start, record, limit, per_state, expect, words):
     """:func:`closure` (numpy's large arrays in small pages)."""
     from markov.chain.road_factored import _Tables, _expand, _final, state_words, word_powers
     from markov.errors import StateSpaceTooLargeError
@@ -365,8 +374,12 @@ def _closure(lattice, start, record, limit, per_state, expect):
     pw = word_powers(tab)
     B = lattice.top_vmax + 2
     small = np.uint16 if tab.n_moves < np.iinfo(np.uint16).max else np.int32
-    states = _Words()
-    stages = [_Words() for _ in range(L + 1)]
+    if expect is not None and words is not None and len(words) == L + 1:
+        states = _Words(expect / _AIM)
+        stages = [_Words(w / _AIM) for w in words]
+    else:
+        states = _Words()
+        stages = [_Words() for _ in range(L + 1)]
     raws = _Words()
     # the links as recorded: (child slots, parent slots, codes, parent stage, -1: a
     # state), per child stage; the final links: (state slots, final word slots, raw
