@@ -250,7 +250,9 @@ _ROAD_LINK_BYTES = 13
 #: the operator keeps, beside ``search_bytes_per_state`` a state: at the end of the search
 #: its records (10 bytes a link) and its tables of words (8 bytes a slot at a load of 0.64
 #: to 0.8, about 0.48 words a link).  1.8 before the tables kept only keys (2026-12-05);
-#: measured since: ``docs/performance.md``, "Roads at scale".
+#: measured since: ``docs/performance.md``, "Roads at scale".  Kept when the tables were
+#: sized from a short road (2026-12-05, later): whole solves peaked at 550 MB (vmax 2
+#: L = 16, predicted 627) and 1,130 MB (vmax 1 L = 22, predicted 1,368).
 _ROAD_BUILD_PEAK = 1.25
 #: The interpreter, numpy, scipy and numba's road kernels, beside the arrays (177 MB after
 #: a small road's solve, 2026-12-05): counted for roads, whose prediction is compared with

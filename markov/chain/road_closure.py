@@ -26,9 +26,11 @@ the sorted numbers in place, a stage at a time, each table freed as soon as it
 is; the links are then placed a stage at a time, each stage's records freed
 (and given back to the system, :func:`_trim`) as its links are placed.
 
-Time (2026-12-05): with a prediction of the states (``expect``) a table grows
-at once to about what it will hold, so the records are renumbered a few times,
-not a quarter at a time (about five passes); the freed memory is given back
+Time (2026-12-05): with a prediction of the states (``expect``) and of each
+stage's words (``words``, from a short road: RoadChain) every table is made as
+large as it will need at the start, and with the states' alone it grows at once
+to about what it will hold, so the records are renumbered seldom or never, not
+a quarter at a time (about five passes); the freed memory is given back
 only while the links are placed (given back after each frontier, it was
 faulted in again by the next); and numpy's large arrays are made in small
 pages while the search runs (:func:`_small_pages`).
