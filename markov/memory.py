@@ -243,18 +243,28 @@ def matrix_bytes(states: int, transitions: int, method: str = "auto") -> float:
 
 
 #: Bytes per link of the factored road sweep: an int32 parent, a uint16 code, and the
-#: words' row pointers and work vector (measured 12.6-12.9: 720,896 links at L = 16 and
-#: 251,658,240 at L = 24, vmax 1).
+#: words' row pointers and work vector (measured 12.5-12.9: 720,896 links at L = 16 and
+#: 251,658,240 at L = 24, vmax 1; 12.5 at vmax 2, L = 14 and 16).
 _ROAD_LINK_BYTES = 13
-#: Peak of building the sweep over what it keeps (the stage's sorted children beside
-#: the kept links): 1.8 measured at L = 24 vmax 1 (5.7 GB against 3.17 GB kept).
-_ROAD_BUILD_PEAK = 1.8
+#: Peak of the search that records the sweep (:mod:`markov.chain.road_closure`) over what
+#: the operator keeps, beside ``search_bytes_per_state`` a state: at the end of the search
+#: its records (10 bytes a link) and its tables of words (8 bytes a slot at a load of 0.64
+#: to 0.8, about 0.48 words a link).  1.8 before the tables kept only keys (2026-12-05);
+#: measured since: ``docs/performance.md``, "Roads at scale".  Kept when the tables were
+#: sized from a short road (2026-12-05, later): whole solves peaked at 550 MB (vmax 2
+#: L = 16, predicted 627) and 1,130 MB (vmax 1 L = 22, predicted 1,368).
+_ROAD_BUILD_PEAK = 1.25
+#: The interpreter, numpy, scipy and numba's road kernels, beside the arrays (177 MB after
+#: a small road's solve, 2026-12-05): counted for roads, whose prediction is compared with
+#: a whole process's peak.
+_ROAD_LIBRARIES = 180e6
 
 
 def road_factored_bytes(states: int, links: int, method: str = "bicgstab") -> float:
     """Peak bytes of a road solved with the factored sweep
     (:class:`markov.chain.road_factored.RoadFactoredOperator`): the larger of its
-    build and of its solve (the links, the keys, the solver's vectors).
+    search-and-build and of its solve (the links, the keys, the solver's vectors), and
+    the libraries.
 
     Parameters
     ----------
@@ -269,8 +279,8 @@ def road_factored_bytes(states: int, links: int, method: str = "bicgstab") -> fl
     float
     """
     kept = links * _ROAD_LINK_BYTES
-    return max(_ROAD_BUILD_PEAK * kept + states * search_bytes_per_state(),
-               kept + states * (_KEY + 8 * solver_vectors(method)))
+    return _ROAD_LIBRARIES + max(_ROAD_BUILD_PEAK * kept + states * search_bytes_per_state(),
+                                 kept + states * (_KEY + 8 * solver_vectors(method)))
 
 
 def check_fits(what: str, need: float, limit: float, hint: str = "") -> None:

@@ -175,7 +175,7 @@ def test_unfolded_sweep_agrees(entry, exit_, update):
 @pytest.mark.parametrize("name", ["nasch1", "nasch2", "kkw"])
 def test_the_search_records_the_sweep(name, update):
     """markov.chain.road_closure: the states of the breadth-first search and the operator
-    built from the keys, found in one sweep (links and words the same, products to rounding)."""
+    built from the keys, found in one sweep (the operator's arrays the same)."""
     from markov.chain.lattice import reachable_keys, start_key
     from markov.chain.road_closure import closure
 
@@ -200,6 +200,15 @@ def test_the_search_records_the_sweep(name, update):
                     op = RoadFactoredOperator(road, keys, lump, lat)
                     got = RoadFactoredOperator.from_sweep(road, keys, sweep, lump, lat)
                     assert (got.links, got.words) == (op.links, op.words)
+                    for attr in ("_stage_lo", "_indptr", "_parent", "_code", "_findptr",
+                                 "_fparent", "_wtab", "_inc"):   # bit for bit
+                        a, b = getattr(got, attr), getattr(op, attr)
+                        assert a.dtype == b.dtype and np.array_equal(a, b), (road, attr)
+                    # the final codes of one final word into one state (on-ramps: 15 of
+                    # 1882 roads here) come in another order from the keys
+                    seg = np.repeat(np.arange(got.n), np.diff(got._findptr))
+                    a, b = (o._fcode[np.lexsort((o._fcode, o._fparent, seg))] for o in (got, op))
+                    assert a.dtype == b.dtype and np.array_equal(a, b), road
                     x = rng.random(len(keys))
                     ref = op.apply(x)
                     assert np.abs(got.apply(x) - ref).max() <= 1e-14 * np.abs(ref).max(), road
@@ -208,6 +217,55 @@ def test_the_search_records_the_sweep(name, update):
                         1.0, np.abs(cref).max()), road
                     checked += 1
     assert checked >= 40
+
+
+@pytest.mark.parametrize("update", UPDATES)
+def test_the_search_renumbers_its_records_as_its_tables_grow(update, monkeypatch):
+    """Tables of 8 slots at first grow many times during the search (each time the links
+    recorded are renumbered): the same states and links as with the usual tables."""
+    import markov.chain.road_closure as road_closure
+    from markov.chain.lattice import start_key
+
+    for road in (Road(9, load_model("nasch", {"vmax": 2, "p": 0.25}), update, 0.5, 0.5,
+                      "reservoir", "wall", ramps=[OnRamp(5, 0.3, 1)]),
+                 Road(10, load_model("nasch", {"vmax": 1, "p": 0.25}), update, 0.3, 0.5,
+                      "site1", "sink")):
+        lat = lattice_of(road, lump=True)
+        keys, sweep = road_closure.closure(lat, start_key(lat))
+        # tables grown a quarter at a time, and sized from a prediction of the states
+        # (right, a third of them, three times as many: a wrong one costs memory only)
+        nw = np.diff(sweep.stage_lo)
+        runs = [dict(expect=None), dict(expect=len(keys)), dict(expect=len(keys) / 3),
+                dict(expect=3.0 * len(keys)), dict(expect=len(keys), words=nw),
+                dict(expect=len(keys) / 2, words=nw / 4), dict(expect=2.0 * len(keys),
+                                                             words=3 * nw[::-1])]
+        for kw in runs:
+            with monkeypatch.context() as m:
+                m.setattr(road_closure, "_FIRST_SIZE", 8)
+                got_keys, got = road_closure.closure(lat, start_key(lat), **kw)
+            assert np.array_equal(got_keys, keys)
+            for attr in ("stage_lo", "indptr", "parent", "code", "findptr", "fparent",
+                         "fcode", "post_w", "post_inc"):
+                a, b = getattr(got, attr), getattr(sweep, attr)
+                assert a.dtype == b.dtype and np.array_equal(a, b), (road, attr, kw)
+
+
+def test_a_long_road_sizes_its_search_from_a_short_one():
+    """RoadChain._stage_words: a stage's words per state on a road of 10 cells times the
+    predicted states, within 10 % of the words found (vmax 1 L = 16, vmax 2 L = 13)."""
+    from markov.solvers.road_chain import RoadChain
+
+    for road in (Road(16, load_model("nasch", {"vmax": 1, "p": 0.25}), "parallel", 0.3, 0.5,
+                      "site1", "sink"),
+                 Road(13, load_model("nasch", {"vmax": 2, "p": 0.25}), "parallel", 0.5, 0.5,
+                      "reservoir", "wall")):
+        chain = RoadChain(road)
+        assert chain.prediction is not None
+        keys = chain.keys
+        want = np.diff(chain._sweep.stage_lo).astype(float)
+        got = chain._stage_words(float(len(keys)))
+        assert got.shape == want.shape
+        assert np.abs(got / want - 1).max() < 0.1, (road, got / want)
 
 
 def test_a_chain_takes_the_recorded_sweep():

@@ -48,6 +48,9 @@ PREDICT_CONFIGURATIONS = 3 ** 13
 #: it builds 10-20x faster than the matrix and holds 2-4x less (measured at 16,384 to
 #: 275,807 states, ``docs/performance.md``).
 FACTORED_MIN_STATES = 20_000
+#: Cells of the short road whose stages size a long road's search
+#: (:meth:`RoadChain._stage_words`).
+_SHORT = 10
 
 #: Largest reachable set split into closed classes (its support graph, every
 #: successor stored); a larger one is solved as one class and verified.
@@ -233,10 +236,34 @@ class RoadChain:
         from markov.chain.lattice import start_key
         from markov.chain.road_closure import closure
 
-        with small_pages():
-            return closure(self.lattice, start_key(self.lattice) if start is None else start,
-                           record=record, limit=self.limit,
-                           per_state=memory.search_bytes_per_state())
+        # the predicted states size the search's tables (the prediction is the default
+        # start's)
+        est = self.prediction if start is None else None
+        expect = None if est is None else float(est.states)
+        return closure(self.lattice, start_key(self.lattice) if start is None else start,
+                       record=record, limit=self.limit,
+                       per_state=memory.search_bytes_per_state(), expect=expect,
+                       words=None if expect is None else self._stage_words(expect))
+
+    def _stage_words(self, states: float) -> np.ndarray | None:
+        """The words expected in each stage of the search (``L + 1``): a stage's words per
+        state on a road of :data:`_SHORT` cells (the entry's first stages, the exit's
+        last, its middle stage for those between; nearly the same at every length: 0.25
+        at vmax 1, 0.27-0.36 at vmax 2, 0.66 and 1.0 the last two) times ``states``."""
+        from markov.chain.lattice import start_key
+        from markov.chain.road_closure import closure
+        from markov.solvers.road_estimate import _shorter
+
+        L = self.system.length
+        L0 = min(L - 1, _SHORT)
+        if L0 < self.system.model.vmax + 2:
+            return None
+        lat = lattice_of(_shorter(self.system, L0), lump=self.lump)
+        keys, sweep = closure(lat, start_key(lat))
+        per = np.diff(sweep.stage_lo) / len(keys)      # stages 0..L0
+        h = L0 // 2
+        s0 = [s if s <= h else L0 - (L - s) if L - s < L0 - h else h for s in range(L + 1)]
+        return per[s0] * states
 
     def _rows(self, keys: np.ndarray):
         if len(keys) <= _ROW_CHUNK:
