@@ -145,12 +145,7 @@ class _Words:
     renumbers what it recorded by the map :meth:`make_room` returns."""
 
     def __init__(self, size: int = _FIRST_SIZE):
-        size = min(max(int(size), _FIRST_SIZE), _INT32_MAX)
-        if size < _PARALLEL_EMPTY:
-            self.keys = np.full(size, -1, np.int64)
-        else:
-            self.keys = np.empty(size, np.int64)
-            _empty(self.keys)
+        self.keys = _empty_table(min(max(int(size), _FIRST_SIZE), _INT32_MAX))
         self.count = 0
 
     def make_room(self, more: int, scale: tuple | None = None):
@@ -173,11 +168,7 @@ class _Words:
             size = max(size, min(int(self.count * ratio / _AIM), (2 if early else _LEAP) * old))
         if size > _INT32_MAX:
             raise MemoryError("more than 2^31 words in one stage")
-        if size < _PARALLEL_EMPTY:
-            keys = np.full(size, -1, np.int64)
-        else:
-            keys = np.empty(size, np.int64)
-            _empty(keys)
+        keys = _empty_table(size)
         moved = np.empty(len(self.keys), np.int32)
         _rehash_slots(self.keys, keys, moved)
         self.keys = keys
@@ -191,18 +182,33 @@ class _Words:
         self.count += m
         return ids, first[:m]
 
+    def sorted_keys(self) -> np.ndarray:
+        """The keys in sorted order."""
+        keys = np.empty(self.count, np.int64)
+        _occupied(self.keys, keys)
+        keys.sort()
+        return keys
+
     def ranks(self, sorted_keys: bool = False):
         """The rank of each slot's key among the keys (an empty slot's: undefined), and
         first the keys in sorted order where ``sorted_keys``: the keys sorted (numpy's
         sort, several times faster than its argsort) and each looked up in the table."""
-        keys = np.empty(self.count, np.int64)
-        _occupied(self.keys, keys)
-        keys.sort()
+        keys = self.sorted_keys()
         rank = np.empty(len(self.keys), np.int32)
         _rank_slots(self.keys, keys, rank)
         if not sorted_keys:
             return rank
         return keys, rank
+
+
+def _empty_table(size: int) -> np.ndarray:
+    """A table of ``size`` empty slots (-1), filled by both cores from
+    :data:`_PARALLEL_EMPTY` slots."""
+    if size < _PARALLEL_EMPTY:
+        return np.full(size, -1, np.int64)
+    keys = np.empty(size, np.int64)
+    _empty(keys)
+    return keys
 
 
 @njit(cache=True)
@@ -498,7 +504,7 @@ def _closure(lattice, start, record, limit, per_state, expect, words):
         del new_states, new_state_ids
     bar.close()
     if not record:
-        return states.ranks(sorted_keys=True)[0], None
+        return states.sorted_keys(), None
     # number the states and each stage's words in sorted order, as the operator built
     # from the keys does (neighbouring words share parents: the product reads them 1.8x
     # faster than in the order met, vmax 2 L = 16); the recorded numbers are renumbered
