@@ -7,7 +7,7 @@ without loading the numerical libraries.
 from __future__ import annotations
 
 __all__ = ["SOLVERS", "METHODS", "PRODUCT_METHODS", "OPERATORS", "GMRES_RESTART",
-           "DEFAULT_TOL", "DEFAULT_MAXITER"]
+           "DEFAULT_TOL", "DEFAULT_MAXITER", "LOCAL_RULES"]
 
 #: Stationary solvers (:func:`markov.solvers.stationary.stationary`).
 SOLVERS = ("direct", "eigs", "iterative", "gmres", "bicgstab", "power", "aggregation")
@@ -24,3 +24,6 @@ GMRES_RESTART = 60
 DEFAULT_TOL = 1e-13
 #: Default cap on ARPACK iterations or products ``x P``.
 DEFAULT_MAXITER = 20_000
+#: Local vectors of the MPS sweep's two-site steps (:func:`markov.mps.stationary.stationary_mps`
+#: ``select``, :func:`markov.solvers.road_mps.solve_road_mps` ``local_rule``).
+LOCAL_RULES = ("nearest", "refined", "ritz-refined")

@@ -91,11 +91,12 @@ def test_refined_local_rule_against_the_exact_chain_at_the_maximal_current(vmax,
         solve_road_mps(road, 8, local_rule="largest")
 
 
-def test_the_local_rules_are_the_sweeps():
-    from markov.mps.stationary import SELECT_RULES
-    from markov.solvers.road_mps import LOCAL_RULE, LOCAL_RULES
+def test_the_local_rules_offered_are_the_ones_tested():
+    # tests/test_mps_stationary.py checks each of these three against dense vectors
+    from markov.choices import LOCAL_RULES
+    from markov.solvers.road_mps import LOCAL_RULE
 
-    assert LOCAL_RULES == SELECT_RULES and LOCAL_RULE in LOCAL_RULES
+    assert LOCAL_RULES == ("nearest", "refined", "ritz-refined") and LOCAL_RULE in LOCAL_RULES
 
 
 def test_parallel_tasep_on_the_special_line_at_L_60():

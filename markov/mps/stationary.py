@@ -46,6 +46,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from markov.choices import LOCAL_RULES
+
 __all__ = [
     "MPS",
     "StationaryMPS",
@@ -880,10 +882,6 @@ def _pick(vals: np.ndarray) -> int:
 CHECK_EVERY = 2
 
 
-#: The local rules of :func:`stationary_mps` (``select``).
-SELECT_RULES = ("nearest", "refined", "ritz-refined")
-
-
 def _ritz(h: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
     """Ritz values of the leading ``m x m`` Hessenberg block and the unit real Ritz vector
     nearest 1 (a complex pair on top: its real part)."""
@@ -1120,8 +1118,8 @@ def stationary_mps(
         p = start.copy()
     if len(p) != len(mpo):
         raise ValueError(f"start of {len(p)} sites for an MPO of {len(mpo)}")
-    if select not in SELECT_RULES:
-        raise ValueError(f"select must be one of {SELECT_RULES}, not {select!r}")
+    if select not in LOCAL_RULES:
+        raise ValueError(f"select must be one of {LOCAL_RULES}, not {select!r}")
     if method not in ("dmrg", "power"):
         raise ValueError(f"method must be 'dmrg' or 'power', not {method!r}")
     p = normalize(_right_canonical(p))

@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from markov.choices import LOCAL_RULES
 from markov.errors import InvalidParameterError
 from markov.model.ring import RANDOM_SEQUENTIAL
 from markov.model.road import Road
@@ -87,9 +88,6 @@ KRYLOV = 12
 #: sweeps, but costs 3x a sweep and ends some low-density rungs earlier (a wider bar); at
 #: vmax 2 neither settles (docs/mps_solver_notes.md, 2026-12-05).
 LOCAL_RULE = "nearest"
-#: Every local rule (:data:`markov.mps.stationary.SELECT_RULES`; here for the command line,
-#: which lists them without importing the MPS machinery).
-LOCAL_RULES = ("nearest", "refined", "ritz-refined")
 
 
 def _geometric_tail(values) -> float:

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import click
 
-from markov.choices import DEFAULT_TOL, METHODS, OPERATORS
+from markov.choices import DEFAULT_TOL, LOCAL_RULES, METHODS, OPERATORS
 
 from ..cli_common import emit_json, handle_errors, quiet_option
 from ..model_options import build_model, model_options
@@ -40,7 +40,7 @@ __all__ = ["solve"]
 @click.option("--bond-dimension", "chi", type=int, default=None, metavar="CHI",
               help="--method mps: the bond dimension of the state [64]; the error bar"
                    " compares it with CHI/2.")
-@click.option("--local-rule", type=click.Choice(("nearest", "refined", "ritz-refined")),
+@click.option("--local-rule", type=click.Choice(LOCAL_RULES),
               default=None, metavar="RULE",
               help="--method mps: the local vector of each two-site step: nearest (the"
                    " Ritz vector of value nearest 1, default), refined (least ||(M - 1) x||:"
