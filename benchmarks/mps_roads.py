@@ -22,6 +22,7 @@ Usage::
 
     python benchmarks/mps_roads.py                     # every table
     python benchmarks/mps_roads.py --only exact
+    python benchmarks/mps_roads.py --only exact --rule nearest --out mps_roads_nearest
 """
 from __future__ import annotations
 
@@ -50,6 +51,11 @@ COLUMNS = ["table", "case", "L", "chi", "flux", "reference", "rel_error", "flux_
 LIMIT_S = {"exact": 300, "closed": 300, "targets": 600}
 POINTS = {"low density": (0.3, 0.7), "high density": (0.7, 0.3),
           "maximal current": (1.0, 1.0), "line (1-a)(1-b)=p": (0.5, 0.5)}
+
+
+def _rule() -> str | None:
+    """The local rule asked with ``--rule`` (children read it from the environment)."""
+    return os.environ.get("MPS_ROADS_RULE") or None
 
 
 def _road(vmax: int, L: int, alpha: float, beta: float, update: str = "parallel"):
@@ -93,7 +99,7 @@ def work_exact(vmax: int, L: int, point: str, chis: list[int]) -> list[dict]:
         return [{"case": f"vmax {vmax} {point}", "L": L, "note": str(exc).split(":")[-1][:80]}]
     rows = []
     for chi in chis:
-        sol = solve_road_mps(road, chi, tol=1e-12)
+        sol = solve_road_mps(road, chi, tol=1e-12, local_rule=_rule())
         rows.append({"case": f"vmax {vmax} {point}", "L": L, **_mps_row(
             sol, exact.flux, exact.density_profile), "note": f"exact {exact.n_states:,} states"})
     return rows
@@ -119,7 +125,7 @@ def work_closed(kind: str, L: int, chi: int) -> list[dict]:
                     "site1", "sink")
         ref = alpha * (q - alpha) / (q - alpha ** 2)
         case = f"parallel TASEP on (1-a)(1-b)=p, a={alpha} q={q} (de Gier-Nienhuis 1999)"
-    sol = solve_road_mps(road, chi, tol=1e-11)
+    sol = solve_road_mps(road, chi, tol=1e-11, local_rule=_rule())
     return [{"case": case, "L": L, **_mps_row(sol, ref), "note": ""}]
 
 
@@ -151,7 +157,8 @@ def work_target(vmax: int, L: int, chi: int) -> list[dict]:
 
     def log(sweep: int, flux: float) -> None:   # read back if the case runs out of time
         print(f"SWEEP {sweep} {time.perf_counter() - t0:.1f} s J {flux:.12f}", flush=True)
-    sol = solve_road_mps(_road(vmax, L, 1.0, 1.0), chi, tol=1e-10, on_sweep=log)
+    sol = solve_road_mps(_road(vmax, L, 1.0, 1.0), chi, tol=1e-10, on_sweep=log,
+                         local_rule=_rule())
     return [{"case": f"target vmax {vmax} maximal current", "L": L, **_mps_row(sol, None),
              "note": f"flux_half {sol.flux_half:.12g}"}]
 
@@ -209,7 +216,8 @@ def _write(rows: list[dict], out: str) -> None:
             return f"{v:.3g}" if abs(v) < 1e-3 or abs(v) >= 1e4 else f"{v:.6g}"
         return str(v)
     lines = [f"# Long roads as matrix product states ({dt.date.today()}, {platform.node()},"
-             f" {os.cpu_count()} cores; benchmarks/mps_roads.py)", "", cover, "",
+             f" {os.cpu_count()} cores; benchmarks/mps_roads.py; local rule:"
+             f" {_rule() or 'the default'})", "", cover, "",
              "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
     lines += ["| " + " | ".join(fmt(r.get(c)) for c in COLUMNS) + " |" for r in rows]
     (RESULTS / f"{out}.md").write_text("\n".join(lines) + "\n")
@@ -219,8 +227,11 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", nargs="*", choices=TABLES, default=list(TABLES))
     ap.add_argument("--out", default="mps_roads")
+    ap.add_argument("--rule", help="local rule of the sweeps (default: the solver's)")
     ap.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
     a = ap.parse_args()
+    if a.rule:
+        os.environ["MPS_ROADS_RULE"] = a.rule
     if a.child:
         _child(a.child[0], json.loads(a.child[1]))
         return

@@ -26,4 +26,4 @@ DEFAULT_TOL = 1e-13
 DEFAULT_MAXITER = 20_000
 #: Local vectors of the MPS sweep's two-site steps (:func:`markov.mps.stationary.stationary_mps`
 #: ``select``, :func:`markov.solvers.road_mps.solve_road_mps` ``local_rule``).
-LOCAL_RULES = ("nearest", "refined", "ritz-refined")
+LOCAL_RULES = ("nearest", "refined", "ritz-refined", "fixed-sum")

@@ -231,7 +231,7 @@ def test_progress_callback_and_warm_start():
 # ----------------------------------------------------------------- local rules
 
 
-@pytest.mark.parametrize("select", ["nearest", "refined", "ritz-refined"])
+@pytest.mark.parametrize("select", ["nearest", "refined", "ritz-refined", "fixed-sum"])
 def test_every_local_rule_finds_the_exact_vector_at_full_bond(select):
     # where chi holds the whole vector the projected matrix has the eigenvalue 1 exactly,
     # and the rules agree on its eigenvector
@@ -274,5 +274,44 @@ def test_refined_local_vectors_are_least_residual_vectors(n):
     x = _local_eigenvector(mva, theta, 1e-13, n, 1, "ritz-refined").ravel()
     v = np.linalg.svd(a - lam * np.eye(n))[2][-1]
     assert abs(abs(x @ v) - 1) < 1e-8
+    # fixed-sum: the least ||(A - 1) x|| among the x of sum 1 (a direct KKT solve)
+    ones = np.ones(n)
+    x = _local_eigenvector(mva, theta, 1e-13, n, 1, "fixed-sum", ones.reshape(theta.shape))
+    kkt = np.block([[2 * (a - np.eye(n)).T @ (a - np.eye(n)), ones[:, None]],
+                    [ones[None, :], np.zeros((1, 1))]])
+    want = np.linalg.solve(kkt, np.r_[np.zeros(n), 1.0])[:n]
+    x = x.ravel()
+    assert x.sum() > 0 and np.abs(x / x.sum() - want).max() < 1e-8 * np.abs(want).max()
+    got = _local_eigenvector(mv, theta, 1e-13, n, 1, "fixed-sum", ones.reshape(theta.shape))
+    assert np.abs(got.ravel() / got.sum() - p).max() < 1e-10
     with pytest.raises(ValueError, match="select"):
         stationary_mps(tasep_mpo(4, 0.5, 0.5), 4, select="largest")
+
+
+def test_the_fixed_sum_rule_fixes_the_sum_in_a_partial_krylov_space():
+    # twelve Krylov vectors of a 200-state chain: the vector returned is, among those of
+    # the space with the sum 1, the one of least ||(M - 1) x|| (checked by brute force on
+    # the same basis: Arnoldi's basis spans the Krylov space of theta)
+    from markov.mps.stationary import _local_eigenvector
+
+    n, k = 200, 12
+    rng = np.random.default_rng(3)
+    m = rng.random((n, n)) ** 6
+    m /= m.sum(axis=0)
+    theta = rng.random(n)
+    krylov = [theta / np.linalg.norm(theta)]
+    for _ in range(k - 1):
+        w = m @ krylov[-1]
+        krylov.append(w / np.linalg.norm(w))
+    q = np.linalg.qr(np.array(krylov).T)[0]            # an orthonormal basis, n x k
+    b = (m - np.eye(n)) @ q
+    c = q.sum(axis=0)
+    kkt = np.block([[2 * b.T @ b, c[:, None]], [c[None, :], np.zeros((1, 1))]])
+    want = q @ np.linalg.solve(kkt, np.r_[np.zeros(k), 1.0])[:k]
+
+    def mv(x):
+        return (m @ x.ravel()).reshape(x.shape)
+
+    x = _local_eigenvector(mv, theta, 0.0, k, 1, "fixed-sum", np.ones(n)).ravel()
+    assert abs(x.sum() * np.linalg.norm(want) - np.linalg.norm(x) * want.sum()) < 1e-12
+    assert np.abs(x / x.sum() - want).max() < 1e-8 * np.abs(want).max()

@@ -72,21 +72,22 @@ def test_random_sequential_tasep_at_L_40_the_bar_never_lies():
     assert sol.flux_error is not None or not sol.converged
 
 
+@pytest.mark.parametrize("rule", ["refined", "fixed-sum"])
 @pytest.mark.parametrize("vmax,L,chi,close", [(1, 14, 16, 1e-6)])
-def test_refined_local_rule_against_the_exact_chain_at_the_maximal_current(vmax, L, chi,
-                                                                             close):
-    # the refined local vector (least ||(M - 1) x||) is the eigenvector where chi holds the
-    # state, and its bar covers where it does not
+def test_refined_local_rules_against_the_exact_chain_at_the_maximal_current(vmax, L, chi,
+                                                                              close, rule):
+    # the refined local vectors (least ||(M - 1) x||, at unit norm or at a fixed sum) are
+    # the eigenvector where chi holds the state, and the bar covers where it does not
     entry, exit_ = ("site1", "sink") if vmax == 1 else ("reservoir", "wall")
     road = Road(L, _nasch(vmax, 0.25), "parallel", 1.0, 1.0, entry, exit_)
     exact = solve_road(road, tol=1e-14)
-    mps = solve_road_mps(road, chi, tol=1e-12, local_rule="refined")
+    mps = solve_road_mps(road, chi, tol=1e-12, local_rule=rule)
     assert mps.flux_error is not None and mps.converged
     assert abs(mps.flux - exact.flux) <= mps.flux_error
     assert mps.flux == pytest.approx(exact.flux, abs=close)
     assert mps.flux_error < 10 * close
     assert np.allclose(mps.density_profile, exact.density_profile, atol=10 * close)
-    assert mps.local_rule == "refined" and mps.to_dict()["local_rule"] == "refined"
+    assert mps.local_rule == rule and mps.to_dict()["local_rule"] == rule
     with pytest.raises(InvalidParameterError, match="local rule must be one of"):
         solve_road_mps(road, 8, local_rule="largest")
 
@@ -96,7 +97,7 @@ def test_the_local_rules_offered_are_the_ones_tested():
     from markov.choices import LOCAL_RULES
     from markov.solvers.road_mps import LOCAL_RULE
 
-    assert LOCAL_RULES == ("nearest", "refined", "ritz-refined") and LOCAL_RULE in LOCAL_RULES
+    assert LOCAL_RULES == ("nearest", "refined", "ritz-refined", "fixed-sum") and LOCAL_RULE in LOCAL_RULES
 
 
 def test_parallel_tasep_on_the_special_line_at_L_60():

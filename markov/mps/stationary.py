@@ -890,8 +890,27 @@ def _ritz(h: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
     return vals, y / np.linalg.norm(y)
 
 
+def _least_with_sum(b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """The ``y`` of least ``||b y||`` with ``c . y = 1``, and ``||b y|| / ||y||``; None where
+    ``c`` vanishes (no direction carries the sum)."""
+    cn = float(np.linalg.norm(c))
+    if cn < 1e-300:
+        return None
+    y0 = c / cn ** 2
+    if c.size == 1:
+        y = y0
+    else:
+        # orthonormal complement of c: a Householder reflection's other columns
+        u = c / cn
+        u = u - np.eye(c.size)[0] * (1.0 if u[0] >= 0 else -1.0)
+        null = (np.eye(c.size) - 2.0 * np.outer(u, u) / (u @ u))[:, 1:]
+        z = np.linalg.lstsq(b @ null, -(b @ y0), rcond=None)[0]
+        y = y0 + null @ z
+    return y, float(np.linalg.norm(b @ y) / np.linalg.norm(y))
+
+
 def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter: int,
-                       rule: str = "nearest") -> np.ndarray:
+                       rule: str = "nearest", ones: np.ndarray | None = None) -> np.ndarray:
     """Eigenvector of the projected matrix ``M`` for its eigenvalue nearest 1.
 
     Explicitly restarted Arnoldi from the current two-site tensor (Krylov size ``ncv``, at
@@ -903,8 +922,13 @@ def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter:
     of least ``||(M - 1) x||`` (the refined Ritz vector for the value 1, Jia 1997: a
     singular vector, well conditioned where the eigenvectors of a non-normal ``M`` are
     not); it stops when that least value is below ``tol``. ``rule="ritz-refined"``: the
-    least ``||(M - lam) x||``, ``lam`` the (real part of the) Ritz value nearest 1. Where
-    ``M`` has the eigenvalue 1 the rules give its eigenvector.
+    least ``||(M - lam) x||``, ``lam`` the (real part of the) Ritz value nearest 1.
+    ``rule="fixed-sum"``: the vector of the Krylov space of least ``||(M - 1) x||`` among
+    those of sum ``ones . x = 1`` (``ones`` the all-ones co-vector in the kept bases;
+    where it vanishes on the space, the refined vector). Every eigenvector of ``T`` but
+    the stationary one has sum 0, so the slow modes that make ``M`` nearly singular
+    cannot take the sum's place, as they can in a unit-norm rule. Where ``M`` has the
+    eigenvalue 1 the rules give its eigenvector.
     """
     shape = theta.shape
     n = theta.size
@@ -915,7 +939,11 @@ def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter:
         eye = np.eye(n)
         for j in range(n):
             m[:, j] = matvec(eye[j].reshape(shape)).ravel()
-        if rule == "refined":
+        got = (_least_with_sum(m - eye, ones.ravel()) if rule == "fixed-sum" and ones is not None
+               else None)
+        if got is not None:
+            vec = got[0]
+        elif rule in ("refined", "fixed-sum"):
             vec = _svd(m - eye)[2][-1]
         elif rule == "ritz-refined":
             vals = np.linalg.eigvals(m)
@@ -928,7 +956,13 @@ def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter:
 
         def choose(h: np.ndarray, m: int) -> tuple[np.ndarray, float]:
             """The vector's coefficients in the Krylov basis and its residual."""
-            if rule == "refined":
+            if rule == "fixed-sum" and ones is not None:
+                got = _least_with_sum(h[: m + 1, :m] - np.eye(m + 1, m),
+                                      basis[:m] @ ones.ravel())
+                if got is not None:
+                    y, res = got
+                    return y / np.linalg.norm(y), res
+            if rule in ("refined", "fixed-sum"):
                 _, sv, vt = _svd(h[: m + 1, :m] - np.eye(m + 1, m))
                 return vt[-1], float(sv[-1])
             if rule == "ritz-refined":
@@ -967,8 +1001,8 @@ def _local_eigenvector(matvec, theta: np.ndarray, tol: float, ncv: int, maxiter:
             if done or res <= tol:
                 break
         vec = v
-    if vec @ v0 < 0:  # the sign of the previous tensor
-        vec = -vec
+    if (vec @ ones.ravel() if rule == "fixed-sum" and ones is not None else vec @ v0) < 0:
+        vec = -vec  # the positive sum, or the sign of the previous tensor
     return (vec / np.linalg.norm(vec)).reshape(shape)
 
 
@@ -993,11 +1027,26 @@ def _dmrg_sweep(
         right[i] = _grow_right(right[i + 1], ts[i], mpo[i])
     left: list[np.ndarray | None] = [None] * (n + 1)
     left[0] = np.ones((1, 1, 1))
+    # the all-ones co-vector in the kept bases: the sum of a local tensor (rule "fixed-sum")
+    e_right: list = [None] * (n + 1)
+    e_left: list = [None] * (n + 1)
+    e_right[n], e_left[0] = np.ones(1), np.ones(1)
+    for i in range(n - 1, 1, -1):
+        e_right[i] = _unit(ts[i].sum(axis=1) @ e_right[i + 1])
+
+    def ones_at(i: int, shape) -> np.ndarray | None:
+        if select != "fixed-sum":
+            return None
+        return np.broadcast_to(e_left[i][:, None, None, None] * e_right[i + 2][None, None,
+                                                                                None, :],
+                               shape)
+
     err = 0.0
     theta = np.tensordot(ts[0], ts[1], axes=(2, 0))
     for i in range(n - 1):  # left to right, bond (i, i+1)
         mv = _effective_two_site(left[i], mpo[i], mpo[i + 1], right[i + 2])
-        theta = _local_eigenvector(mv, theta, local_tol, ncv, maxiter, select)
+        theta = _local_eigenvector(mv, theta, local_tol, ncv, maxiter, select,
+                                   ones_at(i, theta.shape))
         a, s, t, b = theta.shape
         u, sv, vt = _svd(theta.reshape(a * s, t * b))
         k, e = _truncate(sv, bond_dimension, cutoff)
@@ -1009,24 +1058,33 @@ def _dmrg_sweep(
             break
         ts[i] = u[:, :k].reshape(a, s, k)
         left[i + 1] = _grow_left(left[i], ts[i], mpo[i])
+        e_left[i + 1] = _unit(e_left[i] @ ts[i].sum(axis=1))
         nxt = (sv[:k, None] * vt[:k]).reshape(k, t, b)
         theta = np.tensordot(nxt, ts[i + 2], axes=(2, 0))
     theta = np.tensordot(ts[n - 2], ts[n - 1], axes=(2, 0))
     for i in range(n - 2, -1, -1):  # right to left, bond (i, i+1)
         mv = _effective_two_site(left[i], mpo[i], mpo[i + 1], right[i + 2])
-        theta = _local_eigenvector(mv, theta, local_tol, ncv, maxiter, select)
+        theta = _local_eigenvector(mv, theta, local_tol, ncv, maxiter, select,
+                                   ones_at(i, theta.shape))
         a, s, t, b = theta.shape
         u, sv, vt = _svd(theta.reshape(a * s, t * b))
         k, e = _truncate(sv, bond_dimension, cutoff)
         err += e
         ts[i + 1] = vt[:k].reshape(k, t, b)
         right[i + 1] = _grow_right(right[i + 2], ts[i + 1], mpo[i + 1])
+        e_right[i + 1] = _unit(ts[i + 1].sum(axis=1) @ e_right[i + 2])
         prev = (u[:, :k] * sv[:k]).reshape(a, s, k)
         if i == 0:
             ts[0] = prev / np.linalg.norm(prev)
             break
         theta = np.tensordot(ts[i - 1], prev, axes=(2, 0))
     return ts, err
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    """``v`` scaled to unit norm (the sums of long roads' basis vectors overflow)."""
+    n = np.linalg.norm(v)
+    return v / n if n > 0 else v
 
 
 def _grow_left(le: np.ndarray, a: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -1088,12 +1146,14 @@ def stationary_mps(
     local_tol, ncv, local_maxiter : float, int, int
         Ritz-residual tolerance, Krylov size and restarts of the local Arnoldi solve
         (``"dmrg"``).
-    select : {"nearest", "refined", "ritz-refined"}
+    select : {"nearest", "refined", "ritz-refined", "fixed-sum"}
         The local vector (``"dmrg"``): the Ritz vector of value nearest 1, or the refined
         Ritz vector for the value 1, the unit vector of the Krylov space of least
         ``||(M - 1) x||`` (:func:`_local_eigenvector`; steadier where the projected
         matrix is far from normal: docs/mps_solver_notes.md, 2026-12-05), or the refined
-        Ritz vector for the Ritz value nearest 1.
+        Ritz vector for the Ritz value nearest 1, or ``"fixed-sum"``: the vector of least
+        ``||(M - 1) x||`` among those of a fixed sum (the sum taken with the all-ones
+        co-vector in the kept bases; steadiest on long roads: docs/mps_solver_notes.md).
     progress : callable, optional
         ``progress(iteration, mps, residual)`` after every check, ``mps`` normalised; a
         returned dict is merged into that check's history entry (e.g. the flux), and
