@@ -1,9 +1,9 @@
-"""The dynamics of a solved open road: spectrum, sensitivities, exit-current fluctuations, C(t).
+"""The dynamics of a solved open road: sensitivities, exit-current fluctuations, C(t).
 
 The road's entry points and result types of the analyses a ring has
-(:mod:`markov.analysis.spectrum`, ``sensitivity``, ``correlations``,
-``fluctuations``).  The computations are written once, against the chain
-interface (:mod:`markov.analysis.stationary_chain`) that the road produces
+(``sensitivity``, ``correlations``, ``fluctuations``; the spectrum has one entry
+point for both, :func:`markov.analysis.spectrum.relaxation_spectrum`).  The
+computations are written once, against the chain interface (:mod:`markov.analysis.stationary_chain`) that the road produces
 (:mod:`markov.analysis.road_system`: the road's own transition matrix ``P``,
 row-stochastic, never lumped, one sector; its observables; the cars leaving as the
 increment per transition).  What stays here is the road's own: the result types
@@ -16,9 +16,8 @@ a time step is ``S = L + 1`` sub-steps
 result is given per time step (times divided, rates multiplied by ``S``), and
 the per-chain-step value is kept beside it.
 
-* :func:`road_spectrum`: the leading eigenvalues of ``P`` (dense LAPACK up to
-  :data:`markov.analysis.stationary_chain.DENSE_SECTOR_STATES` states, else ARPACK,
-  largest modulus), with residuals; ``tau = -1 / (S ln |lambda_2|)`` time steps.
+* The spectrum: :func:`markov.analysis.spectrum.relaxation_spectrum` takes a road
+  too (one sector; ``tau = -1 / (S ln |lambda_2|)`` time steps).
 * :func:`road_sensitivity`: ``d pi / d theta`` and the derivatives of the flux,
   the inflow, the mean number of cars and the density profile, for ``theta`` =
   ``alpha``, ``beta``, ``ramp@CELL`` (an on-ramp's rate), a probability
@@ -54,16 +53,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from markov.analysis.road_system import (ROAD_OBSERVABLES, _digits, chain_step_name,
                                          exit_branches, prepare_road, road_observable, road_of)
-from markov.analysis.stationary_chain import (DENSE_SECTOR_STATES, MAX_LAGS, autocorrelation_of,
-                                              autocorrelation_time_of,
-                                              continuous_time_relaxation_time, count_variance,
-                                              derivative_solve, diffusion, drop_stationary,
-                                              increment_autocorrelation, leading,
-                                              relaxation_time, scgf_values)
+from markov.analysis.stationary_chain import (MAX_LAGS, autocorrelation_of,
+                                              autocorrelation_time_of, count_variance,
+                                              derivative_solve, diffusion,
+                                              increment_autocorrelation, scgf_values)
 from markov.chain.lattice import increments, lattice_of, successors
 from markov.errors import InvalidParameterError
 from markov.model.road import OnRamp, Road
@@ -71,169 +67,11 @@ from markov.model.stretch import Stretch
 from markov.solvers.road_chain import RoadChain, RoadSolution
 from markov.validate import ensure_int, ensure_real
 
-__all__ = ["RoadSpectrum", "road_spectrum", "RoadSensitivity", "road_sensitivity",
+__all__ = ["RoadSensitivity", "road_sensitivity",
            "road_parameter", "polynomial_degree_bound", "ExitFluctuations",
            "exit_fluctuations", "exit_count_variance", "exit_scgf", "ROAD_OBSERVABLES",
            "road_observable", "road_autocorrelation", "road_autocorrelation_time",
            "exit_branches"]
-
-
-# ------------------------------------------------------------------ spectrum
-
-
-@dataclass(frozen=True)
-class RoadSpectrum:
-    """Leading eigenvalues of a road's ``P``, the stationary 1 excluded.
-
-    Attributes
-    ----------
-    road : Road
-    eigenvalues : tuple of complex
-        By decreasing modulus (per chain step).
-    residuals : tuple of float
-        ``||x P - lambda x|| / ||x||`` of each.
-    states : int
-    steps_per_time_step : int
-    operator : {"dense", "arpack"}
-    seconds : float
-    notes : tuple of str
-        E.g. that the velocities the rule cannot tell apart were merged.
-    """
-
-    road: Road
-    eigenvalues: tuple
-    residuals: tuple
-    states: int
-    steps_per_time_step: int
-    operator: str
-    seconds: float
-    notes: tuple = ()
-
-    @property
-    def second(self) -> complex | None:
-        return self.eigenvalues[0] if self.eigenvalues else None
-
-    @property
-    def relaxation_time_chain_steps(self) -> float:
-        """``-1 / ln |lambda_2|`` in chain steps (sub-steps: random-sequential)."""
-        return 0.0 if self.second is None else relaxation_time(abs(self.second))
-
-    @property
-    def relaxation_time(self) -> float:
-        """``-1 / (S ln |lambda_2|)`` in time steps."""
-        return self.relaxation_time_chain_steps / self.steps_per_time_step
-
-    @property
-    def oscillation(self) -> float:
-        """``arg lambda_2`` per chain step (radians)."""
-        return 0.0 if self.second is None else float(np.angle(self.second))
-
-    @property
-    def continuous_time_relaxation_time(self) -> float | None:
-        """Random-sequential update in continuous time (generator ``S (P - 1)``):
-        ``1 / (S min(1 - Re lambda))`` over the eigenvalues found, in units of time
-        (``S`` sub-steps per unit); None for the other updates."""
-        return continuous_time_relaxation_time(self.eigenvalues, self.steps_per_time_step)
-
-    def to_dict(self) -> dict:
-        """JSON-ready, with the road and its conventions.
-
-        Returns
-        -------
-        dict
-        """
-        tau, tau_c = self.relaxation_time, self.relaxation_time_chain_steps
-        return {**self.road.describe(),
-                "eigenvalues": [{"re": float(v.real), "im": float(v.imag),
-                                 "modulus": float(abs(v)), "residual": float(r)}
-                                for v, r in zip(self.eigenvalues, self.residuals)],
-                "relaxation_time": tau if math.isfinite(tau) else None,
-                "relaxation_time_chain_steps": tau_c if math.isfinite(tau_c) else None,
-                "time_unit": "time step", "chain_step": chain_step_name(
-                    self.steps_per_time_step),
-                "steps_per_time_step": self.steps_per_time_step,
-                "relaxation_time_continuous": self.continuous_time_relaxation_time,
-                "oscillation": self.oscillation, "sectors": "one (a road has no rotation)",
-                "states": self.states, "operator": self.operator, "seconds": self.seconds,
-                "notes": list(self.notes)}
-
-
-def road_spectrum(system, count: int = 4, tol: float = 1e-10, maxiter: int = 20_000,
-                  solution: RoadSolution | None = None,
-                  lump_velocities: bool = True) -> RoadSpectrum:
-    """The ``count`` eigenvalues of largest modulus of a road's ``P`` after the stationary 1.
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-        One closed class (several: :class:`markov.errors.NoUniqueStationaryStateError`
-        with every class solved).
-    count : int
-    tol : float
-        ARPACK's relative accuracy.
-    maxiter : int
-    solution : RoadSolution, optional
-        Its solution with every velocity, if solved (used where the velocities are kept).
-    lump_velocities : bool
-        Take the eigenvalues of the chain with the velocities the rule cannot
-        tell apart merged (parallel and ordered-sequential update): their rows
-        of ``P`` are identical, so every nonzero eigenvalue is the full
-        chain's with its multiplicity and only eigenvalues 0 are lost (as on a
-        ring, :func:`markov.analysis.spectrum.relaxation_spectrum`); the full
-        chain where the lumped one has no more states than eigenvalues asked.
-
-    Returns
-    -------
-    RoadSpectrum
-
-    Examples
-    --------
-    One cell, parallel site1/sink: the cell empties with ``beta``, fills with
-    ``alpha``, so ``lambda_2 = 1 - alpha - beta``.
-
-    >>> from markov import load_model
-    >>> s = road_spectrum(Road(1, load_model("nasch", {"vmax": 1}), alpha=0.3, beta=0.6))
-    >>> round(s.second.real, 12)
-    0.1
-    """
-    from markov.validate import ensure_tol
-
-    count = ensure_int("count", count, 1, 1000)
-    tol = ensure_tol(tol)
-    start = time.perf_counter()
-    lumped = _lumped_chain(system) if lump_velocities else None
-    if lumped is not None and count + 1 < lumped.n_states:
-        road, P = lumped.system, lumped.matrix
-        S = lumped.solution().steps_per_time_step     # refuses several closed classes
-        notes = (f"velocities lumped ({lumped.lattice.lumping.describe()}): every nonzero"
-                 " eigenvalue is the full chain's (identical rows of P); the eigenvalues 0"
-                 " of the merged velocities are not listed",)
-    else:
-        # every velocity kept; a small lumped chain too, so that its zeros are listed
-        sv = prepare_road(system, solution)
-        road, P, S, notes = sv.road, sv.P, sv.S, ()
-    n = P.shape[0]
-    if n == 1:
-        return RoadSpectrum(road, (), (), 1, S, "dense", time.perf_counter() - start, notes)
-    want = min(count + 1, n)
-    # complex, as the ring's sector matrices: _leading starts ARPACK from a complex vector
-    A = spla.aslinearoperator(P.T.tocsr().astype(np.complex128))
-    pairs = drop_stationary(leading(A, want, tol, maxiter), count)
-    route = "dense" if n <= DENSE_SECTOR_STATES or want >= n - 1 else "arpack"
-    return RoadSpectrum(road, tuple(v for v, _ in pairs), tuple(r for _, r in pairs), n,
-                        S, route, time.perf_counter() - start, notes)
-
-
-def _lumped_chain(system) -> RoadChain | None:
-    """The road's chain with its velocities lumped, or None where nothing merges."""
-    if isinstance(system, RoadChain):
-        chain = system if system.lattice.lumping is not None else RoadChain(
-            system.system, max_memory=system.max_memory)
-    elif isinstance(system, Road):
-        chain = RoadChain(system)
-    else:
-        return None                   # prepare_road names the bad input
-    return chain if chain.lattice.lumping is not None and not chain.system.periodic else None
 
 
 # ---------------------------------------------------------------- sensitivity
