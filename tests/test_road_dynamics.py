@@ -17,6 +17,7 @@ from click.testing import CliRunner
 
 from markov import NoUniqueStationaryStateError, OnRamp, Road, Stretch, load_model
 from markov.analysis import road_dynamics as rd
+from markov.analysis.fluctuations import current_fluctuations, current_variance, scgf
 from markov.analysis.spectrum import relaxation_spectrum
 from markov.errors import InvalidParameterError
 from markov.solvers.road_chain import RoadChain
@@ -155,7 +156,7 @@ def test_one_cell_closed_forms():
     A, B = sympy.Rational(3, 10), sympy.Rational(3, 5)
     tr, det = 2 - A - B, (1 - A) * (1 - B) - A * B * sympy.exp(s)
     lam = sympy.log((tr + sympy.sqrt(tr ** 2 - 4 * det)) / 2)
-    fl = rd.exit_fluctuations(road)
+    fl = current_fluctuations(road)
     assert fl.current == pytest.approx(float(sympy.diff(lam, s).subs(s, 0)), abs=1e-14)
     assert fl.diffusion == pytest.approx(float(sympy.diff(lam, s, 2).subs(s, 0)), abs=1e-13)
 
@@ -230,7 +231,7 @@ def test_sensitivity_refuses_before_any_work(name, road, words):
 def test_exit_fluctuations_are_the_naive_chains(case, naive_chains):
     fast, _ = _roads(case)
     ref = naive_chains[case]
-    fl = rd.exit_fluctuations(fast)
+    fl = current_fluctuations(fast)
     J, var, delta = ref.exit_moments()
     assert fl.current == pytest.approx(J, abs=1e-13)
     assert fl.variance == pytest.approx(var, abs=1e-13)
@@ -242,8 +243,8 @@ def test_exit_fluctuations_are_the_naive_chains(case, naive_chains):
     second = (ref.tilted_log_root(h) - 2 * ref.tilted_log_root(0.0) + ref.tilted_log_root(-h)) \
         / h ** 2
     assert fl.diffusion == pytest.approx(second, rel=1e-5, abs=1e-8)
-    scgf = rd.exit_scgf(fast, [-0.2, 0.3])
-    assert scgf == pytest.approx([ref.tilted_log_root(-0.2), ref.tilted_log_root(0.3)],
+    tilted = scgf(fast, [-0.2, 0.3]).value
+    assert tilted == pytest.approx([ref.tilted_log_root(-0.2), ref.tilted_log_root(0.3)],
                                  abs=1e-12)
 
 
@@ -251,8 +252,8 @@ def test_exit_count_variance_tends_to_diffusion_and_matches_a_sampled_run():
     road = Road(3, _nasch(2, 0.3), "parallel", 0.4, 0.7)
     chain = RoadChain(road)
     sol = chain.solution()
-    fl = rd.exit_fluctuations(chain, sol)
-    var = rd.exit_count_variance(chain, 400, sol)
+    fl = current_fluctuations(chain, solution=sol)
+    var = current_variance(chain, 400, solution=sol)
     assert var[1] == pytest.approx(fl.variance, abs=1e-14)
     # var(Y_t) = Delta t + const + (decaying): the increments tend to Delta
     assert var[400] - var[399] == pytest.approx(fl.diffusion, abs=1e-10)
@@ -302,7 +303,7 @@ def test_autocorrelations_are_the_naive_chains(case, naive_chains):
         long = rd.road_autocorrelation(fast, name, 3000)
         assert rd.road_autocorrelation_time(fast, name) == pytest.approx(
             1 + 2 * long[1:].sum() / long[0], rel=1e-9)
-    fl = rd.exit_fluctuations(fast)
+    fl = current_fluctuations(fast)
     assert rd.road_autocorrelation_time(fast, "exit") == pytest.approx(
         fl.diffusion / fl.variance, rel=1e-12)
 
@@ -340,7 +341,7 @@ def test_cli_solve_road_dynamics_json():
     road = Road(3, _nasch(2, 0.3), "parallel", 0.4, 0.7)
     assert data["dflux_dalpha"] == pytest.approx(rd.road_sensitivity(road, "alpha").dflux,
                                                  abs=1e-13)
-    fl = rd.exit_fluctuations(road)
+    fl = current_fluctuations(road)
     assert data["exit_diffusion"] == pytest.approx(fl.diffusion_per_time_step, abs=1e-13)
     assert data["autocorrelation"]["exit"] == pytest.approx(
         rd.road_autocorrelation(road, "exit", 4).tolist(), abs=1e-14)
@@ -377,24 +378,20 @@ def test_one_cell_random_sequential_in_continuous_time_is_the_renewal_process(al
     # in continuous time the cell fills at rate alpha and empties at rate beta: exits are a
     # renewal process with T = Exp(alpha) + Exp(beta), so Delta = var T / E[T]^3, and the
     # two-state chain relaxes at rate alpha + beta
-    from markov.analysis.road_dynamics import exit_fluctuations
-
-    fl = exit_fluctuations(_one_cell(alpha, beta))
+    fl = current_fluctuations(_one_cell(alpha, beta))
     mean, var = 1 / alpha + 1 / beta, 1 / alpha ** 2 + 1 / beta ** 2
     assert fl.continuous_time_diffusion == pytest.approx(var / mean ** 3, rel=1e-12)
     sp_ = relaxation_spectrum(_one_cell(alpha, beta), count=1)
     assert sp_.continuous_time_relaxation_time == pytest.approx(1 / (alpha + beta), rel=1e-12)
-    assert exit_fluctuations(Road(3, load_model("nasch", {"vmax": 1}))).continuous_time_diffusion \
-        is None
+    three = Road(3, load_model("nasch", {"vmax": 1}))
+    assert current_fluctuations(three).continuous_time_diffusion is None
 
 
 @pytest.mark.parametrize("alpha, beta", [(0.3, 0.7), (0.6, 0.45)])
 def test_tau_int_exit_is_of_the_cars_leaving_per_time_step(alpha, beta):
     # one time step is two sub-steps (entry position, cell 1), each drawn with 1/2: the
     # cars leaving in a time step, enumerated over the four draws from the stationary state
-    from markov.analysis.road_dynamics import exit_fluctuations
-
-    fl = exit_fluctuations(_one_cell(alpha, beta))
+    fl = current_fluctuations(_one_cell(alpha, beta))
     occ = alpha / (alpha + beta)            # pi(occupied): alpha (1 - o) = beta o
     pi = {0: 1 - occ, 1: occ}
 
@@ -411,9 +408,9 @@ def test_tau_int_exit_is_of_the_cars_leaving_per_time_step(alpha, beta):
                 moments[1] += p0 * p1 * p2 * (m1 + m2) ** 2
     var_step = moments[1] - moments[0] ** 2
     assert moments[0] == pytest.approx(fl.flux, abs=1e-14)
-    assert fl.to_dict()["exit_variance_per_time_step"] == pytest.approx(var_step, abs=1e-14)
-    assert fl.to_dict()["tau_int_exit"] == pytest.approx(fl.diffusion_per_time_step / var_step,
-                                                         rel=1e-12)
+    assert fl.to_dict()["variance_per_time_step"] == pytest.approx(var_step, abs=1e-14)
+    assert fl.to_dict()["tau_int_time_steps"] == pytest.approx(
+        fl.diffusion_per_time_step / var_step, rel=1e-12)
 
 
 def test_cli_random_sequential_gives_both_clocks_and_per_chain_step_tau():

@@ -2,9 +2,11 @@
 
 ``tests/data/analyses_before_unification.json`` holds the ``to_dict()`` of the
 old, separate entry points (``relaxation_spectrum`` of a ring, ``road_spectrum``
-of a road; main at bc1284b) on small rings and roads: the unified functions give
-every one of those numbers again, under the same keys, and the same keys for both
-systems.
+of a road; ``current_fluctuations``, ``current_variance``, ``scgf`` of a ring,
+``exit_fluctuations``, ``exit_count_variance``, ``exit_scgf`` of a road; main at
+bc1284b) on small rings and roads: the unified functions give every one of those
+numbers again (a road's ``exit_*`` under the generic names, as ``nasch solve --road
+--json`` still writes them), and the same keys for both systems.
 """
 from __future__ import annotations
 
@@ -15,6 +17,7 @@ from pathlib import Path
 import pytest
 
 from markov import Ring, Road, load_model
+from markov.analysis.fluctuations import current_fluctuations, current_variance, scgf
 from markov.analysis.spectrum import relaxation_spectrum
 from markov.errors import InvalidParameterError
 from markov.solvers.road_chain import RoadChain
@@ -109,3 +112,56 @@ def test_spectrum_of_a_road_chain_and_refusals():
             relaxation_spectrum(road, **bad)
     with pytest.raises(InvalidParameterError, match="Ring, Road or RoadChain"):
         relaxation_spectrum("a ring")
+
+
+#: A road's old ``exit_*`` keys and the generic names that hold their numbers now.
+EXIT_KEYS = {"exit_current": "flux", "exit_diffusion": "diffusion_per_time_step",
+             "exit_fano": "fano", "exit_variance_per_chain_step": "variance",
+             "exit_variance_per_time_step": "variance_per_time_step",
+             "exit_current_per_chain_step": "current",
+             "exit_diffusion_per_chain_step": "diffusion",
+             "exit_diffusion_continuous_time": "continuous_time_diffusion",
+             "tau_int_exit": "tau_int_time_steps", "tau_int_exit_chain_steps": "tau_int"}
+
+
+@pytest.mark.parametrize("case", list(SYSTEMS))
+def test_fluctuations_give_the_old_numbers(case):
+    old = BEFORE["current_fluctuations"][case]
+    system = SYSTEMS[case]()
+    new = current_fluctuations(system).to_dict()
+    for key, value in old["to_dict"].items():
+        if key == "time_unit":     # was "step" on a ring, "time step" on a road: the chain step
+            assert new[key] == ("sub-step" if new["steps_per_time_step"] > 1 else "time step")
+        else:
+            _same(value, new[EXIT_KEYS.get(key, key)], key)
+    assert current_variance(system, 6).tolist() == pytest.approx(old["variance"], rel=1e-10,
+                                                                 abs=1e-14)
+    assert scgf(system, [-0.2, 0.3]).value.tolist() == pytest.approx(old["scgf"], rel=1e-10,
+                                                                    abs=1e-14)
+
+
+def test_fluctuations_have_the_same_keys_and_say_what_is_counted():
+    dicts = {case: current_fluctuations(make()).to_dict() for case, make in SYSTEMS.items()}
+    assert len({frozenset(d) for d in dicts.values()}) == 1
+    assert dicts["ring_par"]["counted"] == "cells moved by all cars"
+    assert dicts["road_par"]["counted"].startswith("cars leaving the road (the exit count")
+    rs = dicts["road_rs"]
+    assert rs["chain_step"] == "one sub-step (3 sub-steps = one time step)"
+    assert rs["time_unit"] == "sub-step" and rs["steps_per_time_step"] == rs["sub_steps"] == 3
+    # a road's exit count is the current through one bond: its bond diffusion is its own
+    assert rs["bond_diffusion"] == rs["diffusion_per_time_step"]
+    ring = dicts["ring_rs"]
+    assert ring["tau_int_time_steps"] == pytest.approx(
+        ring["diffusion_per_time_step"] / ring["variance_per_time_step"], rel=1e-14)
+    assert ring["variance_per_time_step"] == pytest.approx(
+        current_variance(SYSTEMS["ring_rs"](), 5)[5], rel=1e-12)
+
+
+def test_fluctuations_refuse_the_other_systems_solution():
+    road, ring = SYSTEMS["road_par"](), SYSTEMS["ring_par"]()
+    with pytest.raises(InvalidParameterError, match="pi is a ring's"):
+        current_fluctuations(road, pi=[0.5, 0.5])
+    with pytest.raises(InvalidParameterError, match="solution is a road's"):
+        current_fluctuations(ring, solution=RoadChain(road).solution())
+    with pytest.raises(InvalidParameterError, match="s must be a finite number in"):
+        scgf(road, [51.0])

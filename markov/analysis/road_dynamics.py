@@ -1,8 +1,9 @@
-"""The dynamics of a solved open road: sensitivities, exit-current fluctuations, C(t).
+"""The dynamics of a solved open road: sensitivities and C(t).
 
 The road's entry points and result types of the analyses a ring has
-(``sensitivity``, ``correlations``, ``fluctuations``; the spectrum has one entry
-point for both, :func:`markov.analysis.spectrum.relaxation_spectrum`).  The
+(``sensitivity``, ``correlations``; the spectrum and the current fluctuations have
+one entry point for both, :func:`markov.analysis.spectrum.relaxation_spectrum`,
+:func:`markov.analysis.fluctuations.current_fluctuations`).  The
 computations are written once, against the chain interface (:mod:`markov.analysis.stationary_chain`) that the road produces
 (:mod:`markov.analysis.road_system`: the road's own transition matrix ``P``,
 row-stochastic, never lumped, one sector; its observables; the cars leaving as the
@@ -32,14 +33,9 @@ the per-chain-step value is kept beside it.
   top Chebyshev coefficients, zero for such a polynomial, are reported
   (``degree_check``).  The state set and the support of ``P`` must not change
   on that interval: a value 0 or 1 is refused.
-* :func:`exit_fluctuations`: ``J`` and the diffusion coefficient
-  ``Delta = lim var(Y_t) / t`` of ``Y_t``, the number of cars that left up to
-  time ``t``, by the Green-Kubo (Poisson-equation) formula of
-  :mod:`markov.analysis.stationary_chain` with the cars leaving in each transition
-  (:func:`markov.chain.lattice.successor_branches`); :func:`exit_count_variance`
-  gives ``var(Y_t)`` at finite ``t``, :func:`exit_scgf` the scaled cumulant
-  generating function: the Perron root of the tilted matrix ``P_s(x, y) = sum P e^{s m}``
-  (centred by ``J``, as a ring's).
+* The exit-current fluctuations: :mod:`markov.analysis.fluctuations` takes a road
+  too (``current_fluctuations``, ``current_variance``, ``scgf``), ``Y_t`` the
+  number of cars that left up to time ``t``.
 * :func:`road_autocorrelation` and :func:`road_autocorrelation_time`: ``C(t)``
   and ``tau_int`` of the exit current (cars leaving in one chain step) or of a
   state observable (:data:`ROAD_OBSERVABLES`: cars on the road, stopped cars,
@@ -47,29 +43,27 @@ the per-chain-step value is kept beside it.
 """
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
-from markov.analysis.road_system import (ROAD_OBSERVABLES, _digits, chain_step_name,
-                                         exit_branches, prepare_road, road_observable, road_of)
+from markov.analysis.fluctuations import current_fluctuations
+from markov.analysis.road_system import (ROAD_OBSERVABLES, _digits, exit_branches,
+                                         prepare_road, road_observable, road_of)
 from markov.analysis.stationary_chain import (MAX_LAGS, autocorrelation_of,
-                                              autocorrelation_time_of, count_variance,
-                                              derivative_solve, diffusion,
-                                              increment_autocorrelation, scgf_values)
+                                              autocorrelation_time_of, derivative_solve,
+                                              increment_autocorrelation)
 from markov.chain.lattice import increments, lattice_of, successors
 from markov.errors import InvalidParameterError
 from markov.model.road import OnRamp, Road
 from markov.model.stretch import Stretch
 from markov.solvers.road_chain import RoadChain, RoadSolution
-from markov.validate import ensure_int, ensure_real
+from markov.validate import ensure_int
 
 __all__ = ["RoadSensitivity", "road_sensitivity",
-           "road_parameter", "polynomial_degree_bound", "ExitFluctuations",
-           "exit_fluctuations", "exit_count_variance", "exit_scgf", "ROAD_OBSERVABLES",
+           "road_parameter", "polynomial_degree_bound", "ROAD_OBSERVABLES",
            "road_observable", "road_autocorrelation", "road_autocorrelation_time",
            "exit_branches"]
 
@@ -364,171 +358,6 @@ def road_sensitivity(system, parameter: str, solution: RoadSolution | None = Non
                            time.perf_counter() - start)
 
 
-# -------------------------------------------------------------- fluctuations
-
-
-@dataclass(frozen=True)
-class ExitFluctuations:
-    """Mean and diffusion of ``Y_t``, the cars that left a road up to time ``t``.
-
-    Attributes
-    ----------
-    road : Road
-    current, diffusion, variance : float
-        Per chain step: ``J``, ``Delta = lim var(Y_t) / t`` and ``var(m)`` of the
-        cars leaving in one chain step.
-    steps_per_time_step : int
-    states : int
-    seconds : float
-    """
-
-    road: Road
-    current: float
-    diffusion: float
-    variance: float
-    steps_per_time_step: int
-    states: int
-    seconds: float
-    time_step_variance: float | None = None
-
-    @property
-    def flux(self) -> float:
-        """``J`` per time step (the solution's flux)."""
-        return self.current * self.steps_per_time_step
-
-    @property
-    def diffusion_per_time_step(self) -> float:
-        """``Delta`` per time step (``S`` chain steps)."""
-        return self.diffusion * self.steps_per_time_step
-
-    @property
-    def fano(self) -> float:
-        """``Delta / J``: 1 for a Poisson stream of cars."""
-        return self.diffusion / self.current if self.current > 0 else math.nan
-
-    @property
-    def tau_int(self) -> float:
-        """``Delta / var(m)``: the integrated autocorrelation time of the exit
-        increments, in chain steps."""
-        return self.diffusion / self.variance if self.variance > 0 else 1.0
-
-    @property
-    def tau_int_time_steps(self) -> float:
-        """The integrated autocorrelation time of the cars leaving per *time step*
-        (``S`` chain steps summed): ``Delta_time_step / var(Y_S)``, in time steps.
-        Under parallel and ordered-sequential update this is :attr:`tau_int`."""
-        var = self.variance if self.time_step_variance is None else self.time_step_variance
-        return self.diffusion_per_time_step / var if var > 0 else 1.0
-
-    @property
-    def continuous_time_diffusion(self) -> float | None:
-        """Random-sequential update in continuous time (each of the ``S = L + 1``
-        positions updated at rate 1, the number of sub-steps in time ``t`` Poisson
-        of mean ``S t``): ``S (Delta + J^2)`` per unit time, ``Delta``, ``J`` per
-        sub-step; None for the other updates."""
-        if self.steps_per_time_step == 1:
-            return None
-        return self.steps_per_time_step * (self.diffusion + self.current ** 2)
-
-    def to_dict(self) -> dict:
-        """JSON-ready.
-
-        Returns
-        -------
-        dict
-        """
-        S = self.steps_per_time_step
-        return {"exit_current": self.flux, "exit_diffusion": self.diffusion_per_time_step,
-                "exit_fano": self.fano, "exit_variance_per_chain_step": self.variance,
-                "exit_variance_per_time_step": (self.variance if self.time_step_variance is None
-                                                else self.time_step_variance),
-                "exit_current_per_chain_step": self.current,
-                "exit_diffusion_per_chain_step": self.diffusion,
-                "exit_diffusion_continuous_time": self.continuous_time_diffusion,
-                "tau_int_exit": self.tau_int_time_steps, "tau_int_exit_chain_steps": self.tau_int,
-                "time_unit": "time step", "chain_step": chain_step_name(S),
-                "steps_per_time_step": S, "states": self.states, "seconds": self.seconds}
-
-
-def exit_fluctuations(system, solution: RoadSolution | None = None) -> ExitFluctuations:
-    """``J`` and the diffusion coefficient of the exit count, exactly (Green-Kubo, one solve).
-
-    ``Delta = var(m) + 2 w . a`` with ``w (I - P) = b - J pi``, ``sum w = 0``
-    (:mod:`markov.analysis.fluctuations`), ``m`` the cars leaving in a transition.
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-    solution : RoadSolution, optional
-
-    Returns
-    -------
-    ExitFluctuations
-
-    Examples
-    --------
-    One cell, parallel site1/sink at ``alpha = beta = 1/2``: the exits form a
-    two-state chain; ``J = 1/4``.
-
-    >>> from markov import load_model
-    >>> fl = exit_fluctuations(Road(1, load_model("nasch", {"vmax": 1}), alpha=0.5, beta=0.5))
-    >>> round(fl.flux, 12)
-    0.25
-    """
-    start = time.perf_counter()
-    sv = prepare_road(system, solution)
-    inc = sv.increments()
-    delta = diffusion(sv, inc)
-    step_var = None
-    if sv.S > 1:            # var(Y_S): the cars leaving in one time step of S sub-steps
-        step_var = count_variance(sv, inc, sv.S)[sv.S]
-    return ExitFluctuations(sv.road, inc.current, delta, inc.variance, sv.S, len(sv.pi),
-                            time.perf_counter() - start, step_var)
-
-
-def exit_count_variance(system, steps: int, solution: RoadSolution | None = None) -> np.ndarray:
-    """``var(Y_t)``, ``t = 0..steps`` chain steps, of the stationary road, exactly.
-
-    ``var(Y_t) = t var(m) + 2 sum_{j=1}^{t-1} (t - j) cov_j``,
-    ``cov_j = (b - J pi) P^{j-1} . a``.
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-    steps : int
-        In chain steps (sub-steps for random-sequential update).
-    solution : RoadSolution, optional
-
-    Returns
-    -------
-    (steps + 1,) float64 array
-    """
-    steps = ensure_int("steps", steps, 0, MAX_LAGS)
-    sv = prepare_road(system, solution)
-    return count_variance(sv, sv.increments(), steps)
-
-
-def exit_scgf(system, s_values, solution: RoadSolution | None = None) -> np.ndarray:
-    """``Lambda(s) = lim (1/t) log E e^{s Y_t}`` per chain step: the log Perron root of
-    the tilted matrix ``P_s(x, y) = sum over branches P e^{s m}``.
-
-    Dense eigenvalues up to 300 states, else ARPACK (largest real part).
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-    s_values : sequence of float, ``|s| <= 50``
-    solution : RoadSolution, optional
-
-    Returns
-    -------
-    (k,) float64 array
-    """
-    s_arr = np.array([ensure_real("s", s, -50.0, 50.0) for s in np.atleast_1d(s_values)])
-    sv = prepare_road(system, solution)
-    return scgf_values(sv, sv.increments(keep=True), s_arr)[0]
-
-
 # ------------------------------------------------------------ correlations
 
 
@@ -578,7 +407,7 @@ def road_autocorrelation_time(system, observable: str = "exit",
         a constant observable.
     """
     if observable == "exit":
-        return exit_fluctuations(system, solution).tau_int
+        return current_fluctuations(system, solution=solution).tau_int
     road = road_of(system)
     if isinstance(road, Road):
         road_observable(road, np.zeros(1, np.int64), observable)
