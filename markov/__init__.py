@@ -51,7 +51,7 @@ __all__ = [
     "simulate", "SimulationResult", "trajectory", "simulate_road", "RoadSimulationResult",
     "relaxation_spectrum", "sensitivity", "autocorrelation", "autocorrelation_time",
     "current_fluctuations", "road_sensitivity",
-    "road_autocorrelation", "extremal_current",
+    "extremal_current",
     "NaschError", "InvalidParameterError", "CorruptFileError", "NoUniqueStationaryStateError",
     "StateSpaceTooLargeError", "ConvergenceError", "OutputError",
 ]
@@ -83,8 +83,7 @@ _WHERE = {
     "simulate_road": "markov.simulation.road_montecarlo",
     "RoadSimulationResult": "markov.simulation.road_montecarlo",
     "relaxation_spectrum": "markov.analysis.spectrum",
-    **{name: "markov.analysis.road_dynamics" for name in ("road_sensitivity",
-                                                         "road_autocorrelation")},
+    "road_sensitivity": "markov.analysis.road_dynamics",
     "sensitivity": "markov.analysis.sensitivity",
     "autocorrelation": "markov.analysis.correlations",
     "autocorrelation_time": "markov.analysis.correlations",

@@ -17,6 +17,7 @@ from click.testing import CliRunner
 
 from markov import NoUniqueStationaryStateError, OnRamp, Road, Stretch, load_model
 from markov.analysis import road_dynamics as rd
+from markov.analysis.correlations import autocorrelation, autocorrelation_time
 from markov.analysis.fluctuations import current_fluctuations, current_variance, scgf
 from markov.analysis.spectrum import relaxation_spectrum
 from markov.errors import InvalidParameterError
@@ -286,7 +287,7 @@ def test_autocorrelations_are_the_naive_chains(case, naive_chains):
     fast, _ = _roads(case)
     ref = naive_chains[case]
     lags = 30
-    assert rd.road_autocorrelation(fast, "exit", lags) == pytest.approx(
+    assert autocorrelation(fast, "exit", lags) == pytest.approx(
         ref.exit_autocorrelation(lags), abs=1e-13)
     for name, f in (("cars", lambda s: sum(c is not None for c in s)),
                     ("stopped", lambda s: sum(c == 0 for c in s)),
@@ -297,20 +298,20 @@ def test_autocorrelations_are_the_naive_chains(case, naive_chains):
         for _ in range(lags + 1):
             expect.append(h @ d)
             h = h @ ref.P
-        got = rd.road_autocorrelation(fast, name, lags)
+        got = autocorrelation(fast, name, lags)
         assert got == pytest.approx(expect, abs=1e-13)
         # tau_int: one solve, against the long sum
-        long = rd.road_autocorrelation(fast, name, 3000)
-        assert rd.road_autocorrelation_time(fast, name) == pytest.approx(
+        long = autocorrelation(fast, name, 3000)
+        assert autocorrelation_time(fast, name) == pytest.approx(
             1 + 2 * long[1:].sum() / long[0], rel=1e-9)
     fl = current_fluctuations(fast)
-    assert rd.road_autocorrelation_time(fast, "exit") == pytest.approx(
+    assert autocorrelation_time(fast, "exit") == pytest.approx(
         fl.diffusion / fl.variance, rel=1e-12)
 
 
 def test_bad_observable_and_reducible_road_are_refused():
     with pytest.raises(InvalidParameterError, match="occupation:X needs a cell X in 1..3"):
-        rd.road_autocorrelation(Road(3, _nasch(2)), "occupation:7")
+        autocorrelation(Road(3, _nasch(2)), "occupation:7")
     with pytest.raises(NoUniqueStationaryStateError, match="4 closed classes"):
         relaxation_spectrum(Road(3, _nasch(1, 0.0), "parallel", 0.0, 0.0, "site1", "sink"))
 
@@ -344,7 +345,7 @@ def test_cli_solve_road_dynamics_json():
     fl = current_fluctuations(road)
     assert data["exit_diffusion"] == pytest.approx(fl.diffusion_per_time_step, abs=1e-13)
     assert data["autocorrelation"]["exit"] == pytest.approx(
-        rd.road_autocorrelation(road, "exit", 4).tolist(), abs=1e-14)
+        autocorrelation(road, "exit", 4).tolist(), abs=1e-14)
     assert data["entry"] == "reservoir" and data["dynamics_time_unit"] == "time step"
 
 

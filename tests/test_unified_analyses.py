@@ -3,7 +3,9 @@
 ``tests/data/analyses_before_unification.json`` holds the ``to_dict()`` of the
 old, separate entry points (``relaxation_spectrum`` of a ring, ``road_spectrum``
 of a road; ``current_fluctuations``, ``current_variance``, ``scgf`` of a ring,
-``exit_fluctuations``, ``exit_count_variance``, ``exit_scgf`` of a road; main at
+``exit_fluctuations``, ``exit_count_variance``, ``exit_scgf`` of a road;
+``autocorrelation`` and ``autocorrelation_time`` of a ring, ``road_autocorrelation``
+and ``road_autocorrelation_time`` of a road; main at
 bc1284b) on small rings and roads: the unified functions give every one of those
 numbers again (a road's ``exit_*`` under the generic names, as ``nasch solve --road
 --json`` still writes them), and the same keys for both systems.
@@ -17,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from markov import Ring, Road, load_model
+from markov.analysis.correlations import autocorrelation, autocorrelation_time
 from markov.analysis.fluctuations import current_fluctuations, current_variance, scgf
 from markov.analysis.spectrum import relaxation_spectrum
 from markov.errors import InvalidParameterError
@@ -165,3 +168,26 @@ def test_fluctuations_refuse_the_other_systems_solution():
         current_fluctuations(ring, solution=RoadChain(road).solution())
     with pytest.raises(InvalidParameterError, match="s must be a finite number in"):
         scgf(road, [51.0])
+
+
+@pytest.mark.parametrize("case", list(SYSTEMS))
+def test_autocorrelations_give_the_old_numbers(case):
+    system = SYSTEMS[case]()
+    for name, old in BEFORE["autocorrelation"][case].items():
+        assert autocorrelation(system, name, 5).tolist() == pytest.approx(old["C"], rel=1e-10,
+                                                                          abs=1e-14)
+        assert autocorrelation_time(system, name) == pytest.approx(old["tau"], rel=1e-10)
+    default = "exit" if case.startswith("road") else "flux"     # the system's current
+    assert autocorrelation(system, lags=3).tolist() == pytest.approx(
+        BEFORE["autocorrelation"][case][default]["C"][:4], rel=1e-10, abs=1e-14)
+
+
+def test_autocorrelations_refuse_what_the_system_lacks():
+    road, ring = SYSTEMS["road_par"](), SYSTEMS["ring_par"]()
+    with pytest.raises(InvalidParameterError, match="stride 1"):
+        autocorrelation_time(road, "exit", stride=2)
+    assert autocorrelation_time(road, "cars", stride=2) > 0
+    with pytest.raises(InvalidParameterError):
+        autocorrelation(ring, "exit")
+    with pytest.raises(InvalidParameterError, match="occupation:X needs a cell X in 1..3"):
+        autocorrelation(road, "occupation:7")

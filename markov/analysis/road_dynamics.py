@@ -1,14 +1,15 @@
-"""The dynamics of a solved open road: sensitivities and C(t).
+"""The dynamics of a solved open road: its sensitivities.
 
-The road's entry points and result types of the analyses a ring has
-(``sensitivity``, ``correlations``; the spectrum and the current fluctuations have
+The road's entry point and result type of the sensitivity a ring has
+(``sensitivity``; the spectrum, the current fluctuations and the correlations have
 one entry point for both, :func:`markov.analysis.spectrum.relaxation_spectrum`,
-:func:`markov.analysis.fluctuations.current_fluctuations`).  The
-computations are written once, against the chain interface (:mod:`markov.analysis.stationary_chain`) that the road produces
-(:mod:`markov.analysis.road_system`: the road's own transition matrix ``P``,
-row-stochastic, never lumped, one sector; its observables; the cars leaving as the
-increment per transition).  What stays here is the road's own: the result types
-with their per-time-step units, and the derivative of ``P`` in a road parameter.
+:func:`markov.analysis.fluctuations.current_fluctuations`,
+:mod:`markov.analysis.correlations`).  The computations are written once, against
+the chain interface (:mod:`markov.analysis.stationary_chain`) that the road
+produces (:mod:`markov.analysis.road_system`: the road's own transition matrix
+``P``, row-stochastic, never lumped, one sector; its observables; the cars leaving
+as the increment per transition).  What stays here is the road's own: the result
+type with its per-time-step units, and the derivative of ``P`` in a road parameter.
 
 Units.  ``P`` is one *chain step*: a time step under parallel and
 ordered-sequential update, one *sub-step* under random-sequential update, where
@@ -36,10 +37,10 @@ the per-chain-step value is kept beside it.
 * The exit-current fluctuations: :mod:`markov.analysis.fluctuations` takes a road
   too (``current_fluctuations``, ``current_variance``, ``scgf``), ``Y_t`` the
   number of cars that left up to time ``t``.
-* :func:`road_autocorrelation` and :func:`road_autocorrelation_time`: ``C(t)``
-  and ``tau_int`` of the exit current (cars leaving in one chain step) or of a
-  state observable (:data:`ROAD_OBSERVABLES`: cars on the road, stopped cars,
-  the occupation of one cell ``occupation:X``).
+* ``C(t)`` and ``tau_int``: :mod:`markov.analysis.correlations` takes a road
+  too, for the exit current (cars leaving in one chain step) or a state
+  observable (:data:`ROAD_OBSERVABLES`: cars on the road, stopped cars, the
+  occupation of one cell ``occupation:X``).
 """
 from __future__ import annotations
 
@@ -49,23 +50,17 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from markov.analysis.fluctuations import current_fluctuations
 from markov.analysis.road_system import (ROAD_OBSERVABLES, _digits, exit_branches,
-                                         prepare_road, road_observable, road_of)
-from markov.analysis.stationary_chain import (MAX_LAGS, autocorrelation_of,
-                                              autocorrelation_time_of, derivative_solve,
-                                              increment_autocorrelation)
+                                         prepare_road, road_observable)
+from markov.analysis.stationary_chain import derivative_solve
 from markov.chain.lattice import increments, lattice_of, successors
 from markov.errors import InvalidParameterError
 from markov.model.road import OnRamp, Road
 from markov.model.stretch import Stretch
 from markov.solvers.road_chain import RoadChain, RoadSolution
-from markov.validate import ensure_int
 
-__all__ = ["RoadSensitivity", "road_sensitivity",
-           "road_parameter", "polynomial_degree_bound", "ROAD_OBSERVABLES",
-           "road_observable", "road_autocorrelation", "road_autocorrelation_time",
-           "exit_branches"]
+__all__ = ["RoadSensitivity", "road_sensitivity", "road_parameter", "polynomial_degree_bound",
+           "ROAD_OBSERVABLES", "road_observable", "exit_branches"]
 
 
 # ---------------------------------------------------------------- sensitivity
@@ -356,59 +351,3 @@ def road_sensitivity(system, parameter: str, solution: RoadSolution | None = Non
     return RoadSensitivity(parameter, value, dpi, dflux, dinflow, float(ddensity.sum()),
                            ddensity, residual, degree, check, radius,
                            time.perf_counter() - start)
-
-
-# ------------------------------------------------------------ correlations
-
-
-def road_autocorrelation(system, observable: str = "exit", lags: int = 100,
-                         solution: RoadSolution | None = None) -> np.ndarray:
-    """Stationary ``C(t)``, ``t = 0..lags`` chain steps, of an observable, exactly.
-
-    ``"exit"``: the cars leaving in one chain step (an increment of ``Y``):
-    ``C(0) = var(m)``, ``C(j) = (b - J pi) P^{j-1} . a``; a state observable
-    (``cars``, ``stopped``, ``occupation:X``): ``C(t) = (pi o d) P^t . d``.
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-    observable : str
-    lags : int
-    solution : RoadSolution, optional
-
-    Returns
-    -------
-    (lags + 1,) float64 array
-    """
-    lags = ensure_int("lags", lags, 0, MAX_LAGS)
-    road = road_of(system)
-    if observable != "exit" and isinstance(road, Road):
-        road_observable(road, np.zeros(1, np.int64), observable)    # the name, before work
-    sv = prepare_road(system, solution)
-    if observable == "exit":
-        return increment_autocorrelation(sv, sv.increments(), lags)
-    return autocorrelation_of(sv, observable, lags)
-
-
-def road_autocorrelation_time(system, observable: str = "exit",
-                              solution: RoadSolution | None = None) -> float:
-    """``tau_int = 1 + 2 sum_{t >= 1} C(t) / C(0)`` in chain steps, exactly (one solve).
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-    observable : str
-    solution : RoadSolution, optional
-
-    Returns
-    -------
-    float
-        In chain steps (divide by ``steps_per_time_step`` for time steps); 1 for
-        a constant observable.
-    """
-    if observable == "exit":
-        return current_fluctuations(system, solution=solution).tau_int
-    road = road_of(system)
-    if isinstance(road, Road):
-        road_observable(road, np.zeros(1, np.int64), observable)
-    return autocorrelation_time_of(prepare_road(system, solution), observable)

@@ -408,6 +408,7 @@ ROAD_CORRELATED = ("exit", "cars", "stopped")
 def _road_dynamics(chain, sol, names, fluctuations: bool, lags, tol) -> dict:
     """The JSON fields of a road's --sensitivity, --fluctuations and --autocorrelation."""
     from markov.analysis import road_dynamics as rd
+    from markov.analysis.correlations import autocorrelation, autocorrelation_time
     from markov.analysis.fluctuations import current_fluctuations
 
     S = sol.steps_per_time_step
@@ -423,13 +424,13 @@ def _road_dynamics(chain, sol, names, fluctuations: bool, lags, tol) -> dict:
     if fluctuations:
         out.update(_exit_fields(current_fluctuations(chain, solution=sol)))
         for name in ("cars", "stopped"):
-            tau = rd.road_autocorrelation_time(chain, name, sol)
+            tau = autocorrelation_time(chain, name, solution=sol)
             out[f"tau_int_{name}"] = tau / S
             out[f"tau_int_{name}_chain_steps"] = tau
     if lags is not None:
         out["autocorrelation_lags"] = "chain steps"
-        out["autocorrelation"] = {name: rd.road_autocorrelation(chain, name, lags, sol).tolist()
-                                  for name in ROAD_CORRELATED}
+        out["autocorrelation"] = {name: autocorrelation(chain, name, lags, solution=sol)
+                                  .tolist() for name in ROAD_CORRELATED}
     return out
 
 
