@@ -19,6 +19,7 @@ from markov import NoUniqueStationaryStateError, OnRamp, Road, Stretch, load_mod
 from markov.analysis import road_dynamics as rd
 from markov.analysis.correlations import autocorrelation, autocorrelation_time
 from markov.analysis.fluctuations import current_fluctuations, current_variance, scgf
+from markov.analysis.sensitivity import sensitivity
 from markov.analysis.spectrum import relaxation_spectrum
 from markov.errors import InvalidParameterError
 from markov.solvers.road_chain import RoadChain
@@ -149,7 +150,7 @@ def test_one_cell_closed_forms():
     road = Road(1, _nasch(1), alpha=0.3, beta=0.6)
     a, b = 0.3, 0.6
     assert relaxation_spectrum(road).second.value == pytest.approx(1 - a - b, abs=1e-14)
-    assert rd.road_sensitivity(road, "beta").dflux == pytest.approx((a / (a + b)) ** 2,
+    assert sensitivity(road, "beta").dflux == pytest.approx((a / (a + b)) ** 2,
                                                                     abs=1e-13)
     # the exit count of the two-state chain: Lambda(s) = log of the Perron root of
     # [[1 - a, a], [b e^s, 1 - b]], differentiated symbolically
@@ -185,7 +186,7 @@ def _change(case, name, x):
 @pytest.mark.parametrize("case, name", SENSITIVITIES)
 def test_sensitivity_is_the_naive_central_difference(case, name):
     fast, _ = _roads(case)
-    d = rd.road_sensitivity(fast, name)
+    d = sensitivity(fast, name)
     value = d.value
     h = 1e-5
     hi = nr.solve_one(_roads(case, **_change(case, name, value + h))[1])
@@ -205,7 +206,7 @@ def test_sensitivity_is_exact_beyond_a_central_difference():
     # derivative agrees with a Richardson-extrapolated difference of the solved
     # fluxes (error h^4) to 1e-10
     road = Road(4, _nasch(2, 0.35), "parallel", 0.45, 0.55)
-    d = rd.road_sensitivity(road, "p")
+    d = sensitivity(road, "p")
     f = {x: RoadChain(road.with_params(p=0.35 + x)).solution().flux
          for x in (-2e-3, -1e-3, 1e-3, 2e-3)}
     richardson = (8 * (f[1e-3] - f[-1e-3]) - (f[2e-3] - f[-2e-3])) / (12 * 1e-3)
@@ -340,7 +341,7 @@ def test_cli_solve_road_dynamics_json():
     assert res.exit_code == 0, res.output
     data = json.loads(res.output)
     road = Road(3, _nasch(2, 0.3), "parallel", 0.4, 0.7)
-    assert data["dflux_dalpha"] == pytest.approx(rd.road_sensitivity(road, "alpha").dflux,
+    assert data["dflux_dalpha"] == pytest.approx(sensitivity(road, "alpha").dflux,
                                                  abs=1e-13)
     fl = current_fluctuations(road)
     assert data["exit_diffusion"] == pytest.approx(fl.diffusion_per_time_step, abs=1e-13)

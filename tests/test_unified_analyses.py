@@ -5,7 +5,8 @@ old, separate entry points (``relaxation_spectrum`` of a ring, ``road_spectrum``
 of a road; ``current_fluctuations``, ``current_variance``, ``scgf`` of a ring,
 ``exit_fluctuations``, ``exit_count_variance``, ``exit_scgf`` of a road;
 ``autocorrelation`` and ``autocorrelation_time`` of a ring, ``road_autocorrelation``
-and ``road_autocorrelation_time`` of a road; main at
+and ``road_autocorrelation_time`` of a road; ``sensitivity`` of a ring,
+``road_sensitivity`` of a road; main at
 bc1284b) on small rings and roads: the unified functions give every one of those
 numbers again (a road's ``exit_*`` under the generic names, as ``nasch solve --road
 --json`` still writes them), and the same keys for both systems.
@@ -21,6 +22,7 @@ import pytest
 from markov import Ring, Road, load_model
 from markov.analysis.correlations import autocorrelation, autocorrelation_time
 from markov.analysis.fluctuations import current_fluctuations, current_variance, scgf
+from markov.analysis.sensitivity import sensitivity
 from markov.analysis.spectrum import relaxation_spectrum
 from markov.errors import InvalidParameterError
 from markov.solvers.road_chain import RoadChain
@@ -191,3 +193,25 @@ def test_autocorrelations_refuse_what_the_system_lacks():
         autocorrelation(ring, "exit")
     with pytest.raises(InvalidParameterError, match="occupation:X needs a cell X in 1..3"):
         autocorrelation(road, "occupation:7")
+
+
+@pytest.mark.parametrize("case", list(SYSTEMS))
+def test_sensitivity_gives_the_old_numbers_with_the_same_keys(case):
+    system = SYSTEMS[case]()
+    keys = set()
+    for name, old in BEFORE["sensitivity"][case].items():
+        new = sensitivity(system, name).to_dict()
+        for key, value in old.items():
+            if isinstance(value, list):
+                assert new[key] == pytest.approx(value, rel=1e-10, abs=1e-12), key
+            else:
+                _same(value, new[key], key)
+        keys = set(new)
+    ring = sensitivity(SYSTEMS["ring_par"](), "p").to_dict()
+    assert keys == set(ring) and ring["time_unit"] == "time step"
+    assert ring["dinflow"] is None and ring["dmean_cars"] == 0.0 and ring["points"] is None
+
+
+def test_sensitivity_of_a_road_refuses_a_ring_route():
+    with pytest.raises(InvalidParameterError, match="route 'auto' only"):
+        sensitivity(SYSTEMS["road_par"](), "alpha", route="rows")

@@ -1,15 +1,16 @@
-"""The dynamics of a solved open road: its sensitivities.
+"""The derivative of a road's transition matrix in one of its parameters.
 
-The road's entry point and result type of the sensitivity a ring has
-(``sensitivity``; the spectrum, the current fluctuations and the correlations have
-one entry point for both, :func:`markov.analysis.spectrum.relaxation_spectrum`,
+Every analysis of a road has one entry point and one result type with a ring's
+(:func:`markov.analysis.spectrum.relaxation_spectrum`,
+:func:`markov.analysis.sensitivity.sensitivity`,
 :func:`markov.analysis.fluctuations.current_fluctuations`,
-:mod:`markov.analysis.correlations`).  The computations are written once, against
-the chain interface (:mod:`markov.analysis.stationary_chain`) that the road
-produces (:mod:`markov.analysis.road_system`: the road's own transition matrix
-``P``, row-stochastic, never lumped, one sector; its observables; the cars leaving
-as the increment per transition).  What stays here is the road's own: the result
-type with its per-time-step units, and the derivative of ``P`` in a road parameter.
+:mod:`markov.analysis.correlations`), written against the chain interface
+(:mod:`markov.analysis.stationary_chain`) that the road produces
+(:mod:`markov.analysis.road_system`: the road's own transition matrix ``P``,
+row-stochastic, never lumped, one sector; its observables; the cars leaving as the
+increment per transition).  What stays here is the road's own: its parameters
+(:func:`road_parameter`) and the exact derivative of ``P`` in one of them, which
+:func:`markov.analysis.sensitivity.sensitivity` solves with.
 
 Units.  ``P`` is one *chain step*: a time step under parallel and
 ordered-sequential update, one *sub-step* under random-sequential update, where
@@ -20,8 +21,9 @@ the per-chain-step value is kept beside it.
 
 * The spectrum: :func:`markov.analysis.spectrum.relaxation_spectrum` takes a road
   too (one sector; ``tau = -1 / (S ln |lambda_2|)`` time steps).
-* :func:`road_sensitivity`: ``d pi / d theta`` and the derivatives of the flux,
-  the inflow, the mean number of cars and the density profile, for ``theta`` =
+* The sensitivity (:func:`markov.analysis.sensitivity.sensitivity`):
+  ``d pi / d theta`` and the derivatives of the flux, the inflow, the mean
+  number of cars and the density profile, for ``theta`` =
   ``alpha``, ``beta``, ``ramp@CELL`` (an on-ramp's rate), a probability
   parameter of the bulk model (``p``, ``p0``, ...; the stretches that do not
   set it follow it) or of one stretch (``p@FIRST-LAST``).  ``dpi (I - P) =
@@ -44,23 +46,17 @@ the per-chain-step value is kept beside it.
 """
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass, field
-
 import numpy as np
 import scipy.sparse as sp
 
-from markov.analysis.road_system import (ROAD_OBSERVABLES, _digits, exit_branches,
-                                         prepare_road, road_observable)
-from markov.analysis.stationary_chain import derivative_solve
-from markov.chain.lattice import increments, lattice_of, successors
+from markov.analysis.road_system import ROAD_OBSERVABLES, exit_branches, road_observable
+from markov.chain.lattice import lattice_of, successors
 from markov.errors import InvalidParameterError
 from markov.model.road import OnRamp, Road
 from markov.model.stretch import Stretch
-from markov.solvers.road_chain import RoadChain, RoadSolution
 
-__all__ = ["RoadSensitivity", "road_sensitivity", "road_parameter", "polynomial_degree_bound",
-           "ROAD_OBSERVABLES", "road_observable", "exit_branches"]
+__all__ = ["road_parameter", "polynomial_degree_bound", "ROAD_OBSERVABLES",
+           "road_observable", "exit_branches"]
 
 
 # ---------------------------------------------------------------- sensitivity
@@ -212,59 +208,6 @@ def polynomial_degree_bound(road: Road, name: str, at, value: float, radius: flo
     return max(1, g * factors)
 
 
-@dataclass(frozen=True, eq=False)
-class RoadSensitivity:
-    """Derivatives of a road's stationary state in one parameter.
-
-    Attributes
-    ----------
-    parameter : str
-    value : float
-    dpi : (n,) float64 array
-        Sums to zero.
-    dflux, dinflow, dmean_cars : float
-        Per time step.
-    ddensity : (L,) float64 array
-    residual : float
-        ``||dpi (I - P) - pi dP||_1``.
-    degree : int
-        The degree bound; ``degree + 3`` Chebyshev points.
-    degree_check : float
-        The two top Chebyshev coefficients of the entries of ``P`` (relative to
-        the largest entry): zero to rounding for polynomials of degree ``<= degree``.
-    radius : float
-    seconds : float
-    """
-
-    parameter: str
-    value: float
-    dpi: np.ndarray = field(repr=False)
-    dflux: float
-    dinflow: float
-    dmean_cars: float
-    ddensity: np.ndarray
-    residual: float
-    degree: int
-    degree_check: float
-    radius: float
-    seconds: float
-
-    def to_dict(self) -> dict:
-        """JSON-ready (without ``dpi``).
-
-        Returns
-        -------
-        dict
-        """
-        return {"parameter": self.parameter, "value": self.value, "dflux": self.dflux,
-                "dinflow": self.dinflow, "dmean_cars": self.dmean_cars,
-                "ddensity_profile": self.ddensity.tolist(), "residual": self.residual,
-                "derivative": "Chebyshev interpolation of the polynomial entries of P",
-                "degree": self.degree, "points": self.degree + 3,
-                "degree_check": self.degree_check, "radius": self.radius,
-                "seconds": self.seconds}
-
-
 def _matrix_on(lattice, keys: np.ndarray) -> sp.csr_array:
     indptr, succ, weight = successors(lattice, keys)
     col = np.searchsorted(keys, succ)
@@ -275,79 +218,3 @@ def _matrix_on(lattice, keys: np.ndarray) -> sp.csr_array:
     P.sum_duplicates()
     P.sort_indices()
     return P
-
-
-def road_sensitivity(system, parameter: str, solution: RoadSolution | None = None,
-                     tol: float = 1e-12) -> RoadSensitivity:
-    """``d pi / d theta`` and the derivatives of the flux, inflow, cars and density, exactly.
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-    parameter : str
-        See :func:`road_parameter`.
-    solution : RoadSolution, optional
-    tol : float
-        Relative residual target of the solve for ``dpi``.
-
-    Returns
-    -------
-    RoadSensitivity
-
-    Examples
-    --------
-    One cell, parallel site1/sink: ``J = alpha beta / (alpha + beta)``, so
-    ``dJ / dalpha = (beta / (alpha + beta))^2``.
-
-    >>> from markov import load_model
-    >>> s = road_sensitivity(Road(1, load_model("nasch", {"vmax": 1}), alpha=0.3, beta=0.6),
-    ...                      "alpha")
-    >>> round(s.dflux, 12), round((0.6 / 0.9) ** 2, 12)
-    (0.444444444444, 0.444444444444)
-    """
-    road = system.system if isinstance(system, RoadChain) else system
-    if not isinstance(road, Road):
-        raise InvalidParameterError(
-            f"expected a markov Road or RoadChain, got {type(system).__name__}")
-    value, at = road_parameter(road, parameter)     # before any work
-    sv = prepare_road(system, solution)
-    start = time.perf_counter()
-    radius = 0.5 * min(value, 1 - value)
-    degree = polynomial_degree_bound(road, parameter, at, value, radius)
-    K = degree + 3
-    t, D, top = _chebyshev(K)
-    keys, P0 = sv.keys, sv.P.copy()
-    P0.sort_indices()
-    lay = sv.chain.lattice.layout
-    cols = [lay["left"], lay["entered"]]
-    data, incr = [], []
-    from markov.progress import progress_bar
-
-    bar = progress_bar(K, "sensitivity", "point")
-    for x in t:
-        bar.update(1)
-        lat = lattice_of(at(value + radius * x))
-        Pk = _matrix_on(lat, keys)
-        if not (np.array_equal(Pk.indptr, P0.indptr) and np.array_equal(Pk.indices, P0.indices)):
-            raise InvalidParameterError(
-                f"the support of P changes between {parameter} = {value - radius:g} and"
-                f" {value + radius:g}: no derivative")
-        data.append(Pk.data)
-        incr.append(increments(lat, keys)[:, cols])
-    bar.close()
-    F = np.array(data)
-    dP = sp.csr_array((D @ F / radius, P0.indices, P0.indptr), shape=P0.shape)
-    check = float(np.abs(top @ F).max() / max(1e-300, np.abs(F).max()))
-    da = np.tensordot(D, np.array(incr), axes=1) / radius          # (n, 2)
-    pi = sv.pi
-    h = dP.T @ pi
-    h -= pi * h.sum()                 # exact sum zero (rows of dP sum to zero)
-    dpi, residual = derivative_solve(sv.P, sv.step, pi, h, tol)
-    a = increments(sv.chain.lattice, keys)[:, cols]
-    dflux = sv.S * float(dpi @ a[:, 0] + pi @ da[:, 0])
-    dinflow = sv.S * float(dpi @ a[:, 1] + pi @ da[:, 1])
-    occ = _digits(road, keys) > 0
-    ddensity = dpi @ occ
-    return RoadSensitivity(parameter, value, dpi, dflux, dinflow, float(ddensity.sum()),
-                           ddensity, residual, degree, check, radius,
-                           time.perf_counter() - start)

@@ -407,16 +407,16 @@ ROAD_CORRELATED = ("exit", "cars", "stopped")
 
 def _road_dynamics(chain, sol, names, fluctuations: bool, lags, tol) -> dict:
     """The JSON fields of a road's --sensitivity, --fluctuations and --autocorrelation."""
-    from markov.analysis import road_dynamics as rd
     from markov.analysis.correlations import autocorrelation, autocorrelation_time
     from markov.analysis.fluctuations import current_fluctuations
+    from markov.analysis.sensitivity import sensitivity
 
     S = sol.steps_per_time_step
     out: dict = {"dynamics_time_unit": "time step",
                  "chain_step": "one time step" if S == 1 else
                  f"one sub-step ({S} sub-steps = one time step)"}
     if names:
-        found = {name: rd.road_sensitivity(chain, name, solution=sol, tol=min(tol, 1e-12))
+        found = {name: sensitivity(chain, name, solution=sol, tol=min(tol, 1e-12))
                  for name in names}
         for name, d in found.items():
             out[f"dflux_d{name}"] = d.dflux
