@@ -52,16 +52,18 @@ import scipy.sparse.linalg as spla
 
 from markov._jit import njit
 from markov.analysis.ring_system import sub_steps
-from markov.analysis.road_system import chain_step_name
+from markov.analysis.road_system import chain_step_name, prepare_road
 from markov.analysis.stationary_chain import (DENSE_SECTOR_STATES, _ncv,
                                               continuous_time_relaxation_time, drop_stationary,
                                               leading, relaxation_time as _relaxation_time)
+from markov.analysis.systems import is_road
 from markov.chain.encoding import powers
 from markov.chain.kernels import canonical_shift, orbit_size, shift_bits
 from markov.chain.transition import state_indices, successors
 from markov.errors import InvalidParameterError
 from markov.model.ring import ORDERED_SEQUENTIAL, PARALLEL, RANDOM_SEQUENTIAL, Ring
 from markov.model.road import Road
+from markov.solvers.road_chain import RoadChain
 from markov.validate import ensure_int
 
 __all__ = ["Eigenvalue", "Spectrum", "orbit_sizes", "sector_states", "sector_matrix",
@@ -555,11 +557,10 @@ def relaxation_spectrum(system, count: int = 4, sectors="all", tol: float = 1e-1
     (0.1, 0)
     """
     from markov.choices import OPERATORS
-    from markov.solvers.road_chain import RoadChain
 
     if operator not in OPERATORS:
         raise InvalidParameterError(f"operator must be one of {', '.join(OPERATORS)}")
-    if isinstance(system, (Road, RoadChain)):
+    if is_road(system):
         return _road_spectrum(system, count, sectors, tol, keys, operator, maxiter, max_memory,
                               lump_velocities)
     return _ring_spectrum(system, count, sectors, tol, keys, operator, maxiter, max_memory,
@@ -669,8 +670,6 @@ def _road_spectrum(system, count: int, sectors, tol: float, keys: np.ndarray | N
                    operator: str, maxiter: int, max_memory: float | None,
                    lump_velocities: bool) -> Spectrum:
     """:func:`relaxation_spectrum` of a road (or its chain): one sector, its ``P``."""
-    from markov.analysis.road_system import prepare_road
-    from markov.solvers.road_chain import RoadChain
     from markov.validate import ensure_tol
 
     count = ensure_int("count", count, 1, 1000)
@@ -713,8 +712,6 @@ def _road_spectrum(system, count: int, sectors, tol: float, keys: np.ndarray | N
 def _lumped_chain(system):
     """The road's chain with its velocities lumped (a RoadChain), or None where nothing
     merges."""
-    from markov.solvers.road_chain import RoadChain
-
     if isinstance(system, RoadChain):
         chain = system if system.lattice.lumping is not None else RoadChain(
             system.system, max_memory=system.max_memory)
