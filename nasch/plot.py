@@ -761,7 +761,7 @@ def relaxation_figure(data: dict, spectrum=None, notes: Sequence[str] = (),
         ax = axes[1]
         t = np.linspace(0, 2 * np.pi, 400)
         ax.plot(np.cos(t), np.sin(t), color="0.6", lw=0.6)
-        ring = spectrum.ring
+        ring = spectrum.system
         values = np.array([e.value for e in spectrum.eigenvalues])
         sectors = np.array([e.sector for e in spectrum.eigenvalues])
         sc = ax.scatter(values.real, values.imag, c=sectors, cmap="twilight", s=12,

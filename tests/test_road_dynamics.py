@@ -17,6 +17,10 @@ from click.testing import CliRunner
 
 from markov import NoUniqueStationaryStateError, OnRamp, Road, Stretch, load_model
 from markov.analysis import road_dynamics as rd
+from markov.analysis.correlations import autocorrelation, autocorrelation_time
+from markov.analysis.fluctuations import current_fluctuations, current_variance, scgf
+from markov.analysis.sensitivity import sensitivity
+from markov.analysis.spectrum import relaxation_spectrum
 from markov.errors import InvalidParameterError
 from markov.solvers.road_chain import RoadChain
 from nasch.cli import main
@@ -119,11 +123,11 @@ def naive_chains():
 def test_spectrum_is_the_naive_chains(case, naive_chains):
     fast, _ = _roads(case)
     ref = naive_chains[case]
-    s = rd.road_spectrum(fast, count=5)
+    s = relaxation_spectrum(fast, count=5)
     vals = np.linalg.eigvals(ref.P)
     vals = vals[np.argsort(-np.abs(vals))][1:6]          # the stationary 1 dropped
-    assert np.allclose(np.abs(s.eigenvalues), np.abs(vals), atol=1e-10)
-    assert max(s.residuals) < 1e-10
+    assert np.allclose(np.abs([e.value for e in s.eigenvalues]), np.abs(vals), atol=1e-10)
+    assert max(e.residual for e in s.eigenvalues) < 1e-10
     # tau in time steps: a random-sequential chain step is one of L + 1 sub-steps
     assert s.steps_per_time_step == ref.S
     lam2 = np.abs(vals[0])
@@ -135,18 +139,18 @@ def test_spectrum_is_the_naive_chains(case, naive_chains):
 def test_spectrum_by_arpack_agrees_with_dense():
     road = Road(6, _nasch(2, 0.4), "parallel", 0.5, 0.5)         # more than 200 states
     chain = RoadChain(road)
-    s = rd.road_spectrum(chain, count=3)
+    s = relaxation_spectrum(chain, count=3)
     assert s.operator == "arpack" and s.states > 200
     dense = np.linalg.eigvals(chain.matrix.toarray())
     dense = dense[np.argsort(-np.abs(dense))][1:4]
-    assert np.allclose(np.abs(s.eigenvalues), np.abs(dense), atol=1e-9)
+    assert np.allclose(np.abs([e.value for e in s.eigenvalues]), np.abs(dense), atol=1e-9)
 
 
 def test_one_cell_closed_forms():
     road = Road(1, _nasch(1), alpha=0.3, beta=0.6)
     a, b = 0.3, 0.6
-    assert rd.road_spectrum(road).second == pytest.approx(1 - a - b, abs=1e-14)
-    assert rd.road_sensitivity(road, "beta").dflux == pytest.approx((a / (a + b)) ** 2,
+    assert relaxation_spectrum(road).second.value == pytest.approx(1 - a - b, abs=1e-14)
+    assert sensitivity(road, "beta").dflux == pytest.approx((a / (a + b)) ** 2,
                                                                     abs=1e-13)
     # the exit count of the two-state chain: Lambda(s) = log of the Perron root of
     # [[1 - a, a], [b e^s, 1 - b]], differentiated symbolically
@@ -154,7 +158,7 @@ def test_one_cell_closed_forms():
     A, B = sympy.Rational(3, 10), sympy.Rational(3, 5)
     tr, det = 2 - A - B, (1 - A) * (1 - B) - A * B * sympy.exp(s)
     lam = sympy.log((tr + sympy.sqrt(tr ** 2 - 4 * det)) / 2)
-    fl = rd.exit_fluctuations(road)
+    fl = current_fluctuations(road)
     assert fl.current == pytest.approx(float(sympy.diff(lam, s).subs(s, 0)), abs=1e-14)
     assert fl.diffusion == pytest.approx(float(sympy.diff(lam, s, 2).subs(s, 0)), abs=1e-13)
 
@@ -182,7 +186,7 @@ def _change(case, name, x):
 @pytest.mark.parametrize("case, name", SENSITIVITIES)
 def test_sensitivity_is_the_naive_central_difference(case, name):
     fast, _ = _roads(case)
-    d = rd.road_sensitivity(fast, name)
+    d = sensitivity(fast, name)
     value = d.value
     h = 1e-5
     hi = nr.solve_one(_roads(case, **_change(case, name, value + h))[1])
@@ -202,7 +206,7 @@ def test_sensitivity_is_exact_beyond_a_central_difference():
     # derivative agrees with a Richardson-extrapolated difference of the solved
     # fluxes (error h^4) to 1e-10
     road = Road(4, _nasch(2, 0.35), "parallel", 0.45, 0.55)
-    d = rd.road_sensitivity(road, "p")
+    d = sensitivity(road, "p")
     f = {x: RoadChain(road.with_params(p=0.35 + x)).solution().flux
          for x in (-2e-3, -1e-3, 1e-3, 2e-3)}
     richardson = (8 * (f[1e-3] - f[-1e-3]) - (f[2e-3] - f[-2e-3])) / (12 * 1e-3)
@@ -229,7 +233,7 @@ def test_sensitivity_refuses_before_any_work(name, road, words):
 def test_exit_fluctuations_are_the_naive_chains(case, naive_chains):
     fast, _ = _roads(case)
     ref = naive_chains[case]
-    fl = rd.exit_fluctuations(fast)
+    fl = current_fluctuations(fast)
     J, var, delta = ref.exit_moments()
     assert fl.current == pytest.approx(J, abs=1e-13)
     assert fl.variance == pytest.approx(var, abs=1e-13)
@@ -241,8 +245,8 @@ def test_exit_fluctuations_are_the_naive_chains(case, naive_chains):
     second = (ref.tilted_log_root(h) - 2 * ref.tilted_log_root(0.0) + ref.tilted_log_root(-h)) \
         / h ** 2
     assert fl.diffusion == pytest.approx(second, rel=1e-5, abs=1e-8)
-    scgf = rd.exit_scgf(fast, [-0.2, 0.3])
-    assert scgf == pytest.approx([ref.tilted_log_root(-0.2), ref.tilted_log_root(0.3)],
+    tilted = scgf(fast, [-0.2, 0.3]).value
+    assert tilted == pytest.approx([ref.tilted_log_root(-0.2), ref.tilted_log_root(0.3)],
                                  abs=1e-12)
 
 
@@ -250,8 +254,8 @@ def test_exit_count_variance_tends_to_diffusion_and_matches_a_sampled_run():
     road = Road(3, _nasch(2, 0.3), "parallel", 0.4, 0.7)
     chain = RoadChain(road)
     sol = chain.solution()
-    fl = rd.exit_fluctuations(chain, sol)
-    var = rd.exit_count_variance(chain, 400, sol)
+    fl = current_fluctuations(chain, solution=sol)
+    var = current_variance(chain, 400, solution=sol)
     assert var[1] == pytest.approx(fl.variance, abs=1e-14)
     # var(Y_t) = Delta t + const + (decaying): the increments tend to Delta
     assert var[400] - var[399] == pytest.approx(fl.diffusion, abs=1e-10)
@@ -284,7 +288,7 @@ def test_autocorrelations_are_the_naive_chains(case, naive_chains):
     fast, _ = _roads(case)
     ref = naive_chains[case]
     lags = 30
-    assert rd.road_autocorrelation(fast, "exit", lags) == pytest.approx(
+    assert autocorrelation(fast, "exit", lags) == pytest.approx(
         ref.exit_autocorrelation(lags), abs=1e-13)
     for name, f in (("cars", lambda s: sum(c is not None for c in s)),
                     ("stopped", lambda s: sum(c == 0 for c in s)),
@@ -295,22 +299,22 @@ def test_autocorrelations_are_the_naive_chains(case, naive_chains):
         for _ in range(lags + 1):
             expect.append(h @ d)
             h = h @ ref.P
-        got = rd.road_autocorrelation(fast, name, lags)
+        got = autocorrelation(fast, name, lags)
         assert got == pytest.approx(expect, abs=1e-13)
         # tau_int: one solve, against the long sum
-        long = rd.road_autocorrelation(fast, name, 3000)
-        assert rd.road_autocorrelation_time(fast, name) == pytest.approx(
+        long = autocorrelation(fast, name, 3000)
+        assert autocorrelation_time(fast, name) == pytest.approx(
             1 + 2 * long[1:].sum() / long[0], rel=1e-9)
-    fl = rd.exit_fluctuations(fast)
-    assert rd.road_autocorrelation_time(fast, "exit") == pytest.approx(
+    fl = current_fluctuations(fast)
+    assert autocorrelation_time(fast, "exit") == pytest.approx(
         fl.diffusion / fl.variance, rel=1e-12)
 
 
 def test_bad_observable_and_reducible_road_are_refused():
     with pytest.raises(InvalidParameterError, match="occupation:X needs a cell X in 1..3"):
-        rd.road_autocorrelation(Road(3, _nasch(2)), "occupation:7")
+        autocorrelation(Road(3, _nasch(2)), "occupation:7")
     with pytest.raises(NoUniqueStationaryStateError, match="4 closed classes"):
-        rd.road_spectrum(Road(3, _nasch(1, 0.0), "parallel", 0.0, 0.0, "site1", "sink"))
+        relaxation_spectrum(Road(3, _nasch(1, 0.0), "parallel", 0.0, 0.0, "site1", "sink"))
 
 
 # ------------------------------------------------------------------ the CLI
@@ -323,7 +327,7 @@ def test_cli_spectrum_road_json_and_text():
     res = runner.invoke(main, ["spectrum", *ROAD, "--json"])
     assert res.exit_code == 0, res.output
     data = json.loads(res.output)
-    s = rd.road_spectrum(Road(3, _nasch(2, 0.3), "parallel", 0.4, 0.7))
+    s = relaxation_spectrum(Road(3, _nasch(2, 0.3), "parallel", 0.4, 0.7))
     assert data["relaxation_time"] == pytest.approx(s.relaxation_time, rel=1e-12)
     assert data["entry"] == "reservoir" and data["exit_convention"] and data["time_unit"] \
         == "time step"
@@ -337,12 +341,12 @@ def test_cli_solve_road_dynamics_json():
     assert res.exit_code == 0, res.output
     data = json.loads(res.output)
     road = Road(3, _nasch(2, 0.3), "parallel", 0.4, 0.7)
-    assert data["dflux_dalpha"] == pytest.approx(rd.road_sensitivity(road, "alpha").dflux,
+    assert data["dflux_dalpha"] == pytest.approx(sensitivity(road, "alpha").dflux,
                                                  abs=1e-13)
-    fl = rd.exit_fluctuations(road)
+    fl = current_fluctuations(road)
     assert data["exit_diffusion"] == pytest.approx(fl.diffusion_per_time_step, abs=1e-13)
     assert data["autocorrelation"]["exit"] == pytest.approx(
-        rd.road_autocorrelation(road, "exit", 4).tolist(), abs=1e-14)
+        autocorrelation(road, "exit", 4).tolist(), abs=1e-14)
     assert data["entry"] == "reservoir" and data["dynamics_time_unit"] == "time step"
 
 
@@ -376,24 +380,20 @@ def test_one_cell_random_sequential_in_continuous_time_is_the_renewal_process(al
     # in continuous time the cell fills at rate alpha and empties at rate beta: exits are a
     # renewal process with T = Exp(alpha) + Exp(beta), so Delta = var T / E[T]^3, and the
     # two-state chain relaxes at rate alpha + beta
-    from markov.analysis.road_dynamics import exit_fluctuations, road_spectrum
-
-    fl = exit_fluctuations(_one_cell(alpha, beta))
+    fl = current_fluctuations(_one_cell(alpha, beta))
     mean, var = 1 / alpha + 1 / beta, 1 / alpha ** 2 + 1 / beta ** 2
     assert fl.continuous_time_diffusion == pytest.approx(var / mean ** 3, rel=1e-12)
-    sp_ = road_spectrum(_one_cell(alpha, beta), count=1)
+    sp_ = relaxation_spectrum(_one_cell(alpha, beta), count=1)
     assert sp_.continuous_time_relaxation_time == pytest.approx(1 / (alpha + beta), rel=1e-12)
-    assert exit_fluctuations(Road(3, load_model("nasch", {"vmax": 1}))).continuous_time_diffusion \
-        is None
+    three = Road(3, load_model("nasch", {"vmax": 1}))
+    assert current_fluctuations(three).continuous_time_diffusion is None
 
 
 @pytest.mark.parametrize("alpha, beta", [(0.3, 0.7), (0.6, 0.45)])
 def test_tau_int_exit_is_of_the_cars_leaving_per_time_step(alpha, beta):
     # one time step is two sub-steps (entry position, cell 1), each drawn with 1/2: the
     # cars leaving in a time step, enumerated over the four draws from the stationary state
-    from markov.analysis.road_dynamics import exit_fluctuations
-
-    fl = exit_fluctuations(_one_cell(alpha, beta))
+    fl = current_fluctuations(_one_cell(alpha, beta))
     occ = alpha / (alpha + beta)            # pi(occupied): alpha (1 - o) = beta o
     pi = {0: 1 - occ, 1: occ}
 
@@ -410,9 +410,9 @@ def test_tau_int_exit_is_of_the_cars_leaving_per_time_step(alpha, beta):
                 moments[1] += p0 * p1 * p2 * (m1 + m2) ** 2
     var_step = moments[1] - moments[0] ** 2
     assert moments[0] == pytest.approx(fl.flux, abs=1e-14)
-    assert fl.to_dict()["exit_variance_per_time_step"] == pytest.approx(var_step, abs=1e-14)
-    assert fl.to_dict()["tau_int_exit"] == pytest.approx(fl.diffusion_per_time_step / var_step,
-                                                         rel=1e-12)
+    assert fl.to_dict()["variance_per_time_step"] == pytest.approx(var_step, abs=1e-14)
+    assert fl.to_dict()["tau_int_time_steps"] == pytest.approx(
+        fl.diffusion_per_time_step / var_step, rel=1e-12)
 
 
 def test_cli_random_sequential_gives_both_clocks_and_per_chain_step_tau():
@@ -452,10 +452,10 @@ def test_road_spectrum_with_lumped_velocities(road):
     for _ in range(20):
         pa, pb = pa @ A, pb @ B
         assert abs(np.trace(pa) - np.trace(pb)) < 1e-12 * max(1.0, np.trace(pb))
-    a = rd.road_spectrum(road, count=3)
-    b = rd.road_spectrum(road, count=6, lump_velocities=False)
+    a = relaxation_spectrum(road, count=3)
+    b = relaxation_spectrum(road, count=6, lump_velocities=False)
     assert a.states == lumped.n_states and b.states == full.n_states
     assert a.notes and "velocities lumped" in a.notes[0] and not b.notes
     assert a.relaxation_time == pytest.approx(b.relaxation_time, rel=1e-10)
     for v in a.eigenvalues:
-        assert min(abs(v - w) for w in b.eigenvalues) < 1e-10
+        assert min(abs(v.value - w.value) for w in b.eigenvalues) < 1e-10

@@ -135,13 +135,13 @@ def test_long_run_is_the_exact_solution_within_its_bars(road):
     assert np.allclose(r.velocity_profile[seen], exact.velocity_profile[seen], atol=0.05)
     # the printed tau_int is of the cars leaving per time step, and it is the bar's:
     # bar^2 = tau_int var / n, var and tau_int near their exact values
-    from markov.analysis.road_dynamics import exit_fluctuations
+    from markov.analysis.fluctuations import current_fluctuations
 
-    fl = exit_fluctuations(road).to_dict()
-    assert r.exit_variance == pytest.approx(fl["exit_variance_per_time_step"], rel=0.05)
+    fl = current_fluctuations(road).to_dict()
+    assert r.exit_variance == pytest.approx(fl["variance_per_time_step"], rel=0.05)
     assert r.flux_error == pytest.approx((r.tau_int * r.exit_variance / r.measured_steps) ** 0.5,
                                          rel=1e-9)
-    assert 0.5 < r.tau_int / fl["tau_int_exit"] < 2.0
+    assert 0.5 < r.tau_int / fl["tau_int_time_steps"] < 2.0
 
 
 def test_the_two_sigma_bar_covers_the_exact_flux_in_90_percent_of_30_seeds():

@@ -1,4 +1,4 @@
-"""Exact stationary time correlations of a ring's Markov chain.
+"""Exact stationary time correlations of a ring's or a road's Markov chain.
 
 For an observable ``f`` of the state (an array over the chain's states) and
 the stationary chain ``X_0, X_1, ...`` (``X_0 ~ pi``):
@@ -10,8 +10,9 @@ the stationary chain ``X_0, X_1, ...`` (``X_0 ~ pi``):
 one product ``x -> x P`` per lag (the CSR matrix or the matrix-free operator
 ``A = P^T`` of :class:`markov.solvers.ring_chain.RingChain`).  The computation is
 written once for a ring and a road
-(:func:`markov.analysis.stationary_chain.autocorrelation_of`); this module is the
-ring's entry point, the road's is :mod:`markov.analysis.road_dynamics`.  The integrated
+(:func:`markov.analysis.stationary_chain.autocorrelation_of`), and so are the
+entry points here (:func:`markov.analysis.systems.prepare_system`; a road's
+observables: :mod:`markov.analysis.road_system`).  The integrated
 autocorrelation time, in the convention of
 :func:`markov.simulation.montecarlo.integrated_autocorrelation_time`,
 
@@ -47,9 +48,15 @@ import numpy as np
 
 from markov.analysis.ring_system import (OBSERVABLES, ensure_observable, observable_values,
                                          prepare, sub_steps)
+from markov.analysis.road_system import road_observable, road_of
 from markov.analysis.stationary_chain import (MAX_LAGS, StationaryChain, autocorrelation_of,
-                                              autocorrelation_time_of)
+                                              autocorrelation_time_of,
+                                              increment_autocorrelation)
+from markov.analysis.systems import is_road, prepare_system
+from markov.errors import InvalidParameterError
 from markov.model.ring import Ring
+from markov.model.road import Road
+from markov.solvers.road_chain import RoadSolution
 from markov.validate import ensure_int
 
 __all__ = ["OBSERVABLES", "MAX_LAGS", "StationaryChain", "prepare", "observable_values",
@@ -59,20 +66,45 @@ __all__ = ["OBSERVABLES", "MAX_LAGS", "StationaryChain", "prepare", "observable_
 MAX_STRIDE = 10_000
 
 
-def autocorrelation(ring_or_chain, observable: str = "flux", lags: int = 100,
-                    pi: np.ndarray | None = None) -> np.ndarray:
-    """Stationary autocorrelation ``C(t)``, ``t = 0..lags``, of an observable, exactly.
+def _default(system, observable: str | None) -> str:
+    """The observable asked, or the system's current: a ring's ``flux``, a road's ``exit``."""
+    if observable is not None:
+        return observable
+    return "exit" if is_road(system) else "flux"
+
+
+def _check_observable(system, observable: str) -> None:
+    """Refuse an unknown observable by name, before any work."""
+    if not is_road(system):
+        ensure_observable(observable)
+        return
+    road = road_of(system)
+    if observable != "exit" and isinstance(road, Road):
+        road_observable(road, np.zeros(1, np.int64), observable)
+
+
+def autocorrelation(system, observable: str | None = None, lags: int = 100,
+                    pi: np.ndarray | None = None,
+                    solution: RoadSolution | None = None) -> np.ndarray:
+    """Stationary autocorrelation ``C(t)``, ``t = 0..lags``, of an observable of a ring or a
+    road, exactly.
 
     Parameters
     ----------
-    ring_or_chain : Ring or RingChain
-    observable : {"flux", "stopped"}
-        See :func:`observable_values` (per cell).
+    system : Ring, RingChain, Road or RoadChain
+    observable : str, optional
+        A ring's ``"flux"`` (the default) or ``"stopped"`` (:func:`observable_values`,
+        per cell); a road's ``"exit"`` (the default: the cars leaving in one chain
+        step, an increment, ``C(0) = var(m)``, ``C(j) = (b - J pi) P^{j-1} . a``),
+        ``"cars"``, ``"stopped"`` or ``"occupation:X"``
+        (:func:`markov.analysis.road_system.road_observable`).
     lags : int
         Largest lag ``T``, ``0..MAX_LAGS`` (``T`` products ``x P``); in steps of
         the chain (sub-steps for random-sequential update).
     pi : (n,) array, optional
-        Stationary vector, if already solved (:func:`prepare`).
+        A ring's stationary vector, if already solved (:func:`prepare`).
+    solution : RoadSolution, optional
+        A road's solution, if already solved.
 
     Returns
     -------
@@ -88,37 +120,47 @@ def autocorrelation(ring_or_chain, observable: str = "flux", lags: int = 100,
     >>> bool(np.allclose(c, [0.25 * 0.75 / 9, 0, 0]))
     True
     """
-    ensure_observable(observable)
+    observable = _default(system, observable)
+    _check_observable(system, observable)
     lags = ensure_int("lags", lags, 0, MAX_LAGS)
-    return autocorrelation_of(prepare(ring_or_chain, pi), observable, lags)
+    sc = prepare_system(system, pi, solution)
+    if observable == "exit" and is_road(system):
+        return increment_autocorrelation(sc, sc.increments(), lags)
+    return autocorrelation_of(sc, observable, lags)
 
 
-def autocorrelation_time(ring_or_chain, observable: str = "flux",
-                         pi: np.ndarray | None = None, stride: int = 1) -> float:
+def autocorrelation_time(system, observable: str | None = None,
+                         pi: np.ndarray | None = None, stride: int = 1,
+                         solution: RoadSolution | None = None) -> float:
     """Integrated autocorrelation time ``tau = 1 + 2 sum_{t>=1} C(t) / C(0)``, exactly.
 
     One solve of ``w (I - Q) = h_0`` (:func:`markov.solvers.fundamental.solve_fundamental`)
     with ``Q = P^stride``: ``sum_{t >= 1} h_0 Q^t = w - h_0``.  The convention of
     :func:`markov.simulation.montecarlo.integrated_autocorrelation_time`: the variance of
     the mean of ``n`` samples is ``tau C(0) / n``.  A constant observable has
-    ``tau = 1`` (as there).
+    ``tau = 1`` (as there).  A road's ``"exit"`` is
+    :attr:`markov.analysis.fluctuations.CurrentFluctuations.tau_int`.
 
     Parameters
     ----------
-    ring_or_chain : Ring or RingChain
-    observable : {"flux", "stopped"}
+    system : Ring, RingChain, Road or RoadChain
+    observable : str, optional
+        As :func:`autocorrelation` (default: a ring's ``"flux"``, a road's ``"exit"``).
     pi : (n,) array, optional
-        Stationary vector, if already solved.
+        A ring's stationary vector, if already solved.
     stride : int
         Sample the chain every ``stride`` steps (``1..MAX_STRIDE``); ``tau``
         is then in units of ``stride`` steps.  Random-sequential update:
-        ``stride = L`` is the series sampled once a time step (a sweep).
+        ``stride = L`` is the series sampled once a time step (a sweep) on a
+        ring.  A road's ``"exit"``: 1 only.
+    solution : RoadSolution, optional
+        A road's solution, if already solved.
 
     Returns
     -------
     float
-        In samples: steps, sub-steps for random-sequential update (divide by
-        ``L`` for the time in sweeps), or ``stride`` of them.
+        In samples: chain steps (sub-steps for random-sequential update: divide
+        by ``steps_per_time_step`` for time steps), or ``stride`` of them.
 
     Examples
     --------
@@ -127,6 +169,13 @@ def autocorrelation_time(ring_or_chain, observable: str = "flux",
     >>> round(autocorrelation_time(Ring(3, 1, 1, 0.25)), 12)
     1.0
     """
-    ensure_observable(observable)
+    observable = _default(system, observable)
+    _check_observable(system, observable)
     stride = ensure_int("stride", stride, 1, MAX_STRIDE)
-    return autocorrelation_time_of(prepare(ring_or_chain, pi), observable, stride)
+    if observable == "exit" and is_road(system):
+        if stride != 1:
+            raise InvalidParameterError("the exit count's tau_int is per chain step: stride 1")
+        from markov.analysis.fluctuations import current_fluctuations
+
+        return current_fluctuations(system, solution=solution).tau_int
+    return autocorrelation_time_of(prepare_system(system, pi, solution), observable, stride)

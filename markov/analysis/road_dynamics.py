@@ -1,13 +1,16 @@
-"""The dynamics of a solved open road: spectrum, sensitivities, exit-current fluctuations, C(t).
+"""The derivative of a road's transition matrix in one of its parameters.
 
-The road's entry points and result types of the analyses a ring has
-(:mod:`markov.analysis.spectrum`, ``sensitivity``, ``correlations``,
-``fluctuations``).  The computations are written once, against the chain
-interface (:mod:`markov.analysis.stationary_chain`) that the road produces
+Every analysis of a road has one entry point and one result type with a ring's
+(:func:`markov.analysis.spectrum.relaxation_spectrum`,
+:func:`markov.analysis.sensitivity.sensitivity`,
+:func:`markov.analysis.fluctuations.current_fluctuations`,
+:mod:`markov.analysis.correlations`), written against the chain interface
+(:mod:`markov.analysis.stationary_chain`) that the road produces
 (:mod:`markov.analysis.road_system`: the road's own transition matrix ``P``,
 row-stochastic, never lumped, one sector; its observables; the cars leaving as the
-increment per transition).  What stays here is the road's own: the result types
-with their per-time-step units, and the derivative of ``P`` in a road parameter.
+increment per transition).  What stays here is the road's own: its parameters
+(:func:`road_parameter`) and the exact derivative of ``P`` in one of them, which
+:func:`markov.analysis.sensitivity.sensitivity` solves with.
 
 Units.  ``P`` is one *chain step*: a time step under parallel and
 ordered-sequential update, one *sub-step* under random-sequential update, where
@@ -16,11 +19,11 @@ a time step is ``S = L + 1`` sub-steps
 result is given per time step (times divided, rates multiplied by ``S``), and
 the per-chain-step value is kept beside it.
 
-* :func:`road_spectrum`: the leading eigenvalues of ``P`` (dense LAPACK up to
-  :data:`markov.analysis.stationary_chain.DENSE_SECTOR_STATES` states, else ARPACK,
-  largest modulus), with residuals; ``tau = -1 / (S ln |lambda_2|)`` time steps.
-* :func:`road_sensitivity`: ``d pi / d theta`` and the derivatives of the flux,
-  the inflow, the mean number of cars and the density profile, for ``theta`` =
+* The spectrum: :func:`markov.analysis.spectrum.relaxation_spectrum` takes a road
+  too (one sector; ``tau = -1 / (S ln |lambda_2|)`` time steps).
+* The sensitivity (:func:`markov.analysis.sensitivity.sensitivity`):
+  ``d pi / d theta`` and the derivatives of the flux, the inflow, the mean
+  number of cars and the density profile, for ``theta`` =
   ``alpha``, ``beta``, ``ramp@CELL`` (an on-ramp's rate), a probability
   parameter of the bulk model (``p``, ``p0``, ...; the stretches that do not
   set it follow it) or of one stretch (``p@FIRST-LAST``).  ``dpi (I - P) =
@@ -33,207 +36,27 @@ the per-chain-step value is kept beside it.
   top Chebyshev coefficients, zero for such a polynomial, are reported
   (``degree_check``).  The state set and the support of ``P`` must not change
   on that interval: a value 0 or 1 is refused.
-* :func:`exit_fluctuations`: ``J`` and the diffusion coefficient
-  ``Delta = lim var(Y_t) / t`` of ``Y_t``, the number of cars that left up to
-  time ``t``, by the Green-Kubo (Poisson-equation) formula of
-  :mod:`markov.analysis.stationary_chain` with the cars leaving in each transition
-  (:func:`markov.chain.lattice.successor_branches`); :func:`exit_count_variance`
-  gives ``var(Y_t)`` at finite ``t``, :func:`exit_scgf` the scaled cumulant
-  generating function: the Perron root of the tilted matrix ``P_s(x, y) = sum P e^{s m}``
-  (centred by ``J``, as a ring's).
-* :func:`road_autocorrelation` and :func:`road_autocorrelation_time`: ``C(t)``
-  and ``tau_int`` of the exit current (cars leaving in one chain step) or of a
-  state observable (:data:`ROAD_OBSERVABLES`: cars on the road, stopped cars,
-  the occupation of one cell ``occupation:X``).
+* The exit-current fluctuations: :mod:`markov.analysis.fluctuations` takes a road
+  too (``current_fluctuations``, ``current_variance``, ``scgf``), ``Y_t`` the
+  number of cars that left up to time ``t``.
+* ``C(t)`` and ``tau_int``: :mod:`markov.analysis.correlations` takes a road
+  too, for the exit current (cars leaving in one chain step) or a state
+  observable (:data:`ROAD_OBSERVABLES`: cars on the road, stopped cars, the
+  occupation of one cell ``occupation:X``).
 """
 from __future__ import annotations
 
-import math
-import time
-from dataclasses import dataclass, field
-
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
-from markov.analysis.road_system import (ROAD_OBSERVABLES, _digits, chain_step_name,
-                                         exit_branches, prepare_road, road_observable, road_of)
-from markov.analysis.stationary_chain import (DENSE_SECTOR_STATES, MAX_LAGS, autocorrelation_of,
-                                              autocorrelation_time_of,
-                                              continuous_time_relaxation_time, count_variance,
-                                              derivative_solve, diffusion, drop_stationary,
-                                              increment_autocorrelation, leading,
-                                              relaxation_time, scgf_values)
-from markov.chain.lattice import increments, lattice_of, successors
+from markov.analysis.road_system import ROAD_OBSERVABLES, exit_branches, road_observable
+from markov.chain.lattice import lattice_of, successors
 from markov.errors import InvalidParameterError
 from markov.model.road import OnRamp, Road
 from markov.model.stretch import Stretch
-from markov.solvers.road_chain import RoadChain, RoadSolution
-from markov.validate import ensure_int, ensure_real
 
-__all__ = ["RoadSpectrum", "road_spectrum", "RoadSensitivity", "road_sensitivity",
-           "road_parameter", "polynomial_degree_bound", "ExitFluctuations",
-           "exit_fluctuations", "exit_count_variance", "exit_scgf", "ROAD_OBSERVABLES",
-           "road_observable", "road_autocorrelation", "road_autocorrelation_time",
-           "exit_branches"]
-
-
-# ------------------------------------------------------------------ spectrum
-
-
-@dataclass(frozen=True)
-class RoadSpectrum:
-    """Leading eigenvalues of a road's ``P``, the stationary 1 excluded.
-
-    Attributes
-    ----------
-    road : Road
-    eigenvalues : tuple of complex
-        By decreasing modulus (per chain step).
-    residuals : tuple of float
-        ``||x P - lambda x|| / ||x||`` of each.
-    states : int
-    steps_per_time_step : int
-    operator : {"dense", "arpack"}
-    seconds : float
-    notes : tuple of str
-        E.g. that the velocities the rule cannot tell apart were merged.
-    """
-
-    road: Road
-    eigenvalues: tuple
-    residuals: tuple
-    states: int
-    steps_per_time_step: int
-    operator: str
-    seconds: float
-    notes: tuple = ()
-
-    @property
-    def second(self) -> complex | None:
-        return self.eigenvalues[0] if self.eigenvalues else None
-
-    @property
-    def relaxation_time_chain_steps(self) -> float:
-        """``-1 / ln |lambda_2|`` in chain steps (sub-steps: random-sequential)."""
-        return 0.0 if self.second is None else relaxation_time(abs(self.second))
-
-    @property
-    def relaxation_time(self) -> float:
-        """``-1 / (S ln |lambda_2|)`` in time steps."""
-        return self.relaxation_time_chain_steps / self.steps_per_time_step
-
-    @property
-    def oscillation(self) -> float:
-        """``arg lambda_2`` per chain step (radians)."""
-        return 0.0 if self.second is None else float(np.angle(self.second))
-
-    @property
-    def continuous_time_relaxation_time(self) -> float | None:
-        """Random-sequential update in continuous time (generator ``S (P - 1)``):
-        ``1 / (S min(1 - Re lambda))`` over the eigenvalues found, in units of time
-        (``S`` sub-steps per unit); None for the other updates."""
-        return continuous_time_relaxation_time(self.eigenvalues, self.steps_per_time_step)
-
-    def to_dict(self) -> dict:
-        """JSON-ready, with the road and its conventions.
-
-        Returns
-        -------
-        dict
-        """
-        tau, tau_c = self.relaxation_time, self.relaxation_time_chain_steps
-        return {**self.road.describe(),
-                "eigenvalues": [{"re": float(v.real), "im": float(v.imag),
-                                 "modulus": float(abs(v)), "residual": float(r)}
-                                for v, r in zip(self.eigenvalues, self.residuals)],
-                "relaxation_time": tau if math.isfinite(tau) else None,
-                "relaxation_time_chain_steps": tau_c if math.isfinite(tau_c) else None,
-                "time_unit": "time step", "chain_step": chain_step_name(
-                    self.steps_per_time_step),
-                "steps_per_time_step": self.steps_per_time_step,
-                "relaxation_time_continuous": self.continuous_time_relaxation_time,
-                "oscillation": self.oscillation, "sectors": "one (a road has no rotation)",
-                "states": self.states, "operator": self.operator, "seconds": self.seconds,
-                "notes": list(self.notes)}
-
-
-def road_spectrum(system, count: int = 4, tol: float = 1e-10, maxiter: int = 20_000,
-                  solution: RoadSolution | None = None,
-                  lump_velocities: bool = True) -> RoadSpectrum:
-    """The ``count`` eigenvalues of largest modulus of a road's ``P`` after the stationary 1.
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-        One closed class (several: :class:`markov.errors.NoUniqueStationaryStateError`
-        with every class solved).
-    count : int
-    tol : float
-        ARPACK's relative accuracy.
-    maxiter : int
-    solution : RoadSolution, optional
-        Its solution with every velocity, if solved (used where the velocities are kept).
-    lump_velocities : bool
-        Take the eigenvalues of the chain with the velocities the rule cannot
-        tell apart merged (parallel and ordered-sequential update): their rows
-        of ``P`` are identical, so every nonzero eigenvalue is the full
-        chain's with its multiplicity and only eigenvalues 0 are lost (as on a
-        ring, :func:`markov.analysis.spectrum.relaxation_spectrum`); the full
-        chain where the lumped one has no more states than eigenvalues asked.
-
-    Returns
-    -------
-    RoadSpectrum
-
-    Examples
-    --------
-    One cell, parallel site1/sink: the cell empties with ``beta``, fills with
-    ``alpha``, so ``lambda_2 = 1 - alpha - beta``.
-
-    >>> from markov import load_model
-    >>> s = road_spectrum(Road(1, load_model("nasch", {"vmax": 1}), alpha=0.3, beta=0.6))
-    >>> round(s.second.real, 12)
-    0.1
-    """
-    from markov.validate import ensure_tol
-
-    count = ensure_int("count", count, 1, 1000)
-    tol = ensure_tol(tol)
-    start = time.perf_counter()
-    lumped = _lumped_chain(system) if lump_velocities else None
-    if lumped is not None and count + 1 < lumped.n_states:
-        road, P = lumped.system, lumped.matrix
-        S = lumped.solution().steps_per_time_step     # refuses several closed classes
-        notes = (f"velocities lumped ({lumped.lattice.lumping.describe()}): every nonzero"
-                 " eigenvalue is the full chain's (identical rows of P); the eigenvalues 0"
-                 " of the merged velocities are not listed",)
-    else:
-        # every velocity kept; a small lumped chain too, so that its zeros are listed
-        sv = prepare_road(system, solution)
-        road, P, S, notes = sv.road, sv.P, sv.S, ()
-    n = P.shape[0]
-    if n == 1:
-        return RoadSpectrum(road, (), (), 1, S, "dense", time.perf_counter() - start, notes)
-    want = min(count + 1, n)
-    # complex, as the ring's sector matrices: _leading starts ARPACK from a complex vector
-    A = spla.aslinearoperator(P.T.tocsr().astype(np.complex128))
-    pairs = drop_stationary(leading(A, want, tol, maxiter), count)
-    route = "dense" if n <= DENSE_SECTOR_STATES or want >= n - 1 else "arpack"
-    return RoadSpectrum(road, tuple(v for v, _ in pairs), tuple(r for _, r in pairs), n,
-                        S, route, time.perf_counter() - start, notes)
-
-
-def _lumped_chain(system) -> RoadChain | None:
-    """The road's chain with its velocities lumped, or None where nothing merges."""
-    if isinstance(system, RoadChain):
-        chain = system if system.lattice.lumping is not None else RoadChain(
-            system.system, max_memory=system.max_memory)
-    elif isinstance(system, Road):
-        chain = RoadChain(system)
-    else:
-        return None                   # prepare_road names the bad input
-    return chain if chain.lattice.lumping is not None and not chain.system.periodic else None
+__all__ = ["road_parameter", "polynomial_degree_bound", "ROAD_OBSERVABLES",
+           "road_observable", "exit_branches"]
 
 
 # ---------------------------------------------------------------- sensitivity
@@ -385,59 +208,6 @@ def polynomial_degree_bound(road: Road, name: str, at, value: float, radius: flo
     return max(1, g * factors)
 
 
-@dataclass(frozen=True, eq=False)
-class RoadSensitivity:
-    """Derivatives of a road's stationary state in one parameter.
-
-    Attributes
-    ----------
-    parameter : str
-    value : float
-    dpi : (n,) float64 array
-        Sums to zero.
-    dflux, dinflow, dmean_cars : float
-        Per time step.
-    ddensity : (L,) float64 array
-    residual : float
-        ``||dpi (I - P) - pi dP||_1``.
-    degree : int
-        The degree bound; ``degree + 3`` Chebyshev points.
-    degree_check : float
-        The two top Chebyshev coefficients of the entries of ``P`` (relative to
-        the largest entry): zero to rounding for polynomials of degree ``<= degree``.
-    radius : float
-    seconds : float
-    """
-
-    parameter: str
-    value: float
-    dpi: np.ndarray = field(repr=False)
-    dflux: float
-    dinflow: float
-    dmean_cars: float
-    ddensity: np.ndarray
-    residual: float
-    degree: int
-    degree_check: float
-    radius: float
-    seconds: float
-
-    def to_dict(self) -> dict:
-        """JSON-ready (without ``dpi``).
-
-        Returns
-        -------
-        dict
-        """
-        return {"parameter": self.parameter, "value": self.value, "dflux": self.dflux,
-                "dinflow": self.dinflow, "dmean_cars": self.dmean_cars,
-                "ddensity_profile": self.ddensity.tolist(), "residual": self.residual,
-                "derivative": "Chebyshev interpolation of the polynomial entries of P",
-                "degree": self.degree, "points": self.degree + 3,
-                "degree_check": self.degree_check, "radius": self.radius,
-                "seconds": self.seconds}
-
-
 def _matrix_on(lattice, keys: np.ndarray) -> sp.csr_array:
     indptr, succ, weight = successors(lattice, keys)
     col = np.searchsorted(keys, succ)
@@ -448,300 +218,3 @@ def _matrix_on(lattice, keys: np.ndarray) -> sp.csr_array:
     P.sum_duplicates()
     P.sort_indices()
     return P
-
-
-def road_sensitivity(system, parameter: str, solution: RoadSolution | None = None,
-                     tol: float = 1e-12) -> RoadSensitivity:
-    """``d pi / d theta`` and the derivatives of the flux, inflow, cars and density, exactly.
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-    parameter : str
-        See :func:`road_parameter`.
-    solution : RoadSolution, optional
-    tol : float
-        Relative residual target of the solve for ``dpi``.
-
-    Returns
-    -------
-    RoadSensitivity
-
-    Examples
-    --------
-    One cell, parallel site1/sink: ``J = alpha beta / (alpha + beta)``, so
-    ``dJ / dalpha = (beta / (alpha + beta))^2``.
-
-    >>> from markov import load_model
-    >>> s = road_sensitivity(Road(1, load_model("nasch", {"vmax": 1}), alpha=0.3, beta=0.6),
-    ...                      "alpha")
-    >>> round(s.dflux, 12), round((0.6 / 0.9) ** 2, 12)
-    (0.444444444444, 0.444444444444)
-    """
-    road = system.system if isinstance(system, RoadChain) else system
-    if not isinstance(road, Road):
-        raise InvalidParameterError(
-            f"expected a markov Road or RoadChain, got {type(system).__name__}")
-    value, at = road_parameter(road, parameter)     # before any work
-    sv = prepare_road(system, solution)
-    start = time.perf_counter()
-    radius = 0.5 * min(value, 1 - value)
-    degree = polynomial_degree_bound(road, parameter, at, value, radius)
-    K = degree + 3
-    t, D, top = _chebyshev(K)
-    keys, P0 = sv.keys, sv.P.copy()
-    P0.sort_indices()
-    lay = sv.chain.lattice.layout
-    cols = [lay["left"], lay["entered"]]
-    data, incr = [], []
-    from markov.progress import progress_bar
-
-    bar = progress_bar(K, "sensitivity", "point")
-    for x in t:
-        bar.update(1)
-        lat = lattice_of(at(value + radius * x))
-        Pk = _matrix_on(lat, keys)
-        if not (np.array_equal(Pk.indptr, P0.indptr) and np.array_equal(Pk.indices, P0.indices)):
-            raise InvalidParameterError(
-                f"the support of P changes between {parameter} = {value - radius:g} and"
-                f" {value + radius:g}: no derivative")
-        data.append(Pk.data)
-        incr.append(increments(lat, keys)[:, cols])
-    bar.close()
-    F = np.array(data)
-    dP = sp.csr_array((D @ F / radius, P0.indices, P0.indptr), shape=P0.shape)
-    check = float(np.abs(top @ F).max() / max(1e-300, np.abs(F).max()))
-    da = np.tensordot(D, np.array(incr), axes=1) / radius          # (n, 2)
-    pi = sv.pi
-    h = dP.T @ pi
-    h -= pi * h.sum()                 # exact sum zero (rows of dP sum to zero)
-    dpi, residual = derivative_solve(sv.P, sv.step, pi, h, tol)
-    a = increments(sv.chain.lattice, keys)[:, cols]
-    dflux = sv.S * float(dpi @ a[:, 0] + pi @ da[:, 0])
-    dinflow = sv.S * float(dpi @ a[:, 1] + pi @ da[:, 1])
-    occ = _digits(road, keys) > 0
-    ddensity = dpi @ occ
-    return RoadSensitivity(parameter, value, dpi, dflux, dinflow, float(ddensity.sum()),
-                           ddensity, residual, degree, check, radius,
-                           time.perf_counter() - start)
-
-
-# -------------------------------------------------------------- fluctuations
-
-
-@dataclass(frozen=True)
-class ExitFluctuations:
-    """Mean and diffusion of ``Y_t``, the cars that left a road up to time ``t``.
-
-    Attributes
-    ----------
-    road : Road
-    current, diffusion, variance : float
-        Per chain step: ``J``, ``Delta = lim var(Y_t) / t`` and ``var(m)`` of the
-        cars leaving in one chain step.
-    steps_per_time_step : int
-    states : int
-    seconds : float
-    """
-
-    road: Road
-    current: float
-    diffusion: float
-    variance: float
-    steps_per_time_step: int
-    states: int
-    seconds: float
-    time_step_variance: float | None = None
-
-    @property
-    def flux(self) -> float:
-        """``J`` per time step (the solution's flux)."""
-        return self.current * self.steps_per_time_step
-
-    @property
-    def diffusion_per_time_step(self) -> float:
-        """``Delta`` per time step (``S`` chain steps)."""
-        return self.diffusion * self.steps_per_time_step
-
-    @property
-    def fano(self) -> float:
-        """``Delta / J``: 1 for a Poisson stream of cars."""
-        return self.diffusion / self.current if self.current > 0 else math.nan
-
-    @property
-    def tau_int(self) -> float:
-        """``Delta / var(m)``: the integrated autocorrelation time of the exit
-        increments, in chain steps."""
-        return self.diffusion / self.variance if self.variance > 0 else 1.0
-
-    @property
-    def tau_int_time_steps(self) -> float:
-        """The integrated autocorrelation time of the cars leaving per *time step*
-        (``S`` chain steps summed): ``Delta_time_step / var(Y_S)``, in time steps.
-        Under parallel and ordered-sequential update this is :attr:`tau_int`."""
-        var = self.variance if self.time_step_variance is None else self.time_step_variance
-        return self.diffusion_per_time_step / var if var > 0 else 1.0
-
-    @property
-    def continuous_time_diffusion(self) -> float | None:
-        """Random-sequential update in continuous time (each of the ``S = L + 1``
-        positions updated at rate 1, the number of sub-steps in time ``t`` Poisson
-        of mean ``S t``): ``S (Delta + J^2)`` per unit time, ``Delta``, ``J`` per
-        sub-step; None for the other updates."""
-        if self.steps_per_time_step == 1:
-            return None
-        return self.steps_per_time_step * (self.diffusion + self.current ** 2)
-
-    def to_dict(self) -> dict:
-        """JSON-ready.
-
-        Returns
-        -------
-        dict
-        """
-        S = self.steps_per_time_step
-        return {"exit_current": self.flux, "exit_diffusion": self.diffusion_per_time_step,
-                "exit_fano": self.fano, "exit_variance_per_chain_step": self.variance,
-                "exit_variance_per_time_step": (self.variance if self.time_step_variance is None
-                                                else self.time_step_variance),
-                "exit_current_per_chain_step": self.current,
-                "exit_diffusion_per_chain_step": self.diffusion,
-                "exit_diffusion_continuous_time": self.continuous_time_diffusion,
-                "tau_int_exit": self.tau_int_time_steps, "tau_int_exit_chain_steps": self.tau_int,
-                "time_unit": "time step", "chain_step": chain_step_name(S),
-                "steps_per_time_step": S, "states": self.states, "seconds": self.seconds}
-
-
-def exit_fluctuations(system, solution: RoadSolution | None = None) -> ExitFluctuations:
-    """``J`` and the diffusion coefficient of the exit count, exactly (Green-Kubo, one solve).
-
-    ``Delta = var(m) + 2 w . a`` with ``w (I - P) = b - J pi``, ``sum w = 0``
-    (:mod:`markov.analysis.fluctuations`), ``m`` the cars leaving in a transition.
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-    solution : RoadSolution, optional
-
-    Returns
-    -------
-    ExitFluctuations
-
-    Examples
-    --------
-    One cell, parallel site1/sink at ``alpha = beta = 1/2``: the exits form a
-    two-state chain; ``J = 1/4``.
-
-    >>> from markov import load_model
-    >>> fl = exit_fluctuations(Road(1, load_model("nasch", {"vmax": 1}), alpha=0.5, beta=0.5))
-    >>> round(fl.flux, 12)
-    0.25
-    """
-    start = time.perf_counter()
-    sv = prepare_road(system, solution)
-    inc = sv.increments()
-    delta = diffusion(sv, inc)
-    step_var = None
-    if sv.S > 1:            # var(Y_S): the cars leaving in one time step of S sub-steps
-        step_var = count_variance(sv, inc, sv.S)[sv.S]
-    return ExitFluctuations(sv.road, inc.current, delta, inc.variance, sv.S, len(sv.pi),
-                            time.perf_counter() - start, step_var)
-
-
-def exit_count_variance(system, steps: int, solution: RoadSolution | None = None) -> np.ndarray:
-    """``var(Y_t)``, ``t = 0..steps`` chain steps, of the stationary road, exactly.
-
-    ``var(Y_t) = t var(m) + 2 sum_{j=1}^{t-1} (t - j) cov_j``,
-    ``cov_j = (b - J pi) P^{j-1} . a``.
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-    steps : int
-        In chain steps (sub-steps for random-sequential update).
-    solution : RoadSolution, optional
-
-    Returns
-    -------
-    (steps + 1,) float64 array
-    """
-    steps = ensure_int("steps", steps, 0, MAX_LAGS)
-    sv = prepare_road(system, solution)
-    return count_variance(sv, sv.increments(), steps)
-
-
-def exit_scgf(system, s_values, solution: RoadSolution | None = None) -> np.ndarray:
-    """``Lambda(s) = lim (1/t) log E e^{s Y_t}`` per chain step: the log Perron root of
-    the tilted matrix ``P_s(x, y) = sum over branches P e^{s m}``.
-
-    Dense eigenvalues up to 300 states, else ARPACK (largest real part).
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-    s_values : sequence of float, ``|s| <= 50``
-    solution : RoadSolution, optional
-
-    Returns
-    -------
-    (k,) float64 array
-    """
-    s_arr = np.array([ensure_real("s", s, -50.0, 50.0) for s in np.atleast_1d(s_values)])
-    sv = prepare_road(system, solution)
-    return scgf_values(sv, sv.increments(keep=True), s_arr)[0]
-
-
-# ------------------------------------------------------------ correlations
-
-
-def road_autocorrelation(system, observable: str = "exit", lags: int = 100,
-                         solution: RoadSolution | None = None) -> np.ndarray:
-    """Stationary ``C(t)``, ``t = 0..lags`` chain steps, of an observable, exactly.
-
-    ``"exit"``: the cars leaving in one chain step (an increment of ``Y``):
-    ``C(0) = var(m)``, ``C(j) = (b - J pi) P^{j-1} . a``; a state observable
-    (``cars``, ``stopped``, ``occupation:X``): ``C(t) = (pi o d) P^t . d``.
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-    observable : str
-    lags : int
-    solution : RoadSolution, optional
-
-    Returns
-    -------
-    (lags + 1,) float64 array
-    """
-    lags = ensure_int("lags", lags, 0, MAX_LAGS)
-    road = road_of(system)
-    if observable != "exit" and isinstance(road, Road):
-        road_observable(road, np.zeros(1, np.int64), observable)    # the name, before work
-    sv = prepare_road(system, solution)
-    if observable == "exit":
-        return increment_autocorrelation(sv, sv.increments(), lags)
-    return autocorrelation_of(sv, observable, lags)
-
-
-def road_autocorrelation_time(system, observable: str = "exit",
-                              solution: RoadSolution | None = None) -> float:
-    """``tau_int = 1 + 2 sum_{t >= 1} C(t) / C(0)`` in chain steps, exactly (one solve).
-
-    Parameters
-    ----------
-    system : Road or RoadChain
-    observable : str
-    solution : RoadSolution, optional
-
-    Returns
-    -------
-    float
-        In chain steps (divide by ``steps_per_time_step`` for time steps); 1 for
-        a constant observable.
-    """
-    if observable == "exit":
-        return exit_fluctuations(system, solution).tau_int
-    road = road_of(system)
-    if isinstance(road, Road):
-        road_observable(road, np.zeros(1, np.int64), observable)
-    return autocorrelation_time_of(prepare_road(system, solution), observable)

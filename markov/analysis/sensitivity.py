@@ -1,5 +1,10 @@
 """Exact derivatives of the stationary state in a probability parameter of the model.
 
+:func:`sensitivity` takes a ring or a road and gives one :class:`Sensitivity`; a
+road's ``dP`` (in ``alpha``, ``beta``, a ramp's rate or a probability) is a
+Chebyshev interpolation of its polynomial entries
+(:mod:`markov.analysis.road_dynamics`).  The rest of this text is the ring's.
+
 Differentiating ``pi (I - P) = 0``, ``sum(pi) = 1`` gives
 
     ``dpi (I - P) = pi dP``,  ``sum(dpi) = 0``,
@@ -42,6 +47,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from markov.analysis.stationary_chain import derivative_solve
+from markov.analysis.systems import is_road
 from markov.chain.transition import state_indices, successor_counts, successors
 from markov.errors import InvalidParameterError
 from markov.model.guard import RuleCaller
@@ -49,7 +55,9 @@ from markov.model.load import Model
 from markov.model.ring import ORDERED_SEQUENTIAL, PARALLEL, Ring
 from markov.model.table import RuleTable, cached_table, tabulate
 from markov.solvers import observables
+from markov.model.road import Road
 from markov.solvers.ring_chain import RingChain, Solution
+from markov.solvers.road_chain import RoadChain, RoadSolution
 
 __all__ = ["Sensitivity", "WeightDerivatives", "weight_derivatives", "sensitivity",
            "derivative_product", "ROUTES", "CENTRAL_STEP"]
@@ -90,7 +98,7 @@ class WeightDerivatives:
 
 @dataclass(frozen=True, eq=False)
 class Sensitivity:
-    """Derivatives of a stationary state in one parameter of the model.
+    """Derivatives of a ring's or a road's stationary state in one parameter.
 
     Attributes
     ----------
@@ -100,40 +108,67 @@ class Sensitivity:
     dpi : (n,) float64 array
         ``d pi / d parameter`` over the solution's keys; sums to zero.
     dflux : float
-        ``d flux / d parameter``.
-    dc_v : (vmax + 1,) float64 array
-        ``d c_v / d parameter``; sums to zero.
+        ``d flux / d parameter`` (the flux per time step: a ring's per cell, a
+        road's cars crossing a bond).
+    dc_v : (vmax + 1,) float64 array or None
+        A ring's ``d c_v / d parameter``; sums to zero.  None on a road.
     residual : float
         ``||dpi (I - P) - pi dP||_1`` of the solve.
-    derivative : {"symbolic", "central-difference"}
-        How the weights were differentiated (:func:`weight_derivatives`).
-    route : {"rows", "factored"}
-        How ``pi dP`` was formed.
+    derivative : str
+        How ``dP`` was found: a ring's weights ``"symbolic"`` or
+        ``"central-difference"`` (:func:`weight_derivatives`), a road's Chebyshev
+        interpolation of the polynomial entries of ``P``.
+    route : {"rows", "factored", "matrix"}
+        How ``pi dP`` was formed (a road: ``dP`` as a sparse matrix).
     seconds : float
-        Time of the derivative: the weights' derivatives, ``pi dP`` and the
-        solve for ``dpi`` (not the stationary solve).
+        Time of the derivative (not the stationary solve).
+    dinflow : float or None
+        A road's ``d inflow / d parameter`` per time step; None on a ring.
+    dmean_cars : float
+        ``d <cars> / d parameter`` (0 on a ring: its cars are conserved).
+    ddensity : (L,) float64 array or None
+        A road's derivative of the density profile; None on a ring.
+    degree, degree_check, radius : int, float, float or None
+        A road's Chebyshev interpolation: the degree bound (``degree + 3``
+        points), the two top coefficients of the entries of ``P`` relative to
+        the largest (zero to rounding for polynomials of degree ``<= degree``),
+        the half-width of the interval; None on a ring.
     """
 
     parameter: str
     value: float
     dpi: np.ndarray = field(repr=False)
     dflux: float
-    dc_v: np.ndarray
+    dc_v: np.ndarray | None
     residual: float
     derivative: str
     route: str
     seconds: float
+    dinflow: float | None = None
+    dmean_cars: float = 0.0
+    ddensity: np.ndarray | None = None
+    degree: int | None = None
+    degree_check: float | None = None
+    radius: float | None = None
 
     def to_dict(self) -> dict:
-        """JSON-ready summary (without ``dpi``).
+        """JSON-ready summary (without ``dpi``); the same keys for a ring and a road.
 
         Returns
         -------
         dict
         """
+        def listed(x):
+            return None if x is None else x.tolist()
+
         return {"parameter": self.parameter, "value": self.value, "dflux": self.dflux,
-                "dc_v": self.dc_v.tolist(), "residual": self.residual,
-                "derivative": self.derivative, "route": self.route, "seconds": self.seconds}
+                "dc_v": listed(self.dc_v), "dinflow": self.dinflow,
+                "dmean_cars": self.dmean_cars, "ddensity_profile": listed(self.ddensity),
+                "residual": self.residual, "derivative": self.derivative,
+                "route": self.route, "degree": self.degree,
+                "points": None if self.degree is None else self.degree + 3,
+                "degree_check": self.degree_check, "radius": self.radius,
+                "time_unit": "time step", "seconds": self.seconds}
 
 
 # --------------------------------------------------------------- the weights
@@ -403,23 +438,27 @@ def _chain_of(system, solution: Solution | None) -> RingChain:
     return chain
 
 
-def sensitivity(system, parameter: str, solution: Solution | None = None,
+def sensitivity(system, parameter: str, solution: Solution | RoadSolution | None = None,
                 route: str = "auto", tol: float = 1e-12) -> Sensitivity:
-    """``d pi / d parameter`` and the derivatives of the flux and ``c_v``, exactly.
+    """``d pi / d parameter`` and the derivatives of the flux and ``c_v`` (a ring) or of
+    the flux, inflow, cars and density profile (a road), exactly.
 
     Parameters
     ----------
-    system : RingChain or Ring
+    system : RingChain, Ring, Road or RoadChain
         The chain (what it has built is reused), or a ring (a chain is made;
-        with ``solution``, on the solution's states).
+        with ``solution``, on the solution's states), or a road
+        (:func:`markov.analysis.road_dynamics.road_parameter`: ``alpha``,
+        ``beta``, ``ramp@CELL``, a model's or a stretch's probability).
     parameter : str
-        A probability parameter of the model (``p``; ``p0`` for VDR, ...).
-    solution : Solution, optional
+        A probability parameter of the model (``p``; ``p0`` for VDR, ...), or a
+        road's parameter.
+    solution : Solution or RoadSolution, optional
         The stationary state of ``system`` (default: ``chain.solution()``);
         one with velocities lumped is solved again with every velocity (the
         derivative reads the states' velocities).
     route : {"auto", "rows", "factored"}
-        How ``pi dP`` is formed (:data:`ROUTES`).
+        How a ring's ``pi dP`` is formed (:data:`ROUTES`); a road: ``"auto"``.
     tol : float
         Relative residual target of the solve for ``dpi``.
 
@@ -443,6 +482,11 @@ def sensitivity(system, parameter: str, solution: Solution | None = None,
     """
     if route not in ROUTES:
         raise InvalidParameterError(f"route must be one of {', '.join(ROUTES)}, got {route!r}")
+    if is_road(system):
+        if route != "auto":
+            raise InvalidParameterError("a road's dP is a Chebyshev interpolation: route"
+                                        " 'auto' only")
+        return _road_sensitivity(system, parameter, solution, tol)
     ring = system.ring if isinstance(system, RingChain) else system
     if not isinstance(ring, Ring):
         raise InvalidParameterError(
@@ -476,3 +520,61 @@ def sensitivity(system, parameter: str, solution: Solution | None = None,
             ring, sol.keys, pi, weight=derivatives.dweight)
     return Sensitivity(parameter, derivatives.value, dpi, dflux, dc_v, residual,
                        derivatives.method, route, time.perf_counter() - start)
+
+
+def _road_sensitivity(system, parameter: str, solution: RoadSolution | None,
+                      tol: float) -> Sensitivity:
+    """:func:`sensitivity` of a road: ``dP`` by Chebyshev interpolation
+    (:mod:`markov.analysis.road_dynamics`)."""
+    from markov.analysis.road_dynamics import (_chebyshev, _matrix_on,
+                                               polynomial_degree_bound, road_parameter)
+    from markov.analysis.road_system import _digits, prepare_road
+    from markov.chain.lattice import increments, lattice_of
+
+    road = system.system if isinstance(system, RoadChain) else system
+    if not isinstance(road, Road):
+        raise InvalidParameterError(
+            f"expected a markov Road or RoadChain, got {type(system).__name__}")
+    value, at = road_parameter(road, parameter)     # before any work
+    sv = prepare_road(system, solution)
+    start = time.perf_counter()
+    radius = 0.5 * min(value, 1 - value)
+    degree = polynomial_degree_bound(road, parameter, at, value, radius)
+    K = degree + 3
+    t, D, top = _chebyshev(K)
+    keys, P0 = sv.keys, sv.P.copy()
+    P0.sort_indices()
+    lay = sv.chain.lattice.layout
+    cols = [lay["left"], lay["entered"]]
+    data, incr = [], []
+    from markov.progress import progress_bar
+
+    bar = progress_bar(K, "sensitivity", "point")
+    for x in t:
+        bar.update(1)
+        lat = lattice_of(at(value + radius * x))
+        Pk = _matrix_on(lat, keys)
+        if not (np.array_equal(Pk.indptr, P0.indptr) and np.array_equal(Pk.indices, P0.indices)):
+            raise InvalidParameterError(
+                f"the support of P changes between {parameter} = {value - radius:g} and"
+                f" {value + radius:g}: no derivative")
+        data.append(Pk.data)
+        incr.append(increments(lat, keys)[:, cols])
+    bar.close()
+    F = np.array(data)
+    dP = sp.csr_array((D @ F / radius, P0.indices, P0.indptr), shape=P0.shape)
+    check = float(np.abs(top @ F).max() / max(1e-300, np.abs(F).max()))
+    da = np.tensordot(D, np.array(incr), axes=1) / radius          # (n, 2)
+    pi = sv.pi
+    h = dP.T @ pi
+    h -= pi * h.sum()                 # exact sum zero (rows of dP sum to zero)
+    dpi, residual = derivative_solve(sv.P, sv.step, pi, h, tol)
+    a = increments(sv.chain.lattice, keys)[:, cols]
+    dflux = sv.S * float(dpi @ a[:, 0] + pi @ da[:, 0])
+    dinflow = sv.S * float(dpi @ a[:, 1] + pi @ da[:, 1])
+    occ = _digits(road, keys) > 0
+    ddensity = dpi @ occ
+    return Sensitivity(parameter, value, dpi, dflux, None, residual,
+                       "Chebyshev interpolation of the polynomial entries of P", "matrix",
+                       time.perf_counter() - start, dinflow, float(ddensity.sum()), ddensity,
+                       degree, check, radius)

@@ -1,4 +1,9 @@
-"""The relaxation spectrum of a ring: leading eigenvalues of ``P`` in every momentum sector.
+"""The relaxation spectrum: leading eigenvalues of ``P`` in every momentum sector of a ring,
+or in the one sector of a road.
+
+:func:`relaxation_spectrum` takes either and gives one :class:`Spectrum`; a road
+(:mod:`markov.analysis.road_system`) has no rotation, so its sector 0 is its own
+``P`` (velocities lumped as a ring's, below).  The rest of this text is the ring's.
 
 The rules are translation invariant, so ``P`` commutes with the rotation ``R``
 of the ring (cell ``x`` to ``x + 1``) and splits into momentum sectors
@@ -31,7 +36,9 @@ densely.
 Each eigenvalue carries its residual ``||x P_k - lambda x|| / ||x||``.  The
 relaxation time is ``tau = -1 / ln |lambda_2|`` for the eigenvalue of largest
 modulus after the stationary 1 (in steps; sub-steps for random-sequential
-update), and its argument is the oscillation per step.
+update, ``L`` of them a time step), and its argument is the oscillation per step.
+A road's is ``-1 / (S ln |lambda_2|)`` time steps, ``S = L + 1`` sub-steps per time
+step under random-sequential update; :attr:`Spectrum.time_unit` says which.
 """
 from __future__ import annotations
 
@@ -44,14 +51,19 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from markov._jit import njit
+from markov.analysis.ring_system import sub_steps
+from markov.analysis.road_system import chain_step_name, prepare_road
 from markov.analysis.stationary_chain import (DENSE_SECTOR_STATES, _ncv,
                                               continuous_time_relaxation_time, drop_stationary,
                                               leading, relaxation_time as _relaxation_time)
+from markov.analysis.systems import is_road
 from markov.chain.encoding import powers
 from markov.chain.kernels import canonical_shift, orbit_size, shift_bits
 from markov.chain.transition import state_indices, successors
 from markov.errors import InvalidParameterError
 from markov.model.ring import ORDERED_SEQUENTIAL, PARALLEL, RANDOM_SEQUENTIAL, Ring
+from markov.model.road import Road
+from markov.solvers.road_chain import RoadChain
 from markov.validate import ensure_int
 
 __all__ = ["Eigenvalue", "Spectrum", "orbit_sizes", "sector_states", "sector_matrix",
@@ -68,46 +80,64 @@ _CHUNK = 1 << 15
 
 @dataclass(frozen=True)
 class Eigenvalue:
-    """One eigenvalue of ``P`` with its momentum sector and residual."""
+    """One eigenvalue of ``P`` (per chain step) with its sector (a road: 0) and residual
+    ``||x P_k - lambda x|| / ||x||``."""
 
     value: complex
     sector: int
     residual: float
 
     def to_dict(self) -> dict:
-        """``re``, ``im``, ``sector`` and ``residual``, as the JSON writes them.
+        """``re``, ``im``, ``modulus``, ``sector`` and ``residual``, as the JSON writes them.
 
         Returns
         -------
         dict
         """
         return {"re": float(self.value.real), "im": float(self.value.imag),
-                "sector": int(self.sector), "residual": float(self.residual)}
+                "modulus": float(abs(self.value)), "sector": int(self.sector),
+                "residual": float(self.residual)}
 
 
 @dataclass(frozen=True)
 class Spectrum:
-    """Leading eigenvalues of a ring's chain, the stationary eigenvalue 1 excluded.
+    """Leading eigenvalues of a ring's or a road's chain, the stationary eigenvalue 1 excluded.
+
+    A ring's come from its momentum sectors, a road's from its one sector, 0.
+    Eigenvalues are per chain step: a time step under parallel and
+    ordered-sequential update, a sub-step under random-sequential update (``S``
+    of them make a time step: ``L`` on a ring, ``L + 1`` on a road).
 
     Attributes
     ----------
-    ring : Ring
+    system : Ring or Road
     eigenvalues : tuple of Eigenvalue
         By decreasing modulus (ties: by sector, then argument).
     sector_sizes : dict
-        States of every sector computed.
+        States of every sector computed (a road: ``{0: states}``).
     operator : str
-        ``"dense"``, ``"matrix"`` or ``"matrix-free"`` (the largest sector's route).
+        The largest sector's route: ``"dense"``, ``"matrix"`` or ``"matrix-free"``
+        (a ring), ``"dense"`` or ``"arpack"`` (a road's sparse matrix).
     seconds : float
+    products : int
+        Products of a matrix-free operator (0 otherwise).
+    notes : tuple of str
+        E.g. that the velocities the rule cannot tell apart were merged.
+    states : int
+        States of the chain (a ring: its rotation classes).
+    steps_per_time_step : int
+        ``S``: chain steps per time step.
     """
 
-    ring: Ring
+    system: Ring | Road
     eigenvalues: tuple
     sector_sizes: dict
     operator: str
     seconds: float
     products: int = 0
     notes: tuple = field(default=())
+    states: int = 1
+    steps_per_time_step: int = 1
 
     @property
     def second(self) -> Eigenvalue | None:
@@ -115,19 +145,34 @@ class Spectrum:
         return self.eigenvalues[0] if self.eigenvalues else None
 
     @property
-    def relaxation_time(self) -> float:
-        """``-1 / ln |lambda_2|`` in steps: ``inf`` for ``|lambda_2| = 1`` (a periodic
-        or deterministic chain), 0 when nothing is left after one step."""
+    def time_unit(self) -> str:
+        """The unit of :attr:`relaxation_time`: ``"time step"``, but ``"sub-step"`` on a
+        random-sequential ring, whose relaxation time has always been given per chain
+        step (a road's per time step)."""
+        ring_substeps = isinstance(self.system, Ring) and self.steps_per_time_step > 1
+        return "sub-step" if ring_substeps else "time step"
+
+    @property
+    def relaxation_time_chain_steps(self) -> float:
+        """``-1 / ln |lambda_2|`` in chain steps: ``inf`` for ``|lambda_2| = 1`` (a
+        periodic or deterministic chain), 0 when nothing is left after one step."""
         lam = self.second
         return 0.0 if lam is None else _relaxation_time(abs(lam.value))
 
+    @property
+    def relaxation_time(self) -> float:
+        """The relaxation time in :attr:`time_unit`: ``-1 / (S ln |lambda_2|)`` time
+        steps, or :attr:`relaxation_time_chain_steps` where a chain step is the unit."""
+        per_unit = 1 if self.time_unit == "sub-step" else self.steps_per_time_step
+        return self.relaxation_time_chain_steps / per_unit
+
     def sector_relaxation_time(self, k: int) -> float:
-        """``-1 / ln |lambda|`` of the slowest eigenvalue of sector ``k`` alone.
+        """The relaxation time (in :attr:`time_unit`) of the slowest eigenvalue of sector ``k``.
 
         Sector 0 is what a translation-invariant observable (the flux, the
         density of stopped cars) started from a translation-invariant
         distribution sees; the slowest sector overall is usually ``k = 1``,
-        a density wave drifting around the ring.
+        a density wave drifting around the ring.  A road has sector 0 alone.
 
         Parameters
         ----------
@@ -139,39 +184,53 @@ class Spectrum:
             ``nan`` when the sector was not computed or holds no eigenvalue.
         """
         values = [abs(e.value) for e in self.eigenvalues if e.sector == k]
-        return _relaxation_time(max(values)) if values else math.nan
+        if not values:
+            return math.nan
+        per_unit = 1 if self.time_unit == "sub-step" else self.steps_per_time_step
+        return _relaxation_time(max(values)) / per_unit
 
     @property
     def oscillation(self) -> float:
-        """The argument of ``lambda_2`` (radians per step)."""
+        """The argument of ``lambda_2`` (radians per chain step)."""
         lam = self.second
         return 0.0 if lam is None else float(np.angle(lam.value))
 
     @property
     def continuous_time_relaxation_time(self) -> float | None:
-        """Random-sequential update in continuous time (each cell drawn at rate 1,
-        generator ``L (P - 1)``): ``1 / (L min(1 - Re lambda))`` over the eigenvalues
-        found, in time steps; None for the other updates (not in :meth:`to_dict`)."""
-        steps = self.ring.length if self.ring.update == RANDOM_SEQUENTIAL else 1
-        return continuous_time_relaxation_time([e.value for e in self.eigenvalues], steps)
+        """Random-sequential update in continuous time (each cell, on a road each of
+        the ``L + 1`` positions, drawn at rate 1: generator ``S (P - 1)``):
+        ``1 / (S min(1 - Re lambda))`` over the eigenvalues found, in time steps;
+        None for the other updates."""
+        return continuous_time_relaxation_time([e.value for e in self.eigenvalues],
+                                               self.steps_per_time_step)
 
     def to_dict(self) -> dict:
-        """The spectrum as JSON-ready values (``None`` for an infinite time).
+        """The spectrum, the system and its conventions as JSON-ready values (``None`` for
+        an infinite time); the same keys for a ring and a road.
 
         Returns
         -------
         dict
         """
-        tau = self.relaxation_time
+        def finite(t):
+            return t if math.isfinite(t) else None
+
         lam = self.second
-        tau0 = self.sector_relaxation_time(0)
-        return {"eigenvalues": [e.to_dict() for e in self.eigenvalues],
-                "relaxation_time": tau if math.isfinite(tau) else None,
-                "relaxation_time_sector0": tau0 if math.isfinite(tau0) else None,
+        S = self.steps_per_time_step
+        return {**self.system.describe(),
+                "eigenvalues": [e.to_dict() for e in self.eigenvalues],
+                "relaxation_time": finite(self.relaxation_time),
+                "relaxation_time_sector0": finite(self.sector_relaxation_time(0)),
+                "relaxation_time_chain_steps": finite(self.relaxation_time_chain_steps),
+                "time_unit": self.time_unit, "chain_step": chain_step_name(S),
+                "steps_per_time_step": S,
+                "relaxation_time_continuous": self.continuous_time_relaxation_time,
                 "sector": None if lam is None else int(lam.sector),
                 "oscillation": self.oscillation,
+                "sectors": ("one (a road has no rotation)" if isinstance(self.system, Road)
+                            else "momentum k = 0..L-1"),
                 "sector_sizes": {str(k): int(v) for k, v in self.sector_sizes.items()},
-                "operator": self.operator, "seconds": self.seconds,
+                "states": self.states, "operator": self.operator, "seconds": self.seconds,
                 "products": self.products, "notes": list(self.notes)}
 
 
@@ -417,32 +476,41 @@ def _check_memory(ring: Ring, keys: np.ndarray, free: bool, count: int, limit: f
                       if ring.update == PARALLEL else "")
 
 
-def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 1e-10,
+def relaxation_spectrum(system, count: int = 4, sectors="all", tol: float = 1e-10,
                         keys: np.ndarray | None = None, operator: str = "auto",
                         maxiter: int = 20_000, max_memory: float | None = None,
                         lump_velocities: bool = True) -> Spectrum:
-    """The ``count`` leading eigenvalues (after 1) of every momentum sector asked.
+    """The ``count`` leading eigenvalues (after 1) of every sector asked, of a ring or a road.
+
+    A ring's chain splits into momentum sectors (the module's text); a road has
+    no rotation, so one sector, 0: the leading eigenvalues of its ``P`` (dense
+    LAPACK up to :data:`DENSE_SECTOR_STATES` states, else ARPACK on the sparse
+    matrix, largest modulus).
 
     Parameters
     ----------
-    ring : Ring
-        Any model and update; the chain must have one closed class.
+    system : Ring, Road or RoadChain
+        Any model and update; the chain must have one closed class (a road with
+        several: :class:`markov.errors.NoUniqueStationaryStateError` with every
+        class solved).
     count : int
         Eigenvalues per sector (sector 0 computes one more and drops the
         stationary eigenvalue 1).
     sectors : "all", int or iterable of int
+        A road: ``"all"`` or 0.
     tol : float
         ARPACK's relative accuracy of the eigenvalues.
     keys : (n,) int64 array, optional
-        The canonical keys of the recurrent class, if already found (one
+        A ring's canonical keys of the recurrent class, if already found (one
         closed class: the caller vouches for it), e.g. ``RingChain(ring,
         lump_velocities=lump_velocities).keys``: with the velocities merged as
-        ``lump_velocities`` says.
+        ``lump_velocities`` says.  Not for a road.
     operator : {"auto", "matrix", "matrix-free"}
-        ``auto``: sector matrices, but matrix-free for parallel rings above
+        A ring: ``auto``: sector matrices, but matrix-free for parallel rings above
         :data:`FACTORED_SECTOR_STATES` states and for random-sequential rings
         whose matrices do not fit (the row operator is about 7x slower);
-        ordered-sequential update has only the matrices.
+        ordered-sequential update has only the matrices.  A road: its matrix
+        (``"matrix-free"`` is refused).
     maxiter : int
         ARPACK restarts.
     max_memory : float, optional
@@ -458,9 +526,9 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
         ``R V``, whose nonzero eigenvalues are ``V R``'s with their
         multiplicities, sector by sector (both commute with the rotation).
         Only eigenvalues 0 are lost; the notes say so.  Where a sector of the
-        lumped chain has no more states than eigenvalues asked (a small ring),
-        the full chain is solved instead, so that its eigenvalues 0 are listed.
-        ``False`` keeps every velocity.
+        lumped chain has no more states than eigenvalues asked (a small ring or
+        road), the full chain is solved instead, so that its eigenvalues 0 are
+        listed.  ``False`` keeps every velocity.
 
     Returns
     -------
@@ -478,17 +546,39 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
     [(1, (0.5+0.5j)), (3, (0.5-0.5j))]
     >>> round(s.relaxation_time, 6)
     2.88539
+
+    One cell of a road, parallel site1/sink: the cell empties with ``beta``,
+    fills with ``alpha``, so ``lambda_2 = 1 - alpha - beta``.
+
+    >>> from markov import load_model
+    >>> s = relaxation_spectrum(Road(1, load_model("nasch", {"vmax": 1}), alpha=0.3,
+    ...                              beta=0.6))
+    >>> round(s.second.value.real, 12), s.second.sector
+    (0.1, 0)
     """
     from markov.choices import OPERATORS
+
+    if operator not in OPERATORS:
+        raise InvalidParameterError(f"operator must be one of {', '.join(OPERATORS)}")
+    if is_road(system):
+        return _road_spectrum(system, count, sectors, tol, keys, operator, maxiter, max_memory,
+                              lump_velocities)
+    return _ring_spectrum(system, count, sectors, tol, keys, operator, maxiter, max_memory,
+                          lump_velocities)
+
+
+def _ring_spectrum(ring: Ring, count: int, sectors, tol: float, keys: np.ndarray | None,
+                   operator: str, maxiter: int, max_memory: float | None,
+                   lump_velocities: bool) -> Spectrum:
+    """:func:`relaxation_spectrum` of a ring: its momentum sectors."""
     from markov.solvers.ring_chain import RingChain, velocity_lumping
     from markov.validate import ensure_tol
 
     if not isinstance(ring, Ring):
-        raise InvalidParameterError(f"ring must be a Ring, got {type(ring).__name__}")
+        raise InvalidParameterError(
+            f"expected a markov Ring, Road or RoadChain, got {type(ring).__name__}")
     count = ensure_int("count", count, 1, 1000)
     tol = ensure_tol(tol)
-    if operator not in OPERATORS:
-        raise InvalidParameterError(f"operator must be one of {', '.join(OPERATORS)}")
     wanted = _parse_sectors(ring, sectors)
     start = time.perf_counter()
     from markov.memory import memory_limit
@@ -505,10 +595,12 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
             chain.solution()
     keys = np.ascontiguousarray(keys, dtype=np.int64)
     n = len(keys)
+    steps = sub_steps(ring)
     if ring.trivial:
         # no car or no empty cell: one configuration, nothing moves
         return Spectrum(ring, (), {k: int(k == 0) for k in wanted}, "dense",
-                        time.perf_counter() - start, notes=("a single configuration",))
+                        time.perf_counter() - start, notes=("a single configuration",),
+                        steps_per_time_step=steps)
     notes = () if lumping is None else (
         f"velocities lumped ({lumping.describe()}): every nonzero eigenvalue is the full"
         " chain's (identical rows of P); the eigenvalues 0 of the merged velocities are"
@@ -556,8 +648,8 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
             # hold eigenvalues 0 besides them, which only the full chain lists (a small
             # ring: a sector of a large one holds every aperiodic class)
             bar.close()
-            return relaxation_spectrum(ring, count, sectors, tol, None, operator, maxiter,
-                                       max_memory, lump_velocities=False)
+            return _ring_spectrum(ring, count, sectors, tol, None, operator, maxiter,
+                                  max_memory, lump_velocities=False)
         A, _ = sector_operator(ring, keys, k, free_op, _rows=rows, _sizes=sizes)
         if m > DENSE_SECTOR_STATES and want < m - 1:
             route = "matrix-free" if free_op is not None else "matrix"
@@ -571,4 +663,58 @@ def relaxation_spectrum(ring: Ring, count: int = 4, sectors="all", tol: float = 
     found.sort(key=lambda e: (-round(abs(e.value), 12), e.sector, np.angle(e.value)))
     products = free_op.products if free_op is not None else 0
     return Spectrum(ring, tuple(found), dict(sorted(sector_sizes.items())), route,
-                    time.perf_counter() - start, products, notes)
+                    time.perf_counter() - start, products, notes, n, steps)
+
+
+def _road_spectrum(system, count: int, sectors, tol: float, keys: np.ndarray | None,
+                   operator: str, maxiter: int, max_memory: float | None,
+                   lump_velocities: bool) -> Spectrum:
+    """:func:`relaxation_spectrum` of a road (or its chain): one sector, its ``P``."""
+    from markov.validate import ensure_tol
+
+    count = ensure_int("count", count, 1, 1000)
+    tol = ensure_tol(tol)
+    if not (sectors is None or (isinstance(sectors, str) and sectors == "all")
+            or np.array_equal(np.atleast_1d(np.asarray(sectors, dtype=object)), [0])):
+        raise InvalidParameterError(f"a road has one sector, 0; got sectors={sectors!r}")
+    if keys is not None:
+        raise InvalidParameterError("keys are a ring's canonical keys; give a road's states"
+                                    " as a RoadChain")
+    if operator == "matrix-free":
+        raise InvalidParameterError("a road is solved with its matrix (operator='matrix-free'"
+                                    " is for rings)")
+    if isinstance(system, Road) and max_memory is not None:
+        system = RoadChain(system, max_memory=max_memory)
+    start = time.perf_counter()
+    lumped = _lumped_chain(system) if lump_velocities else None
+    if lumped is not None and count + 1 < lumped.n_states:
+        road, P = lumped.system, lumped.matrix
+        S = lumped.solution().steps_per_time_step     # refuses several closed classes
+        notes = (f"velocities lumped ({lumped.lattice.lumping.describe()}): every nonzero"
+                 " eigenvalue is the full chain's (identical rows of P); the eigenvalues 0"
+                 " of the merged velocities are not listed",)
+    else:
+        # every velocity kept; a small lumped chain too, so that its zeros are listed
+        sv = prepare_road(system)
+        road, P, S, notes = sv.road, sv.P, sv.S, ()
+    n = P.shape[0]
+    if n == 1:
+        return Spectrum(road, (), {0: 1}, "dense", time.perf_counter() - start, 0, notes, 1, S)
+    want = min(count + 1, n)
+    # complex, as the ring's sector matrices: leading starts ARPACK from a complex vector
+    A = spla.aslinearoperator(P.T.tocsr().astype(np.complex128))
+    pairs = drop_stationary(leading(A, want, tol, maxiter), count)
+    route = "dense" if n <= DENSE_SECTOR_STATES or want >= n - 1 else "arpack"
+    return Spectrum(road, tuple(Eigenvalue(v, 0, r) for v, r in pairs), {0: n}, route,
+                    time.perf_counter() - start, 0, notes, n, S)
+
+
+def _lumped_chain(system):
+    """The road's chain with its velocities lumped (a RoadChain), or None where nothing
+    merges."""
+    if isinstance(system, RoadChain):
+        chain = system if system.lattice.lumping is not None else RoadChain(
+            system.system, max_memory=system.max_memory)
+    else:
+        chain = RoadChain(system)
+    return chain if chain.lattice.lumping is not None and not chain.system.periodic else None

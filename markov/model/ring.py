@@ -139,6 +139,18 @@ class Ring:
 
     periodic = True
 
+    def describe(self) -> dict:
+        """JSON-ready: the ring's geometry, size, update, model and stretches (as a
+        road's :meth:`markov.model.road.Road.describe`).
+
+        Returns
+        -------
+        dict
+        """
+        return {"geometry": "ring", "length": self.length, "cars": self.cars,
+                "update": self.update, "model": self.model.describe(),
+                "stretches": [s.describe() for s in self.stretches]}
+
     @property
     def zones(self) -> tuple[Model, ...]:
         """The distinct models along the ring, the bulk first (one without stretches)."""

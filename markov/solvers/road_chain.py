@@ -755,10 +755,7 @@ class RoadSolution:
         -------
         dict
         """
-        s = self.system
-        d = s.describe() if hasattr(s, "describe") else {
-            "geometry": "ring", "length": s.length, "cars": s.cars, "update": s.update,
-            "model": s.model.describe(), "stretches": [x.describe() for x in s.stretches]}
+        d = self.system.describe()
         d.update({
             "flux": self.flux, "inflow": self.inflow, "ramp_inflows": self.ramp_inflows.tolist(),
             "bond_currents": self.bond_currents.tolist(),

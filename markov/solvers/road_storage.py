@@ -67,11 +67,7 @@ def system_description(system) -> dict:
     -------
     dict
     """
-    if not system.periodic:
-        return system.describe()
-    return {"geometry": "ring", "length": system.length, "cars": system.cars,
-            "update": system.update, "model": system.model.describe(),
-            "stretches": [s.describe() for s in system.stretches]}
+    return system.describe()
 
 
 def system_of(described: dict):

@@ -408,30 +408,45 @@ ROAD_CORRELATED = ("exit", "cars", "stopped")
 
 def _road_dynamics(chain, sol, names, fluctuations: bool, lags, tol) -> dict:
     """The JSON fields of a road's --sensitivity, --fluctuations and --autocorrelation."""
-    from markov.analysis import road_dynamics as rd
+    from markov.analysis.correlations import autocorrelation, autocorrelation_time
+    from markov.analysis.fluctuations import current_fluctuations
+    from markov.analysis.sensitivity import sensitivity
 
     S = sol.steps_per_time_step
     out: dict = {"dynamics_time_unit": "time step",
                  "chain_step": "one time step" if S == 1 else
                  f"one sub-step ({S} sub-steps = one time step)"}
     if names:
-        found = {name: rd.road_sensitivity(chain, name, solution=sol, tol=min(tol, 1e-12))
+        found = {name: sensitivity(chain, name, solution=sol, tol=min(tol, 1e-12))
                  for name in names}
         for name, d in found.items():
             out[f"dflux_d{name}"] = d.dflux
         out["sensitivity"] = {name: d.to_dict() for name, d in found.items()}
     if fluctuations:
-        out.update(rd.exit_fluctuations(chain, sol).to_dict())
+        out.update(_exit_fields(current_fluctuations(chain, solution=sol)))
         for name in ("cars", "stopped"):
-            tau = rd.road_autocorrelation_time(chain, name, sol)
+            tau = autocorrelation_time(chain, name, solution=sol)
             out[f"tau_int_{name}"] = tau / S
             out[f"tau_int_{name}_chain_steps"] = tau
-        out.pop("time_unit", None)
     if lags is not None:
         out["autocorrelation_lags"] = "chain steps"
-        out["autocorrelation"] = {name: rd.road_autocorrelation(chain, name, lags, sol).tolist()
-                                  for name in ROAD_CORRELATED}
+        out["autocorrelation"] = {name: autocorrelation(chain, name, lags, solution=sol)
+                                  .tolist() for name in ROAD_CORRELATED}
     return out
+
+
+def _exit_fields(fl) -> dict:
+    """A road's current fluctuations under the names of its --json: ``exit_*`` (the
+    current is the exit count), per time step and per chain step."""
+    return {"exit_current": fl.flux, "exit_diffusion": fl.diffusion_per_time_step,
+            "exit_fano": fl.fano, "exit_variance_per_chain_step": fl.variance,
+            "exit_variance_per_time_step": fl.variance_per_time_step,
+            "exit_current_per_chain_step": fl.current,
+            "exit_diffusion_per_chain_step": fl.diffusion,
+            "exit_diffusion_continuous_time": fl.continuous_time_diffusion,
+            "tau_int_exit": fl.tau_int_time_steps, "tau_int_exit_chain_steps": fl.tau_int,
+            "steps_per_time_step": fl.steps_per_time_step, "states": fl.states,
+            "seconds": fl.seconds}
 
 
 def _echo_road_dynamics(data: dict) -> None:
@@ -549,7 +564,8 @@ def _dynamics(sol, chain, start, limit, operator, fluctuations: bool, lags) -> d
     if fluctuations:
         fl = current_fluctuations(chain, pi)
         # parallel, ordered-sequential: the increments are L times the flux per step
-        tau_flux = fl.tau_int if fl.sub_steps == 1 else autocorrelation_time(chain, "flux", pi)
+        tau_flux = fl.tau_int if fl.steps_per_time_step == 1 else autocorrelation_time(
+            chain, "flux", pi)
         out.update(diffusion=fl.diffusion, current=fl.current, tau_int_flux=tau_flux,
                    tau_int_stopped=autocorrelation_time(chain, "stopped", pi),
                    diffusion_per_time_step=fl.diffusion_per_time_step)

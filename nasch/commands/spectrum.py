@@ -143,12 +143,11 @@ def spectrum(length_text, cars, density, model, params, road, alpha, beta, entry
     if len(rings) > 1 and all(math.isfinite(t) and t > 0 for t in taus):
         fit = fit_power_law(lengths, taus)
     if as_json:
-        entries = [{"length": r.length, "cars": r.cars, "model": r.model.describe(),
-                    "update": r.update, **s.to_dict()} for r, s in zip(rings, results)]
+        entries = [s.to_dict() for s in results]
         emit_json(entries[0] if len(entries) == 1 else {"rings": entries, "fit": fit})
         return
-    for ring, s in zip(rings, results):
-        _echo_ring(ring, s, show)
+    for s in results:
+        _echo_ring(s, show)
     if len(rings) > 1:
         if fit is None:
             click.echo("tau(L): no power-law fit (a ring without a finite, positive tau)")
@@ -159,14 +158,18 @@ def spectrum(length_text, cars, density, model, params, road, alpha, beta, entry
                        f" local exponents {local}")
 
 
-def _echo_ring(ring, s, show: int) -> None:
+def _echo_ring(s, show: int) -> None:
+    from markov.analysis.road_system import chain_step_name
+
+    ring = s.system
     params = " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}"
                       for k, v in ring.model.params.items())
     sizes = s.sector_sizes
     click.echo(f"{ring.model.name} ring L={ring.length} N={ring.cars} {params}"
                f" update={ring.update}: {len(sizes)} sector{'s' if len(sizes) != 1 else ''},"
                f" {max(sizes.values()) if sizes else 0:,} states in the largest,"
-               f" {s.operator}, {s.seconds:.2f} s")
+               f" {s.operator}, {s.seconds:.2f} s; a chain step is"
+               f" {chain_step_name(s.steps_per_time_step)}")
     for note in s.notes:
         click.echo(f"  {note}")
     lam = s.second
@@ -175,11 +178,29 @@ def _echo_ring(ring, s, show: int) -> None:
         return
     tau = s.relaxation_time
     tau_text = "infinite (|lambda_2| = 1: the chain does not relax)" if math.isinf(tau) \
-        else f"{tau:.10g} steps"
+        else f"{tau:.10g} {s.time_unit}s"
     click.echo(f"  lambda_2 = {lam.value.real:.12f} {lam.value.imag:+.12f}i"
                f"  |lambda_2| = {abs(lam.value):.12f}  sector {lam.sector}")
     click.echo(f"  relaxation time tau = -1/ln|lambda_2| = {tau_text};"
-               f" oscillation arg = {s.oscillation:.6f} rad/step")
+               f" oscillation arg = {s.oscillation:.6f} rad/{_step(s)}")
+    _echo_continuous(s)
+    _echo_eigenvalues(s, show)
+
+
+def _step(s) -> str:
+    """The chain step in one word: ``"step"`` (a time step) or ``"sub-step"``."""
+    return "sub-step" if s.steps_per_time_step > 1 else "step"
+
+
+def _echo_continuous(s) -> None:
+    """Random-sequential update: the relaxation time in continuous time."""
+    tau_c = s.continuous_time_relaxation_time
+    if tau_c is not None:
+        click.echo("  continuous time (generator S (P - 1), each position at rate 1): tau ="
+                   f" 1/(S min(1 - Re lambda)) = {tau_c:.10g}")
+
+
+def _echo_eigenvalues(s, show: int) -> None:
     if show:
         click.echo("  eigenvalues (by modulus; sector, residual):")
         for e in s.eigenvalues[:show]:
@@ -191,7 +212,7 @@ def _road_spectrum(length_text, cars, density, model, params, road, alpha, beta,
                    v_in, stretches, ramps, vmax, p, update, count, sector_text, operator, tol,
                    max_memory, no_lump, show, as_json) -> None:
     """``--road``: the leading eigenvalues of one road's P (one sector)."""
-    from markov.analysis.road_dynamics import road_spectrum
+    from markov.analysis.spectrum import relaxation_spectrum
     from markov.solvers.road_chain import RoadChain
     from markov.validate import ensure_int, ensure_max_memory, ensure_tol
 
@@ -218,7 +239,7 @@ def _road_spectrum(length_text, cars, density, model, params, road, alpha, beta,
                           road=True, alpha=alpha, beta=beta, entry=entry, exit_=exit_,
                           v_in=v_in, stretches=stretches, ramps=ramps)
     chain = RoadChain(system, max_memory=None if max_memory is None else max_memory * 2**30)
-    s = road_spectrum(chain, count=count, tol=tol, lump_velocities=not no_lump)
+    s = relaxation_spectrum(chain, count=count, tol=tol, lump_velocities=not no_lump)
     if as_json:
         emit_json(s.to_dict())
         return
@@ -237,16 +258,14 @@ def _road_spectrum(length_text, cars, density, model, params, road, alpha, beta,
     tau = s.relaxation_time
     tau_text = "infinite (|lambda_2| = 1: the chain does not relax)" if math.isinf(tau) \
         else f"{tau:.10g} time steps"
-    click.echo(f"  lambda_2 = {lam.real:.12f} {lam.imag:+.12f}i  |lambda_2| = {abs(lam):.12f}"
-               " (per chain step)")
+    click.echo(f"  lambda_2 = {lam.value.real:.12f} {lam.value.imag:+.12f}i"
+               f"  |lambda_2| = {abs(lam.value):.12f} (per chain step)")
     click.echo(f"  relaxation time tau = -1/(S ln|lambda_2|) = {tau_text}"
                f" (S = {s.steps_per_time_step} chain steps per time step);"
                f" oscillation arg = {s.oscillation:.6f} rad/chain step")
-    tau_c = s.continuous_time_relaxation_time
-    if tau_c is not None:
-        click.echo("  continuous time (generator S (P - 1), each position at rate 1): tau ="
-                   f" 1/(S min(1 - Re lambda)) = {tau_c:.10g}")
+    _echo_continuous(s)
     if show:
         click.echo("  eigenvalues (by modulus; residual):")
-        for v, r in list(zip(s.eigenvalues, s.residuals))[:show]:
-            click.echo(f"    {v.real:+.12f} {v.imag:+.12f}i  |{abs(v):.12f}|  res {r:.1e}")
+        for e in s.eigenvalues[:show]:
+            click.echo(f"    {e.value.real:+.12f} {e.value.imag:+.12f}i  |{abs(e.value):.12f}|"
+                       f"  res {e.residual:.1e}")
