@@ -15,6 +15,8 @@ Usage::
 
     python benchmarks/mps_parallel_tasep.py                          # L = 100, 200, 400
     python benchmarks/mps_parallel_tasep.py --lengths 1000 --append
+    python benchmarks/mps_parallel_tasep.py --lengths 200,400 --points MC1,MC2,CO,LINE \
+        --rule fixed-sum --append                                    # another local rule
 """
 from __future__ import annotations
 
@@ -89,12 +91,12 @@ def work(point: str, L: int, rule: str | None) -> dict:
             "peak_MB": _peak_mb(), "note": sol.stopped}
 
 
-def _cases(lengths: list[int]) -> list[tuple[str, int, str | None]]:
+def _cases(lengths: list[int], rule: str | None = None) -> list[tuple[str, int, str | None]]:
     cases = []
     for L in lengths:
         for point in POINTS:
-            cases.append((point, L, None))
-            if L == 200 and point.startswith("MC"):
+            cases.append((point, L, rule))
+            if rule is None and L == 200 and point.startswith("MC"):
                 cases.append((point, L, "refined"))
     return cases
 
@@ -156,6 +158,8 @@ def main() -> None:
     ap.add_argument("--lengths", default="100,200,400")
     ap.add_argument("--points", default=",".join(POINTS))
     ap.add_argument("--append", action="store_true")
+    ap.add_argument("--rule", help="every case with this local rule (default: the solver's,"
+                                   " and refined beside it at the maximal current, L = 200)")
     ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.child:
@@ -164,7 +168,7 @@ def main() -> None:
         return
     rows = _read() if a.append else []
     keep = a.points.split(",")
-    for point, L, rule in _cases([int(x) for x in a.lengths.split(",")]):
+    for point, L, rule in _cases([int(x) for x in a.lengths.split(",")], a.rule):
         if point not in keep:
             continue
         t = time.perf_counter()
