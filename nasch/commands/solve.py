@@ -560,7 +560,7 @@ def _dynamics(sol, chain, start, limit, operator, fluctuations: bool, lags) -> d
         chain = RingChain(sol.ring, lump=sol.lumped, max_memory=limit, operator=operator,
                           start=start, lump_velocities=False)
     pi = sol.pi if np.array_equal(chain.keys, sol.keys) else None
-    out = {"time_unit": "sub-step" if sol.ring.update == "random-sequential" else "step"}
+    out = {"time_unit": "sub-step" if sol.ring.update == "random-sequential" else "time step"}
     if fluctuations:
         fl = current_fluctuations(chain, pi)
         # parallel, ordered-sequential: the increments are L times the flux per step
