@@ -263,7 +263,7 @@ def test_cli_fluctuations_and_autocorrelation_match_the_api(update):
     assert data["tau_int_flux"] == pytest.approx(autocorrelation_time(chain, "flux"), rel=1e-10)
     assert data["tau_int_stopped"] == pytest.approx(autocorrelation_time(chain, "stopped"),
                                                     rel=1e-10)
-    assert data["time_unit"] == ("sub-step" if update == "random-sequential" else "step")
+    assert data["time_unit"] == ("sub-step" if update == "random-sequential" else "time step")
     for name in ("flux", "stopped"):
         assert data["autocorrelation"][name] == pytest.approx(
             autocorrelation(chain, name, 4).tolist(), rel=1e-10)
