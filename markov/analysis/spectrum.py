@@ -21,8 +21,9 @@ update) the sectors keep every nonzero eigenvalue and lose only zeros: see
 complex conjugate of ``P_k``: sectors above ``L/2`` are computed from their
 mirror.
 
-The leading eigenvalues are found by ARPACK (``scipy.sparse.linalg.eigs``,
-largest modulus) on the sector matrix, or matrix-free: for parallel update on
+The leading eigenvalues are found by a Krylov-Schur iteration (largest modulus,
+:mod:`markov.analysis.krylov_schur`; ARPACK's ``scipy.sparse.linalg.eigs`` where
+it does not converge) on the sector matrix, or matrix-free: for parallel update on
 the factored operator with the two phases
 (:meth:`markov.chain.factored.FactoredOperator.sector_apply`), for random-sequential
 update on the row operator with the phase of each successor
