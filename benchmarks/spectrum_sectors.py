@@ -5,13 +5,16 @@ at least 3x faster than before the issue's work (2c3153e), L = 22 within 5 minut
 same command from this checkout and from the previous commit (a ``git worktree``),
 interleaved, each in a fresh process; wall seconds and peak memory from the child's own
 ``wait4`` usage, lambda_2 and tau from ``--json``.  ``--large`` adds L = 22, this
-checkout only.  Results: ``benchmarks/results/spectrum_sectors.{csv,md}``.
+checkout only; ``--also PATH`` adds a third checkout (e.g. the main branch while this is
+a branch), timed in the same rounds.  Results: ``benchmarks/results/spectrum_sectors.{csv,md}``.
 
 Usage::
 
     python benchmarks/spectrum_sectors.py                  # about 10 minutes on 2 cores
     python benchmarks/spectrum_sectors.py --large          # and L = 22 (about 4 minutes)
     python benchmarks/spectrum_sectors.py --previous REV --rounds 3
+    python benchmarks/spectrum_sectors.py --previous-tree ../main-solver-2c3153e \
+        --also ../main                                     # and a third checkout
 """
 from __future__ import annotations
 
@@ -63,6 +66,7 @@ def _write(rows: list, meta: dict) -> None:
              f" ({meta['date']})", "", f"- machine: {meta['machine']}",
              f"- load average at start: {meta['load0']}",
              f"- load average at end: {meta.get('load1', '')}",
+             f"- checkouts: {meta['trees']}",
              "- `nasch spectrum -L L -N L/2 --vmax 2 --p 0.5 --count 2`; each run a fresh"
              " process, the two versions interleaved; peak_MB from the child's wait4 usage",
              "", "| " + " | ".join(COLUMNS) + " |", "|" + "---|" * len(COLUMNS)]
@@ -77,31 +81,39 @@ def main() -> None:
     ap.add_argument("--large", action="store_true", help=f"add L = {LARGE} (this checkout)")
     ap.add_argument("--previous", default=PREVIOUS,
                     help=f"the commit to compare with [{PREVIOUS}]")
+    ap.add_argument("--previous-tree", type=Path,
+                    help="an existing checkout of --previous (else a worktree beside this one)")
+    ap.add_argument("--also", type=Path, help="a third checkout, timed as 'also'")
     args = ap.parse_args()
     sys.path.insert(0, str(ROOT))
     from common import previous_worktree, warm
 
-    old = previous_worktree(ROOT, f"solver-{args.previous}", args.previous)
-    for tree in (old, ROOT):       # compile each tree's kernels before timing
+    old = (args.previous_tree.resolve() if args.previous_tree
+           else previous_worktree(ROOT, f"solver-{args.previous}", args.previous))
+    tools = [("previous", old)] + ([("also", args.also.resolve())] if args.also else [])
+    tools.append(("this", ROOT))
+    for _, tree in tools:          # compile each tree's kernels before timing
         warm(tree, ["-m", "nasch", *_argv(12)])
     meta = {"previous": args.previous,
             "date": dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": f"{platform.machine()}, {os.cpu_count()} cores",
-            "load0": " ".join(f"{x:.2f}" for x in os.getloadavg()), "ratios": []}
+            "load0": " ".join(f"{x:.2f}" for x in os.getloadavg()), "ratios": [],
+            "trees": ", ".join(f"{tool}: {tree}" for tool, tree in tools)}
     rows: list[dict] = []
     for L in SIZES:
         for rnd in range(1, args.rounds + 1):
-            for tool, tree in (("previous", old), ("this", ROOT)):
+            for tool, tree in tools:
                 rows.append({"tool": tool, "round": rnd, **_run(tree, L)})
                 _write(rows, meta)
         mine = [r for r in rows if r["L"] == L and r["rc"] == 0]
         for key in ("seconds", "peak_MB"):
-            a = [r[key] for r in mine if r["tool"] == "previous"]
             b = [r[key] for r in mine if r["tool"] == "this"]
-            if a and len(a) == len(b):
-                meta["ratios"].append(f"L = {L}: {key} previous / this = "
-                                      + ", ".join(f"{x / y:.2f}" for x, y in zip(a, b))
-                                      + " (by round)")
+            for other, _ in tools[:-1]:
+                a = [r[key] for r in mine if r["tool"] == other]
+                if a and len(a) == len(b):
+                    meta["ratios"].append(f"L = {L}: {key} {other} / this = "
+                                          + ", ".join(f"{x / y:.2f}" for x, y in zip(a, b))
+                                          + " (by round)")
     if args.large:
         rows.append({"tool": "this", "round": 1, **_run(ROOT, LARGE)})
     meta["load1"] = " ".join(f"{x:.2f}" for x in os.getloadavg())

@@ -26,8 +26,9 @@ update) the sectors keep every nonzero eigenvalue and lose only zeros: see
 complex conjugate of ``P_k``: sectors above ``L/2`` are computed from their
 mirror.
 
-The leading eigenvalues are found by ARPACK (``scipy.sparse.linalg.eigs``,
-largest modulus) on the sector matrix, or matrix-free: for parallel update on
+The leading eigenvalues are found by a Krylov-Schur iteration (largest modulus,
+:mod:`markov.analysis.krylov_schur`; ARPACK's ``scipy.sparse.linalg.eigs`` where
+it does not converge) on the sector matrix, or matrix-free: for parallel update on
 the factored operator with the two phases
 (:meth:`markov.chain.factored.FactoredOperator.sector_apply`), for random-sequential
 update on the row operator with the phase of each successor
@@ -117,7 +118,7 @@ class Spectrum:
         States of every sector computed (a road: ``{0: states}``).
     operator : str
         The largest sector's route: ``"dense"``, ``"matrix"`` or ``"matrix-free"``
-        (a ring), ``"dense"`` or ``"arpack"`` (a road's sparse matrix).
+        (a ring), ``"dense"`` or ``"matrix"`` (a road: its sparse matrix, Krylov-Schur).
     seconds : float
     products : int
         Products of a matrix-free operator (0 otherwise).
@@ -484,8 +485,8 @@ def relaxation_spectrum(system, count: int = 4, sectors="all", tol: float = 1e-1
 
     A ring's chain splits into momentum sectors (the module's text); a road has
     no rotation, so one sector, 0: the leading eigenvalues of its ``P`` (dense
-    LAPACK up to :data:`DENSE_SECTOR_STATES` states, else ARPACK on the sparse
-    matrix, largest modulus).
+    LAPACK up to :data:`DENSE_SECTOR_STATES` states, else Krylov-Schur on the sparse
+    matrix, ARPACK its fallback, largest modulus).
 
     Parameters
     ----------
@@ -499,7 +500,7 @@ def relaxation_spectrum(system, count: int = 4, sectors="all", tol: float = 1e-1
     sectors : "all", int or iterable of int
         A road: ``"all"`` or 0.
     tol : float
-        ARPACK's relative accuracy of the eigenvalues.
+        Relative accuracy of the eigenvalues (the Ritz estimate, as ARPACK's).
     keys : (n,) int64 array, optional
         A ring's canonical keys of the recurrent class, if already found (one
         closed class: the caller vouches for it), e.g. ``RingChain(ring,
@@ -512,7 +513,7 @@ def relaxation_spectrum(system, count: int = 4, sectors="all", tol: float = 1e-1
         ordered-sequential update has only the matrices.  A road: its matrix
         (``"matrix-free"`` is refused).
     maxiter : int
-        ARPACK restarts.
+        Restarts of the fallback ARPACK (Krylov-Schur: at most 300).
     max_memory : float, optional
         Bytes allowed (default 75 % of physical memory): the route is refused
         before it is built when its arrays would not fit.
@@ -701,10 +702,10 @@ def _road_spectrum(system, count: int, sectors, tol: float, keys: np.ndarray | N
     if n == 1:
         return Spectrum(road, (), {0: 1}, "dense", time.perf_counter() - start, 0, notes, 1, S)
     want = min(count + 1, n)
-    # complex, as the ring's sector matrices: leading starts ARPACK from a complex vector
+    # complex, as the ring's sector matrices: leading starts from a complex vector
     A = spla.aslinearoperator(P.T.tocsr().astype(np.complex128))
     pairs = drop_stationary(leading(A, want, tol, maxiter), count)
-    route = "dense" if n <= DENSE_SECTOR_STATES or want >= n - 1 else "arpack"
+    route = "dense" if n <= DENSE_SECTOR_STATES or want >= n - 1 else "matrix"
     return Spectrum(road, tuple(Eigenvalue(v, 0, r) for v, r in pairs), {0: n}, route,
                     time.perf_counter() - start, 0, notes, n, S)
 

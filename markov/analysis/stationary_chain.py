@@ -51,6 +51,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from markov._blas import one_blas_thread
+from markov.analysis.krylov_schur import krylov_schur
 from markov.errors import ConvergenceError
 from markov.solvers.fundamental import solve_fundamental
 
@@ -443,15 +444,29 @@ def scgf_values(sc: StationaryChain, inc: Increments, s_values,
 # --- the spectrum of one sector -------------------------------------------------------------
 
 
-#: ARPACK restarts with the narrow basis before the wide one (:func:`leading`); a ring's
-#: sector needs about 11 (L = 20, two eigenvalues).
+#: Krylov-Schur restarts with the narrow basis before ARPACK with the wide one
+#: (:func:`leading`); a ring's sector needs about 11 (L = 20, two eigenvalues).
 NARROW_RESTARTS = 300
 
 
 def _ncv(count: int, wide: bool = False) -> int:
-    """ARPACK's Krylov vectors for ``count`` eigenvalues: ``count + 10``, or ``count + 20``
-    (``wide``) where that did not converge (see :func:`leading`)."""
+    """Krylov vectors for ``count`` eigenvalues: ``count + 10`` (Krylov-Schur), or
+    ``count + 20`` (``wide``: ARPACK, where that did not converge; see :func:`leading`)."""
     return max(2 * count + 1, count + (20 if wide else 10))
+
+
+def _arpack(A, count: int, tol: float, maxiter: int, v0: np.ndarray):
+    """ARPACK's ``count`` eigenvalues of largest modulus with the wide basis (where the
+    narrow Krylov-Schur iteration of :func:`leading` did not converge): values and
+    vectors (columns); :class:`ConvergenceError` after ``maxiter`` restarts."""
+    try:
+        # moduli clustered beyond the wanted ones (a conjugate pair split by count)
+        return spla.eigs(A, k=count, which="LM", tol=tol, maxiter=maxiter, v0=v0,
+                         ncv=min(A.shape[0], _ncv(count, wide=True)))
+    except spla.ArpackNoConvergence as exc:
+        raise ConvergenceError(
+            f"ARPACK found {len(exc.eigenvalues)} of {count} eigenvalues in"
+            f" {maxiter} iterations", maxiter, np.inf) from None
 
 
 def leading(A, count: int, tol: float, maxiter: int, dense_limit: int = DENSE_SECTOR_STATES):
@@ -463,8 +478,11 @@ def leading(A, count: int, tol: float, maxiter: int, dense_limit: int = DENSE_SE
         ``A @ x`` is ``x P_k``: one sector (a ring's momentum sector, a road's one).
     count : int
     tol : float
-        ARPACK's relative accuracy.
+        Relative accuracy of each Ritz value, as ARPACK's
+        (:func:`markov.analysis.krylov_schur.krylov_schur`).
     maxiter : int
+        Restarts: Krylov-Schur with ``count + 10`` vectors for up to
+        :data:`NARROW_RESTARTS` of them, then ARPACK with ``count + 20``.
     dense_limit : int
         Up to this many states (or ``count >= m - 1``), dense LAPACK.
 
@@ -483,22 +501,16 @@ def leading(A, count: int, tol: float, maxiter: int, dense_limit: int = DENSE_SE
             vals, vecs = np.linalg.eig(M)
         else:
             v0 = np.random.default_rng(12345).standard_normal(m) + 0j
-            try:
-                # the narrow basis first: ARPACK's own work (reorthogonalisation on one
-                # BLAS thread) grows with the basis and was 60 % of a sector spectrum
-                vals, vecs = spla.eigs(A, k=count, which="LM", tol=tol,
-                                       maxiter=min(maxiter, NARROW_RESTARTS), v0=v0,
-                                       ncv=min(m, _ncv(count)))
-            except spla.ArpackNoConvergence:
-                # moduli clustered beyond the wanted ones (a conjugate pair split by
-                # count): the wide basis, with every restart allowed
-                try:
-                    vals, vecs = spla.eigs(A, k=count, which="LM", tol=tol, maxiter=maxiter,
-                                           v0=v0, ncv=min(m, _ncv(count, wide=True)))
-                except spla.ArpackNoConvergence as exc:
-                    raise ConvergenceError(
-                        f"ARPACK found {len(exc.eigenvalues)} of {count} eigenvalues in"
-                        f" {maxiter} iterations", maxiter, np.inf) from None
+            # the narrow basis first: the basis work (reorthogonalisation on one BLAS
+            # thread) grows with it and was 60 % of a sector spectrum under ARPACK;
+            # Krylov-Schur's thick restart needs a quarter fewer products than ARPACK's
+            # implicit one and rebuilds the basis in one product (krylov_schur)
+            found = krylov_schur(A.matvec, v0, count, tol, min(maxiter, NARROW_RESTARTS),
+                                 ncv=min(m, _ncv(count)))
+            if found is not None:
+                vals, vecs = found[0], found[1].T
+            else:
+                vals, vecs = _arpack(A, count, tol, maxiter, v0)
         order = np.lexsort((np.angle(vals), -np.abs(vals)))[:count]
         out = []
         for i in order:
