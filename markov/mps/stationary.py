@@ -1045,11 +1045,12 @@ def _dmrg_sweep(
     e_right: list = [None] * (n + 1)
     e_left: list = [None] * (n + 1)
     e_right[n], e_left[0] = np.ones(1), np.ones(1)
-    for i in range(n - 1, 1, -1):
+    summed = select == "fixed-sum"   # the other rules never read the sums
+    for i in range(n - 1, 1, -1) if summed else ():
         e_right[i] = _unit(ts[i].sum(axis=1) @ e_right[i + 1])
 
     def ones_at(i: int, shape) -> np.ndarray | None:
-        if select != "fixed-sum":
+        if not summed:
             return None
         return np.broadcast_to(e_left[i][:, None, None, None] * e_right[i + 2][None, None,
                                                                                 None, :],
@@ -1072,7 +1073,8 @@ def _dmrg_sweep(
             break
         ts[i] = u[:, :k].reshape(a, s, k)
         left[i + 1] = _grow_left(left[i], ts[i], mpo[i])
-        e_left[i + 1] = _unit(e_left[i] @ ts[i].sum(axis=1))
+        if summed:
+            e_left[i + 1] = _unit(e_left[i] @ ts[i].sum(axis=1))
         nxt = (sv[:k, None] * vt[:k]).reshape(k, t, b)
         theta = np.tensordot(nxt, ts[i + 2], axes=(2, 0))
     theta = np.tensordot(ts[n - 2], ts[n - 1], axes=(2, 0))
@@ -1086,7 +1088,8 @@ def _dmrg_sweep(
         err += e
         ts[i + 1] = vt[:k].reshape(k, t, b)
         right[i + 1] = _grow_right(right[i + 2], ts[i + 1], mpo[i + 1])
-        e_right[i + 1] = _unit(ts[i + 1].sum(axis=1) @ e_right[i + 2])
+        if summed:
+            e_right[i + 1] = _unit(ts[i + 1].sum(axis=1) @ e_right[i + 2])
         prev = (u[:, :k] * sv[:k]).reshape(a, s, k)
         if i == 0:
             ts[0] = prev / np.linalg.norm(prev)
