@@ -215,3 +215,31 @@ def test_sensitivity_gives_the_old_numbers_with_the_same_keys(case):
 def test_sensitivity_of_a_road_refuses_a_ring_route():
     with pytest.raises(InvalidParameterError, match="route 'auto' only"):
         sensitivity(SYSTEMS["road_par"](), "alpha", route="rows")
+
+
+def test_solve_json_carries_one_fluctuations_block_for_a_ring_and_a_road():
+    """``nasch solve --fluctuations --json``: the same ``fluctuations`` keys for a ring and a
+    road, each equal to :func:`current_fluctuations` of the system (seconds aside)."""
+    from click.testing import CliRunner
+
+    from nasch.cli import main
+
+    cases = {("-L", "7", "-N", "3", "--p", "0.5"): Ring(7, 3, 2, 0.5),
+             ("--road", "-L", "3", "--vmax", "2", "--p", "0.3", "--alpha", "0.4", "--beta",
+              "0.7"): Road(3, load_model("nasch", {"vmax": 2, "p": 0.3}), "parallel", 0.4, 0.7)}
+    blocks = []
+    for args, system in cases.items():
+        res = CliRunner().invoke(main, ["solve", *args, "--fluctuations", "--json"])
+        assert res.exit_code == 0, res.output
+        got = json.loads(res.output)["fluctuations"]
+        want = current_fluctuations(system).to_dict()
+        assert set(got) == set(want)
+        for key, value in want.items():
+            if key == "seconds":
+                continue
+            if isinstance(value, float):
+                assert got[key] == pytest.approx(value, rel=1e-10, abs=1e-14), key
+            else:
+                assert got[key] == value, key
+        blocks.append(got)
+    assert blocks[0]["counted"] != blocks[1]["counted"]   # cells moved against cars leaving

@@ -423,7 +423,9 @@ def _road_dynamics(chain, sol, names, fluctuations: bool, lags, tol) -> dict:
             out[f"dflux_d{name}"] = d.dflux
         out["sensitivity"] = {name: d.to_dict() for name, d in found.items()}
     if fluctuations:
-        out.update(_exit_fields(current_fluctuations(chain, solution=sol)))
+        fl = current_fluctuations(chain, solution=sol)
+        # the flat exit_* names stay; "fluctuations" has a ring's keys (CurrentFluctuations)
+        out.update(_exit_fields(fl), fluctuations=fl.to_dict())
         for name in ("cars", "stopped"):
             tau = autocorrelation_time(chain, name, solution=sol)
             out[f"tau_int_{name}"] = tau / S
@@ -568,7 +570,8 @@ def _dynamics(sol, chain, start, limit, operator, fluctuations: bool, lags) -> d
             chain, "flux", pi)
         out.update(diffusion=fl.diffusion, current=fl.current, tau_int_flux=tau_flux,
                    tau_int_stopped=autocorrelation_time(chain, "stopped", pi),
-                   diffusion_per_time_step=fl.diffusion_per_time_step)
+                   diffusion_per_time_step=fl.diffusion_per_time_step,
+                   fluctuations=fl.to_dict())   # a road's keys (CurrentFluctuations)
     if lags is not None:
         out["autocorrelation"] = {name: autocorrelation(chain, name, lags, pi).tolist()
                                   for name in ("flux", "stopped")}
