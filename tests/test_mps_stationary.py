@@ -315,3 +315,30 @@ def test_the_fixed_sum_rule_fixes_the_sum_in_a_partial_krylov_space():
     x = _local_eigenvector(mv, theta, 0.0, k, 1, "fixed-sum", np.ones(n)).ravel()
     assert abs(x.sum() * np.linalg.norm(want) - np.linalg.norm(x) * want.sum()) < 1e-12
     assert np.abs(x / x.sum() - want).max() < 1e-8 * np.abs(want).max()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_residual_from_the_overlaps_equals_the_dense_one(seed):
+    """The overlaps' form (``<Tp|Tp> - 2 <p|Tp> + <p|p>``, taken for large residuals) gives
+    the dense ``||T p - p|| / ||p||`` to rounding, at any scale of the tensors; near the
+    stationary vector its rounding bound exceeds the value and the exact form is taken."""
+    from markov.mps.stationary import GRAM_ACCURACY, _gram_residual, residual
+
+    rng = np.random.default_rng(seed)
+    dims = [2, 3, 2, 3, 2, 2]
+    n = int(np.prod(dims))
+    t = rng.random((n, n))
+    t /= t.sum(axis=0)
+    mpo = dense_to_mpo(t, dims)
+    v = rng.random(n)
+    want = np.linalg.norm(t @ v - v) / np.linalg.norm(v)
+    p = dense_to_mps(v, dims)
+    for f in (1.0, 1e60, 1e-60):   # tensors of 1e60: each overlap would overflow unscaled
+        got, floor = _gram_residual(mpo, MPS([f * a for a in p.tensors], p.log_scale))
+        assert got == pytest.approx(want, rel=1e-12)
+        assert 0 < floor ** 2 <= GRAM_ACCURACY * got ** 2
+    assert residual(mpo, p, 64)[0] == pytest.approx(want, rel=1e-12)
+    q = dense_to_mps(dense_stationary(t), dims)
+    r, floor = residual(mpo, q, 64)
+    assert r < 1e-13 and floor < 1e-13     # the QR form, not the overlaps' 1e-8
+    assert _gram_residual(mpo, q)[0] <= 10 * _gram_residual(mpo, q)[1]

@@ -35,6 +35,9 @@ Residual
 the bond dimension and cutoff 1e-30, and the difference's norm computed exactly in MPS form
 by a QR sweep (no Gram-matrix cancellation, so it resolves 1e-14). The compression of
 ``T p`` is bounded separately by ``residual_floor`` (square root of its discarded weight).
+Where the residual is far above the rounding of the overlaps ``<Tp|Tp> - 2 <p|Tp> +
+<p|p>`` (above about 1e-6, a state that chi truncates), it is taken from them instead,
+with their rounding bound as the floor: no product at twice chi.
 """
 
 from __future__ import annotations
@@ -124,8 +127,9 @@ class StationaryMPS:
     residual : float
         ``||T p - p||_2 / ||p||_2`` computed in MPS form (see the module docstring).
     residual_floor : float
-        Square root of the discarded weight of the ``T p`` used for ``residual``: the
-        residual is exact up to about this.
+        The residual is exact up to about this: the square root of the discarded weight
+        of the ``T p`` used for ``residual``, or, where the residual came from the
+        overlaps (:func:`residual`), the bound of their rounding.
     truncation_error : float
         Relative discarded squared weight, summed over the cuts, of the last sweep
         (DMRG) or the last step (power iteration).
@@ -461,11 +465,51 @@ def apply_mpo(
     return _compress_right_to_left(out, log, bond_dimension, cutoff)
 
 
+#: The Gram form of the residual is taken where its rounding bound is at most this fraction
+#: of the squared residual (then the residual is right to half of it).
+GRAM_ACCURACY = 1e-2
+
+
+def _gram_residual(mpo: Sequence[np.ndarray], p: MPS) -> tuple[float, float]:
+    """``||T p - p|| / ||p||`` from ``<Tp|Tp> - 2 <p|Tp> + <p|p>`` and the bound of its
+    rounding: three left environments, no compression.
+
+    The cancellation leaves an absolute error of about ``L eps`` times the three terms'
+    size in the squared residual, so the form serves only residuals well above
+    ``sqrt(L eps)`` (about 1e-7); at chi 128 it costs a tenth of the compressed product
+    (vmax 2 road, L = 200: docs/mps_solver_notes.md).
+    """
+    ett = np.ones((1, 1, 1, 1))  # (bra, bra-side w, ket-side w, ket)
+    etp = np.ones((1, 1, 1))     # (bra, w, ket)
+    epp = np.ones((1, 1))        # (bra, ket)
+    for a, w in zip(p.tensors, mpo):
+        x = np.tensordot(ett, a, axes=(3, 0))                # (a', w1, w2, s, b)
+        x = np.tensordot(x, w, axes=([2, 3], [0, 2]))        # (a', w1, b, s', v)
+        x = np.tensordot(x, w, axes=([1, 3], [0, 1]))        # (a', b, v, s0, v1)
+        x = np.tensordot(a, x, axes=([0, 1], [0, 3]))        # (b', b, v, v1)
+        ett = x.transpose(0, 3, 2, 1)
+        etp = _grow_left(etp, a, w)
+        x = np.tensordot(epp, a, axes=(1, 0))                # (a', s, b)
+        epp = np.tensordot(a, x, axes=([0, 1], [0, 1]))      # (b', b)
+        m = max(np.abs(ett).max(), np.abs(etp).max(), np.abs(epp).max())
+        if m > 0:  # one common scale: only the ratios matter
+            ett, etp, epp = ett / m, etp / m, epp / m
+    tt, tp, pp = float(ett.ravel()[0]), float(etp.ravel()[0]), float(epp.ravel()[0])
+    if pp <= 0:
+        return math.inf, math.inf
+    rounding = 10 * len(mpo) * np.finfo(float).eps * (abs(tt) + 2 * abs(tp) + pp)
+    return math.sqrt(max(tt - 2 * tp + pp, 0.0) / pp), math.sqrt(rounding / pp)
+
+
 def residual(mpo: Sequence[np.ndarray], p: MPS, bond_dimension: int) -> tuple[float, float]:
     """``||T p - p||_2 / ||p||_2`` and the floor of its accuracy.
 
+    Where the residual is large enough, from the overlaps ``<Tp|Tp> - 2 <p|Tp> + <p|p>``
+    (:func:`_gram_residual`: exact up to rounding, whose bound is then the floor; used
+    where that bound is at most :data:`GRAM_ACCURACY` of the squared residual). Else
     ``T p`` is compressed at ``bond_dimension`` (pass about twice the bond of ``p``) with
-    cutoff 1e-30; the floor is the square root of that compression's discarded weight.
+    cutoff 1e-30, and the difference's norm taken by a QR sweep; the floor is then the
+    square root of that compression's discarded weight.
 
     Parameters
     ----------
@@ -480,11 +524,14 @@ def residual(mpo: Sequence[np.ndarray], p: MPS, bond_dimension: int) -> tuple[fl
     Returns
     -------
     (residual, floor) : tuple of float
-        ``residual`` is ``||T p - p||_2 / ||p||_2``, the difference's norm computed by
-        :func:`distance`; ``floor`` is the square root of the relative discarded squared
-        weight, summed over the cuts, that :func:`apply_mpo` reports for its final
-        truncation sweep.
+        ``residual`` is ``||T p - p||_2 / ||p||_2``; ``floor`` is the rounding bound of the
+        overlaps' form, or, where the difference's norm was computed by :func:`distance`,
+        the square root of the relative discarded squared weight, summed over the cuts,
+        that :func:`apply_mpo` reports for its final truncation sweep.
     """
+    r, floor = _gram_residual(mpo, p)
+    if floor ** 2 <= GRAM_ACCURACY * r ** 2:
+        return r, floor
     tp, err = apply_mpo(mpo, p, bond_dimension, 1e-30)
     r = distance(tp, p) / math.exp(log_norm(p))
     return r, math.sqrt(err)
