@@ -342,3 +342,19 @@ def test_residual_from_the_overlaps_equals_the_dense_one(seed):
     r, floor = residual(mpo, q, 64)
     assert r < 1e-13 and floor < 1e-13     # the QR form, not the overlaps' 1e-8
     assert _gram_residual(mpo, q)[0] <= 10 * _gram_residual(mpo, q)[1]
+
+
+@pytest.mark.parametrize("dims", [(3, 2, 3, 4, 2), (1, 3, 3, 1, 1)])
+def test_two_site_matvec_equals_the_plain_contraction(dims):
+    """The fused two-site product (:func:`_effective_two_site`) against one ``einsum``."""
+    from markov.mps.stationary import _effective_two_site
+
+    a, d, e, b, w = dims
+    rng = np.random.default_rng(sum(dims))
+    le, re = rng.random((a + 1, w, a)), rng.random((b + 2, w + 1, b))
+    w1, w2 = rng.random((w, d + 1, d, w + 2)), rng.random((w + 2, e + 2, e, w + 1))
+    theta = rng.random((a, d, e, b))
+    want = np.einsum("xwa,wsSv,vtTu,yub,aSTb->xsty", le, w1, w2, re, theta)
+    got = _effective_two_site(le, w1, w2, re)(theta)
+    assert got.shape == want.shape
+    assert np.allclose(got, want, rtol=1e-13, atol=0)
