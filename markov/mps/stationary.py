@@ -466,7 +466,7 @@ def apply_mpo(
 
 
 #: The Gram form of the residual is taken where its rounding bound is at most this fraction
-#: of the squared residual (then the residual is right to half of it).
+#: of the squared residual (then the residual is right to 0.5 %).
 GRAM_ACCURACY = 1e-2
 
 
