@@ -424,13 +424,19 @@ def sector_operator(ring: Ring, keys: np.ndarray, k: int, free=None,
         Complex; real (float64) in the real sectors (``2 k = 0 mod L``) of a factored
         ``free`` operator, whose product keeps real vectors real.
     states : (m,) int64 array
+        The classes of ``A_k``'s rows and columns, in its order: ascending, or for a
+        factored ``free`` operator that of its fastest product
+        (:meth:`markov.chain.factored.FactoredOperator.sector_order`).
     """
     if free is not None:
         from markov.chain.factored import FactoredOperator
 
         states = sector_states(ring, keys, k, _sizes)
-        kind = _FactoredSectorOperator if isinstance(free, FactoredOperator) else _SectorOperator
-        return kind(free, k, states), states
+        if isinstance(free, FactoredOperator):
+            # the order of its fastest product (the eigenvalues do not depend on it)
+            states = free.sector_order(states)
+            return _FactoredSectorOperator(free, k, states), states
+        return _SectorOperator(free, k, states), states
     Pk, states = sector_matrix(ring, keys, k, _rows, _sizes, velocities)
     return spla.aslinearoperator(Pk.T.tocsr()), states
 
