@@ -163,7 +163,7 @@ def krylov_schur(apply: Callable, v0: np.ndarray, count: int, tol: float, maxite
     dtype = np.float64 if np.isrealobj(v0) else np.complex128
     V = np.empty((m + 1, n), dtype)
     H = np.zeros((m + 1, m), dtype)
-    block = np.empty((keep + 1, min(n, _RESTART_BLOCK)), dtype)
+    block = np.empty((m, min(n, _RESTART_BLOCK)), dtype)   # p < m rows of V_m Z at a time
     rng = np.random.default_rng(54321)
     np.multiply(v0, 1.0 / np.linalg.norm(v0), out=V[0])
     k = 0
