@@ -361,7 +361,7 @@ def test_word_bits_hold_the_largest_row_id():
 @pytest.mark.parametrize("update", ["parallel", "random-sequential"])
 def test_sector_apply_on_the_sector_states_alone(update):
     """``sector_apply(x, k, states)`` equals the product of every state gathered on
-    ``states``, sector after sector (the scatter's buffer holds another sector's states)."""
+    ``states``, sector after sector (the level-0 map kept is another sector's)."""
     from markov.analysis.spectrum import sector_states
     from markov.chain.sequential import SequentialOperator
 
@@ -377,6 +377,52 @@ def test_sector_apply_on_the_sector_states_alone(update):
         full[states] = x
         np.testing.assert_allclose(op.sector_apply(x, k, states),
                                    op.sector_apply(full, k)[states], rtol=1e-14, atol=1e-16)
+
+
+@pytest.mark.parametrize("name", ["nasch", "vdr"])
+def test_sector_apply_in_any_order_of_the_states(name):
+    """The sector's states in any order (``sector_order``'s, shuffled): the product of
+    the vector in that order is the product in ascending order, permuted."""
+    from markov.analysis.spectrum import sector_states
+
+    ring = Ring(11, 4, model=_model(name, 2))
+    keys = recurrent_keys(ring, lump=True)
+    op = FactoredOperator(ring, keys, True, shifts=True)
+    rng = np.random.default_rng(7)
+    for k in (0, 2):
+        states = sector_states(ring, keys, k)
+        ordered = op.sector_order(states)
+        assert np.array_equal(np.sort(ordered), states)
+        x = rng.standard_normal(len(states)) + 1j * rng.standard_normal(len(states))
+        y = op.sector_apply(x, k, states)
+        for order in (np.searchsorted(states, ordered), rng.permutation(len(states))):
+            np.testing.assert_allclose(op.sector_apply(x[order], k, states[order]), y[order],
+                                       rtol=1e-14, atol=1e-16)
+
+
+@pytest.mark.parametrize("name", ["nasch", "vdr", "kkw", "tt"])
+def test_sector_apply_real_sectors_stay_real(name):
+    """In the sectors 0 and L/2 (phases +-1) a real vector's product is real and equals
+    the complex product of the same vector (whose phases exp(i pi r) leave imaginary
+    parts of rounding); ``out`` is written."""
+    from markov.analysis.spectrum import sector_states
+
+    ring = Ring(10, 4, model=_model(name, 2))
+    keys = recurrent_keys(ring, lump=True)
+    op = FactoredOperator(ring, keys, True, shifts=True)
+    rng = np.random.default_rng(5)
+    for k in (0, 5, 3, 0):
+        states = sector_states(ring, keys, k)
+        x = rng.standard_normal(len(states))
+        y = op.sector_apply(x + 0j, k, states)
+        if k == 3:    # a complex sector: a real vector is taken as complex
+            assert op.sector_apply(x, k, states).dtype == np.complex128
+            continue
+        out = np.empty(len(states))
+        r = op.sector_apply(x, k, states, out=out)
+        assert r is out and r.dtype == np.float64
+        np.testing.assert_allclose(r, y.real, rtol=1e-14, atol=1e-15)
+        assert np.abs(y.imag).max() < 1e-14
 
 
 @pytest.mark.parametrize("name", ["nasch", "vdr", "kkw", "tt"])

@@ -377,12 +377,27 @@ def sector_matrix(ring: Ring, keys: np.ndarray, k: int, _rows: _ShiftedRows | No
 class _SectorOperator(spla.LinearOperator):
     """``x -> x P_k`` on the classes of sector ``k`` through a matrix-free operator."""
 
-    def __init__(self, op, k: int, states: np.ndarray):
+    def __init__(self, op, k: int, states: np.ndarray, dtype=np.complex128):
         self.op, self.k, self.states = op, k, states
-        super().__init__(np.complex128, (len(states), len(states)))
+        super().__init__(dtype, (len(states), len(states)))
 
     def _matvec(self, x):
         return self.op.sector_apply(np.ravel(x), self.k, self.states)
+
+
+class _FactoredSectorOperator(_SectorOperator):
+    """:class:`_SectorOperator` of a :class:`markov.chain.factored.FactoredOperator`:
+    real (float64) in the real sectors (``2 k = 0 mod L``: its product keeps a real
+    vector real, half the memory traffic; complex vectors are taken too), and
+    writing into a given vector (the Krylov basis of :func:`leading`)."""
+
+    def __init__(self, op, k: int, states: np.ndarray):
+        real = (2 * k) % op.ring.length == 0
+        super().__init__(op, k, states, np.float64 if real else np.complex128)
+
+    def matvec_into(self, x, out):
+        """``x P_k`` written into ``out`` (a contiguous vector of ``x``'s type)."""
+        self.op.sector_apply(x, self.k, self.states, out=out)
 
 
 def sector_operator(ring: Ring, keys: np.ndarray, k: int, free=None,
@@ -405,11 +420,22 @@ def sector_operator(ring: Ring, keys: np.ndarray, k: int, free=None,
 
     Returns
     -------
-    A_k : LinearOperator (complex)
+    A_k : LinearOperator
+        Complex; real (float64) in the real sectors (``2 k = 0 mod L``) of a factored
+        ``free`` operator, whose product keeps real vectors real.
     states : (m,) int64 array
+        The classes of ``A_k``'s rows and columns, in its order: ascending, or for a
+        factored ``free`` operator that of its fastest product
+        (:meth:`markov.chain.factored.FactoredOperator.sector_order`).
     """
     if free is not None:
+        from markov.chain.factored import FactoredOperator
+
         states = sector_states(ring, keys, k, _sizes)
+        if isinstance(free, FactoredOperator):
+            # the order of its fastest product (the eigenvalues do not depend on it)
+            states = free.sector_order(states)
+            return _FactoredSectorOperator(free, k, states), states
         return _SectorOperator(free, k, states), states
     Pk, states = sector_matrix(ring, keys, k, _rows, _sizes, velocities)
     return spla.aslinearoperator(Pk.T.tocsr()), states

@@ -474,8 +474,11 @@ def leading(A, count: int, tol: float, maxiter: int, dense_limit: int = DENSE_SE
 
     Parameters
     ----------
-    A : LinearOperator (complex)
+    A : LinearOperator (complex, or real)
         ``A @ x`` is ``x P_k``: one sector (a ring's momentum sector, a road's one).
+        A real ``A`` (float64) runs in real arithmetic; it takes complex vectors too
+        (the residuals).  An ``A`` with a method ``matvec_into(x, out)`` writes its
+        products into the Krylov basis.
     count : int
     tol : float
         Relative accuracy of each Ritz value, as ARPACK's
@@ -492,6 +495,7 @@ def leading(A, count: int, tol: float, maxiter: int, dense_limit: int = DENSE_SE
         ``(lambda, ||x P - lambda x|| / ||x||)`` by decreasing modulus, then argument.
     """
     m = A.shape[0]
+    real = A.dtype == np.float64
     # one BLAS thread: on the small dense matrices threads only contend (10x slower on
     # a loaded 2-core machine), and ARPACK's vector work between the numba-parallel
     # sector products gains nothing from them (markov._blas)
@@ -500,13 +504,15 @@ def leading(A, count: int, tol: float, maxiter: int, dense_limit: int = DENSE_SE
             M = A.matmat(np.eye(m, dtype=np.complex128))
             vals, vecs = np.linalg.eig(M)
         else:
-            v0 = np.random.default_rng(12345).standard_normal(m) + 0j
+            v0 = np.random.default_rng(12345).standard_normal(m) + (0 if real else 0j)
+            into = hasattr(A, "matvec_into")
             # the narrow basis first: the basis work (reorthogonalisation on one BLAS
             # thread) grows with it and was 60 % of a sector spectrum under ARPACK;
             # Krylov-Schur's thick restart needs a quarter fewer products than ARPACK's
             # implicit one and rebuilds the basis in one product (krylov_schur)
-            found = krylov_schur(A.matvec, v0, count, tol, min(maxiter, NARROW_RESTARTS),
-                                 ncv=min(m, _ncv(count)))
+            found = krylov_schur(A.matvec_into if into else A.matvec, v0, count, tol,
+                                 min(maxiter, NARROW_RESTARTS), ncv=min(m, _ncv(count)),
+                                 into=into)
             if found is not None:
                 vals, vecs = found[0], found[1].T
             else:
