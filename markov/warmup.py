@@ -45,6 +45,11 @@ def warm() -> None:
             solution.to_dict()
             solution.top_configurations(3)
             solution.cluster_probabilities(2)
+    from markov.analysis.spectrum import relaxation_spectrum
+
+    # the sector products, complex and real (sectors 0 and L/2), through Krylov-Schur:
+    # else a user's first spectrum compiled them, about 7 s
+    relaxation_spectrum(Ring(12, 6, 2, 0.5), count=2, operator="matrix-free")
     warm_roads()
 
 
