@@ -125,7 +125,7 @@ def work_closed(kind: str, L: int, chi: int) -> list[dict]:
                     "site1", "sink")
         ref = alpha * (q - alpha) / (q - alpha ** 2)
         case = f"parallel TASEP on (1-a)(1-b)=p, a={alpha} q={q} (de Gier-Nienhuis 1999)"
-    sol = solve_road_mps(road, chi, tol=1e-11, local_rule=_rule())
+    sol = solve_road_mps(road, chi, tol=1e-12, local_rule=_rule())
     return [{"case": case, "L": L, **_mps_row(sol, ref), "note": ""}]
 
 

@@ -157,6 +157,21 @@ def test_cli_profile_writes_png(tmp_path):
     assert data[1]["road"]["entry"] == "reservoir"
 
 
+def test_mps_profile_of_a_random_sequential_road_says_it_has_no_velocities(tmp_path):
+    # the MPS merges v0 = v1 under random-sequential update: no velocity profile, said
+    from nasch.road_figures import profile_figure
+
+    road = Road(8, load_model("nasch", {"vmax": 1, "p": 0.25}), "random-sequential", 0.3,
+                0.6, "site1", "sink")
+    data = profile_data(profile_cases(road, [0.3], [0.6]), method="mps", bond_dimension=8)
+    assert data[0]["velocity_profile"] is not None
+    assert np.isnan(data[0]["velocity_profile"]).all()
+    ref = RoadChain(road).solution()
+    assert np.allclose(data[0]["density_profile"], ref.density_profile, atol=1e-10)
+    texts = [t.get_text() for ax in profile_figure(data).axes for t in ax.texts]
+    assert any(t.startswith("no velocity profile") for t in texts)
+
+
 @pytest.mark.parametrize("args", [
     ["phase-diagram", "--alphas", "0.5,0.2"],
     ["phase-diagram", "--betas", "0:1.5:3"],

@@ -198,7 +198,13 @@ def test_counts(update, entry, exit_):
         reps = [tuple(None if k == 0 else m.site_labels[0][k][0] for k in c) for c in confs]
         outs = [naive_road.step(nr, s) for s in reps]
         kinds = [("left", None), ("entered", None)] + [("bond", k) for k in range(1, L)] + \
-            [("ramp", r) for r in range(len(road.ramps))] + [("velocity", x) for x in range(1, L + 1)]
+            [("ramp", r) for r in range(len(road.ramps))]
+        if m.velocities_known:
+            kinds += [("velocity", x) for x in range(1, L + 1)]
+        else:   # merged velocities under random-sequential update: refused, never guessed
+            assert update == "random-sequential" and lump
+            with pytest.raises(InvalidParameterError, match="velocities are merged"):
+                m.count("velocity", 1)
         for kind, index in kinds:
             f = naive_count(kind, index)
             expect = sum(pi * sum(pr * f(s, c) for (s, c), pr in out.items())
@@ -215,11 +221,18 @@ def test_counts(update, entry, exit_):
             assert abs(to_dense(row)[0] @ p - expect) < 1e-13, (kind, index, lump)
 
 
-def test_count_refusals_and_random_sequential_keeps_velocities():
+def test_count_refusals_and_random_sequential_merged_velocities():
+    # random-sequential: the chain of merged velocities is exact for the occupations
+    # (check_entries above), but a car not moved keeps a velocity it no longer holds
     road = Road(3, nasch(2), "random-sequential", 0.4, 0.6)
     m = road_mpo(road, lump=True)
-    assert m.lumped is False and len(m.site_labels[0]) == 4
-    assert road_mpo(Road(3, nasch(2), "parallel", 0.4, 0.6)).lumped is True
+    assert m.lumped is True and m.site_labels[0] == [None, (0,), (1, 2)]
+    assert not m.velocities_known
+    every = road_mpo(road, lump=False)
+    assert len(every.site_labels[0]) == 4 and every.velocities_known
+    assert road_mpo(Road(3, nasch(2), "parallel", 0.4, 0.6)).velocities_known
+    kkw = road_mpo(Road(3, load_model("kkw", {"vmax": 2}), "random-sequential", 0.4, 0.6))
+    assert kkw.velocities_known        # nothing merges: every velocity is still there
     with pytest.raises(InvalidParameterError):
         m.count("bond", 3)
     with pytest.raises(InvalidParameterError):
@@ -262,7 +275,8 @@ def test_bulk_memo_changes_nothing(monkeypatch, update):
     assert shared.raw_bond_dimensions == alone.raw_bond_dimensions
     for a, b in zip(shared.count_base, alone.count_base):
         assert a.shape == b.shape and np.array_equal(a, b)
-    for kind, index in (("bond", 20), ("velocity", 22), ("ramp", 1), ("left", None)):
+    kinds = (("bond", 20), ("velocity", 22), ("ramp", 1), ("left", None))
+    for kind, index in [k for k in kinds if k[0] != "velocity" or shared.velocities_known]:
         (sa, ta), = shared.count(kind, index).items()
         (sb, tb), = alone.count(kind, index).items()
         assert sa == sb and np.array_equal(ta, tb)

@@ -511,7 +511,8 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         got = expectations(p, base, repl)
         return np.array([got[site] for site in sorted(got)])
 
-    velocity = profile("velocity", range(1, L + 1))
+    velocity = (profile("velocity", range(1, L + 1)) if mpo.velocities_known
+                else np.full(L, np.nan))        # merged under random-sequential: unknown
     bonds = steps * profile("bond", range(1, L)) if L > 1 else np.zeros(0)
     ramps = np.array([steps * expectation(p, base, mpo.count("ramp", r))
                       for r in range(len(road.ramps))])
@@ -606,6 +607,12 @@ def _velocities(road: Road, mpo, tables) -> str:
     if mpo.lumped:
         from markov.model.lumping import velocity_classes
 
-        return "lumped: " + velocity_classes(*tables).describe()
+        said = "lumped: " + velocity_classes(*tables).describe()
+        if not mpo.velocities_known:
+            said += ("; no velocity profile (random-sequential: a car the sub-step does not"
+                     " move keeps the velocity of its last move, which the merged basis does"
+                     " not hold; --no-lump keeps every velocity, but then the sweeps of a long"
+                     " road do not settle)")
+        return said
     return "every velocity kept" + (" (random-sequential: a sub-step moves one car)"
                                     if road.update == RANDOM_SEQUENTIAL else "")
