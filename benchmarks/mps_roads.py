@@ -188,7 +188,7 @@ def _cases(only) -> list[tuple[str, list]]:
     if "targets" in only:
         cases += [("targets", [2, 200, 128]), ("targets", [1, 1000, 64])]
     if "closed" in only:
-        for kind, chi in (("dehp-ld", 16), ("dehp-mc", 32)):
+        for kind, chi in (("dehp-ld", 32), ("dehp-mc", 32)):
             for L in (100, 500, 1000):
                 cases.append(("closed", [kind, L, chi]))
     return cases

@@ -446,7 +446,8 @@ def profile_figure(data: Sequence[dict], width: float = 7.0, height: float = 6.4
                     label="on-ramp" if (ax is top and c == ramp_cells[0]) else None)
     top.set_ylabel("density ρ(x) = P(cell x holds a car)")
     top.set_ylim(0, 1)
-    if all(np.isnan(np.asarray(d["velocity_profile"], float)).all() for d in data):
+    if all(d.get("method") == "mps" and d["_road"].update == "random-sequential"
+           and np.isnan(np.asarray(d["velocity_profile"], float)).all() for d in data):
         # an MPS of a random-sequential road merges the velocities (markov.mps.road_mpo)
         bottom.text(0.5, 0.5, "no velocity profile: the matrix product state merges the"
                     " velocities\n(random-sequential update; nasch solve --no-lump keeps them)",

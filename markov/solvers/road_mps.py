@@ -91,6 +91,12 @@ KRYLOV = 12
 #: in 6 sweeps; the special line at L = 400), but at vmax 2, L = 12-14 it took 1.3x the
 #: sweeps of this rule and left 5 of 48 exact cases without a bar against 1.
 LOCAL_RULE = "nearest"
+#: ... and under random-sequential update, where it is the fixed sum: NaSch vmax 1 against
+#: Derrida-Evans-Hakim-Pasquier, (0.3, 0.6), q = 0.75, chi 32, tol 1e-12: L = 500 7.7e-9
+#: relative against 3.4e-7 with ``"nearest"`` (J crept by 5e-11 a sweep there), L = 1000
+#: 3.5e-8 against 5.9e-7; the maximal current at L = 1000 6.7e-9 against 7.8e-9, in 46 s
+#: against 77 s (docs/mps_solver_notes.md, 2026-12-05 night).
+LOCAL_RULE_RANDOM_SEQUENTIAL = "fixed-sum"
 
 
 def _geometric_tail(values) -> float:
@@ -437,7 +443,8 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         ``on_sweep(sweep, flux)`` after every sweep of either solve (a log of progress).
     local_rule : {"nearest", "refined", "ritz-refined", "fixed-sum"}, optional
         The local vector of each two-site step (``select`` of
-        :func:`markov.mps.stationary.stationary_mps`); default :data:`LOCAL_RULE`.
+        :func:`markov.mps.stationary.stationary_mps`); default :data:`LOCAL_RULE`
+        (:data:`LOCAL_RULE_RANDOM_SEQUENTIAL` under random-sequential update).
         ``"fixed-sum"`` for the maximal current and the special line of long vmax 1
         roads (L = 200-400; docs/mps_solver_notes.md).
 
@@ -464,7 +471,8 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         raise InvalidParameterError("the MPS solver takes an open road (a ring: the exact solver)")
     chi = ensure_int("bond dimension", bond_dimension, MIN_BOND_DIMENSION, MAX_BOND_DIMENSION)
     tol = ensure_tol(tol)
-    rule = LOCAL_RULE if local_rule is None else local_rule
+    rule = local_rule if local_rule is not None else (
+        LOCAL_RULE_RANDOM_SEQUENTIAL if road.update == RANDOM_SEQUENTIAL else LOCAL_RULE)
     if rule not in LOCAL_RULES:
         raise InvalidParameterError(f"local rule must be one of {', '.join(LOCAL_RULES)},"
                                     f" not {rule!r}")

@@ -45,8 +45,9 @@ __all__ = ["solve"]
               help="--method mps: the local vector of each two-site step: nearest (the"
                    " Ritz vector of value nearest 1, default), refined (least ||(M - 1) x||"
                    " at unit norm), ritz-refined, fixed-sum (least ||(M - 1) x|| at a fixed"
-                   " sum: settles vmax 1's maximal current and the special line at"
-                   " L = 200-400; docs/mps_solver_notes.md).")
+                   " sum, the default under random-sequential update: settles vmax 1's"
+                   " maximal current and the special line at L = 200-400;"
+                   " docs/mps_solver_notes.md).")
 @click.option("--operator", type=click.Choice(OPERATORS), default="auto", show_default=True,
               help="Assemble P, or apply x -> xP without storing it (parallel and"
                    " ordered-sequential roads: factored car by car).")
