@@ -365,7 +365,8 @@ def profile_data(cases: Sequence[ProfileCase], max_memory: float | None = None,
         ``label``, ``road`` (:meth:`Road.describe`), ``summary``, ``flux``, ``inflow``,
         ``density_profile``, ``velocity_profile`` (NaN where no car stands),
         ``states`` (None for an MPS), ``residual``, ``method``; an MPS adds
-        ``flux_error`` and ``bond_dimension``.
+        ``flux_error``, ``bond_dimension`` and ``velocities_known`` (False: merged
+        velocities of a random-sequential road, the velocity profile NaN).
     """
     from markov.progress import progress_bar
     from markov.solvers.road_chain import RoadChain
@@ -382,7 +383,8 @@ def profile_data(cases: Sequence[ProfileCase], max_memory: float | None = None,
                 sol = solve_road_mps(case.road, bond_dimension or DEFAULT_BOND_DIMENSION,
                                      max_memory=max_memory)
                 states = None
-                extra.update(flux_error=sol.flux_error, bond_dimension=sol.bond_dimension)
+                extra.update(flux_error=sol.flux_error, bond_dimension=sol.bond_dimension,
+                             velocities_known=sol.velocities_known)
             else:
                 sol = RoadChain(case.road, max_memory=max_memory).solution()
                 states = sol.n_states
@@ -446,8 +448,7 @@ def profile_figure(data: Sequence[dict], width: float = 7.0, height: float = 6.4
                     label="on-ramp" if (ax is top and c == ramp_cells[0]) else None)
     top.set_ylabel("density ρ(x) = P(cell x holds a car)")
     top.set_ylim(0, 1)
-    if all(d.get("method") == "mps" and d["_road"].update == "random-sequential"
-           and np.isnan(np.asarray(d["velocity_profile"], float)).all() for d in data):
+    if not any(d.get("velocities_known", True) for d in data):
         # an MPS of a random-sequential road merges the velocities (markov.mps.road_mpo)
         bottom.text(0.5, 0.5, "no velocity profile: the matrix product state merges the"
                     " velocities\n(random-sequential update; nasch solve --no-lump keeps them)",

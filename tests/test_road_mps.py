@@ -59,6 +59,7 @@ def test_short_roads_against_the_exact_chain(road):
         # them): no velocity profile, said; every velocity kept gives the exact one
         assert np.isnan(mps.velocity_profile).all() and "no velocity profile" in mps.velocities
         assert mps.to_dict()["velocity_profile"] == [None] * road.length
+        assert not mps.velocities_known and mps.to_dict()["velocities_known"] is False
         mps = solve_road_mps(road, 64, tol=1e-12, lump=False)
         assert mps.flux == pytest.approx(exact.flux, abs=1e-10)
     assert np.allclose(mps.velocity_profile, exact.velocity_profile, atol=1e-9, equal_nan=True)

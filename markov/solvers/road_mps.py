@@ -245,6 +245,10 @@ class MPSRoadSolution:
         Why they ended (:class:`markov.mps.stationary.StationaryMPS` ``stopped``).
     tol : float
         The residual target.
+    velocities_known : bool
+        Whether the state holds each car's velocity (False where a random-sequential
+        road merges velocities: :attr:`markov.mps.road_mpo.RoadMPO.velocities_known`;
+        the velocity profile is then NaN).
     local_rule : str
         The local vector of each two-site step (:data:`LOCAL_RULES`).
     state : MPS
@@ -272,6 +276,7 @@ class MPSRoadSolution:
     converged: bool
     tol: float
     stopped: str
+    velocities_known: bool = True
     local_rule: str = LOCAL_RULE
     state: object = field(default=None, repr=False, compare=False)
 
@@ -319,7 +324,7 @@ class MPSRoadSolution:
             "iterations": self.iterations, "seconds": self.seconds,
             "velocities": self.velocities, "closed_classes": self.closed_classes,
             "converged": self.converged, "tol": self.tol, "stopped": self.stopped,
-            "local_rule": self.local_rule,
+            "local_rule": self.local_rule, "velocities_known": self.velocities_known,
             "time_step": (f"{_chain_steps(self.system)} sub-steps"
                           if self.system.update == RANDOM_SEQUENTIAL else "one step"),
         })
@@ -541,7 +546,7 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         mpo_bond_dimension=max(mpo.bond_dimensions, default=1),
         velocities=_velocities(road, mpo, tables), closed_classes=classes,
         converged=settled and bar is not None, tol=tol, stopped=full.stopped,
-        local_rule=rule, state=p)
+        velocities_known=mpo.velocities_known, local_rule=rule, state=p)
 
 
 def _chain_steps(road: Road) -> int:
