@@ -17,6 +17,7 @@ Usage::
     python benchmarks/mps_parallel_tasep.py --lengths 1000 --append
     python benchmarks/mps_parallel_tasep.py --lengths 200,400 --points MC1,MC2,CO,LINE \
         --rule fixed-sum --append                                    # another local rule
+    python benchmarks/mps_parallel_tasep.py --lengths 400,1000 --out mps_parallel_tasep_grown
 """
 from __future__ import annotations
 
@@ -39,7 +40,7 @@ RESULTS = ROOT / "benchmarks" / "results"
 OUT = "mps_parallel_tasep"
 COLUMNS = ["point", "phase", "alpha", "beta", "p", "L", "chi", "local_rule", "flux", "exact",
            "rel_error", "abs_error", "flux_error", "covered", "ratio", "profile_error",
-           "converged", "sweeps", "seconds", "peak_MB", "note"]
+           "converged", "sweeps", "seconds", "peak_MB", "start", "note"]
 #: Wall-clock limit of one case in seconds.
 LIMIT_S = 600
 _LINE_BETA = round(1 - 0.4 / (1 - 0.35), 12)    # (1 - alpha)(1 - beta) = p at alpha 0.35
@@ -88,7 +89,8 @@ def work(point: str, L: int, rule: str | None) -> dict:
             "ratio": None if not bar else err / bar,
             "profile_error": float(np.max(np.abs(sol.density_profile - rho))),
             "converged": sol.converged, "sweeps": sol.iterations, "seconds": seconds,
-            "peak_MB": _peak_mb(), "note": sol.stopped}
+            "peak_MB": _peak_mb(), "note": sol.stopped,
+            "start": "grown" if "grow_mps" in sol.start else "uniform"}
 
 
 def _cases(lengths: list[int], rule: str | None = None) -> list[tuple[str, int, str | None]]:
@@ -160,8 +162,10 @@ def main() -> None:
     ap.add_argument("--append", action="store_true")
     ap.add_argument("--rule", help="every case with this local rule (default: the solver's,"
                                    " and refined beside it at the maximal current, L = 200)")
+    ap.add_argument("--out", default=OUT, help="results file stem in benchmarks/results/")
     ap.add_argument("--child", nargs=3, help=argparse.SUPPRESS)
     a = ap.parse_args()
+    globals()["OUT"] = a.out
     if a.child:
         point, L, rule = a.child
         print("RESULT " + json.dumps(work(point, int(L), None if rule == "-" else rule)))

@@ -691,11 +691,11 @@ def road_table(road: Road, lengths: Sequence[int], order: int = 2, *, extremal: 
         start = None
         for r in roads:
             if method == "mps":
-                from markov.mps.stationary import pad_mps
+                from markov.mps.stationary import grow_mps
                 from markov.solvers.road_mps import DEFAULT_BOND_DIMENSION, solve_road_mps
 
-                # the shorter road's state, padded in the middle, starts the next one
-                start = None if start is None else pad_mps(start, r.length)
+                # the shorter road's state, its middle cell repeated, starts the next one
+                start = None if start is None else grow_mps(start, r.length)
                 sol = solve_road_mps(r, bond_dimension or DEFAULT_BOND_DIMENSION, start=start)
                 start = sol.state
                 rows.append(RoadRow("mps", r.length, sol.flux, sol.flux_error, sol.inflow,

@@ -17,13 +17,15 @@ from markov.mps.stationary import (
     distance,
     expectation,
     expectations,
+    grow_mps,
+    log_norm,
     log_total,
     mpo_to_dense,
     mps_to_dense,
     negativity,
     normalize,
     one_site_marginals,
-    pad_mps,
+    product_mps,
     stationary_mps,
     total,
     two_site_marginals,
@@ -221,11 +223,54 @@ def test_progress_callback_and_warm_start():
                          progress=lambda it, p, r: seen.append(it) or {"J": float(bond_currents(p)[10])})
     assert seen == [h["iteration"] for h in res.history]
     assert all("J" in h for h in res.history)
-    longer = pad_mps(res.mps, 30)
+    longer = grow_mps(res.mps, 30)
     assert len(longer) == 30 and math.isclose(total(longer), 1.0, rel_tol=1e-12)
     warm = stationary_mps(tasep_mpo(30, 0.3, 0.6), 16, tol=1e-10, start=longer)
     assert warm.converged
     assert math.isclose(bond_currents(warm.mps)[15], dehp_current(30, Fraction(3, 10), Fraction(3, 5)), rel_tol=1e-8)
+
+
+def test_grow_mps_repeats_the_middle_of_a_product_state():
+    rng = np.random.default_rng(3)
+    vs = [rng.random(d) + 0.1 for d in (2, 3, 2, 3, 2)]
+    grown = grow_mps(product_mps(vs), 8)
+    assert len(grown) == 8 and math.isclose(total(grown), 1.0, rel_tol=1e-12)
+    want = vs[:3] + [vs[2]] * 3 + vs[3:]   # the site right of the middle bond, repeated
+    dense = want[0]
+    for v in want[1:]:
+        dense = np.kron(dense, v)
+    assert np.abs(mps_to_dense(grown) - dense / dense.sum()).max() < 1e-14
+    assert np.abs(mps_to_dense(grow_mps(product_mps(vs), 5)) - mps_to_dense(
+        normalize(product_mps(vs)))).max() < 1e-15
+    one = grow_mps(product_mps(vs[:1]), 3)
+    assert np.abs(mps_to_dense(one) - np.kron(np.kron(vs[0], vs[0]), vs[0])
+                  / vs[0].sum() ** 3).max() < 1e-15
+    with pytest.raises(ValueError):
+        grow_mps(product_mps(vs), 4)
+
+
+def test_grow_mps_continues_a_translation_invariant_bulk():
+    # boundary vectors and one positive bulk tensor: far from the ends the Schmidt bases of
+    # neighbouring bonds agree (to the transfer matrix's gap to the power of the distance),
+    # so the grown chain is the same construction at the new length; the Schmidt vectors'
+    # signs are free, and grow_mps must fix them consistently
+    rng = np.random.default_rng(5)
+    a = rng.random((3, 2, 3)) + 0.05
+
+    def chain(n: int) -> MPS:
+        ts = [a.copy() for _ in range(n)]
+        ts[0] = np.tensordot(rng_l, a, axes=(0, 0))[None]
+        ts[-1] = np.tensordot(a, rng_r, axes=(2, 0))[:, :, None]
+        return MPS(ts)
+
+    rng_l, rng_r = rng.random(3), rng.random(3)
+    want = normalize(chain(70))
+
+    def off(n: int) -> float:
+        return distance(grow_mps(chain(n), 70), want) / math.exp(log_norm(want))
+
+    assert off(40) < 1e-10
+    assert off(10) > 1e-8    # from a short chain the middle is not yet the bulk: measurable
 
 
 # ----------------------------------------------------------------- local rules

@@ -124,6 +124,33 @@ def test_parallel_tasep_on_the_special_line_at_L_60():
     assert sol.closed_classes.startswith("one, proven")
 
 
+def test_a_long_road_starts_from_a_short_one_grown(monkeypatch):
+    # the special line again, L = 90 grown from L = 30: started at (nearly) the exact state,
+    # the sweeps stay there (the cutoff keeps noise directions out of the kept bases)
+    import markov.solvers.road_mps as rm
+
+    monkeypatch.setattr(rm, "GROW_FROM", 30)
+    L, alpha, q = 90, 0.35, 0.6
+    beta = 1 - (1 - q) / (1 - alpha)
+    road = Road(L, _nasch(1, 1 - q), "parallel", alpha, beta, "site1", "sink")
+    sol = solve_road_mps(road, 8, local_rule="fixed-sum")
+    exact = alpha * (q - alpha) / (q - alpha ** 2)
+    assert sol.start.startswith("the road of 30 cells") and "grow_mps" in sol.start
+    assert sol.to_dict()["start"] == sol.start
+    assert sol.flux_error is not None and abs(sol.flux - exact) <= sol.flux_error
+    assert sol.flux == pytest.approx(exact, abs=1e-11)
+    assert solve_road_mps(road, 8, grow=False, max_sweeps=4).start == "the uniform product state"
+    # a grown start whose rungs do not settle (here: one sweep a rung) is given up
+    monkeypatch.setattr(rm, "GROWN_SWEEPS", 1)
+    again = solve_road_mps(road, 8, local_rule="fixed-sum", max_sweeps=6)
+    assert again.start.startswith("the uniform product state (the start grown")
+    uniform = solve_road_mps(road, 8, local_rule="fixed-sum", grow=False, max_sweeps=6)
+    assert again.flux == uniform.flux and again.flux_error == uniform.flux_error
+    ramp = Road(L, _nasch(1, 1 - q), "parallel", alpha, beta, "site1", "sink",
+                ramps=(OnRamp(40, 0.1),))
+    assert "not grown" in solve_road_mps(ramp, 8, max_sweeps=4).start
+
+
 def test_several_closed_classes_are_refused():
     # p = 1 at vmax 1: no car ever moves, every configuration of stuck cars is absorbing
     with pytest.raises(NoUniqueStationaryStateError, match="closed classes"):
@@ -172,6 +199,7 @@ def test_cli_local_rule_is_passed_and_echoed():
     assert d["local_rule"] == "refined" and d["flux"] == api.flux
     r = _run(*args)
     assert r.exit_code == 0 and "local rule refined" in r.output, r.output
+    assert "start: the uniform product state" in r.output and d["start"] == api.start
 
 
 @pytest.mark.parametrize("args", [
@@ -236,6 +264,11 @@ def test_flux_tail_covers_a_geometric_approach_and_a_settled_two_cycle():
     rng = np.random.default_rng(0)
     wandering = list(limit + 1e-3 * rng.standard_normal(12))
     assert flux_tail(wandering) == math.inf and not _stalled(wandering)
+    # changes of 1e-12 relative: rounding on a road of 1000 cells (1e-13 a cell), not on one
+    # of 10
+    noise = list(limit * (1 + 1e-12 * rng.standard_normal(12)))
+    assert flux_tail(noise, rounding=1e-10) == 0.0
+    assert flux_tail(noise, rounding=1e-12 / 10) == math.inf
 
 
 def test_ladder_doubles_from_16_to_chi():

@@ -67,7 +67,7 @@ __all__ = [
     "negativity",
     "normalize",
     "one_site_marginals",
-    "pad_mps",
+    "grow_mps",
     "product_mps",
     "residual",
     "stationary_mps",
@@ -853,51 +853,66 @@ def mpo_to_dense(mpo: Sequence[np.ndarray]) -> np.ndarray:
 # --------------------------------------------------------------------------- warm starts
 
 
-def pad_mps(p: MPS, length: int, position: int | None = None) -> MPS:
-    """A warm start for a longer chain: ``p`` with independent sites inserted.
+# --------------------------------------------------------------------------- solver
 
-    The inserted sites (before ``position``, default the middle) carry the one-site
-    marginal of the site they are inserted before, as a product with the bond passing
-    through unchanged, so the sum stays 1 and both boundary regions of ``p`` are kept.
+
+def grow_mps(p: MPS, length: int) -> MPS:
+    """A longer chain's start from a shorter chain's state: its middle site repeated.
+
+    The state is brought to left-canonical form with Schmidt bases (a left-to-right SVD
+    sweep from right-canonical form), each Schmidt vector signed so that its sum is
+    non-negative, and the tensor of the site right of the middle bond (which maps that
+    bond's Schmidt basis to the next one's) is inserted ``length - len(p)`` times after
+    that site: in the bulk of a road neighbouring bonds have nearly the same Schmidt
+    bases, so the copies continue the bulk (a translation-invariant MPS in its
+    left-canonical gauge), and both boundary layers are kept.  Where the two bonds differ
+    in dimension both are cut to the smaller.
 
     Parameters
     ----------
     p : MPS
-        The state of the shorter chain (need not be normalised).
+        The shorter chain's state.
     length : int
-        Number of sites of the result, at least ``len(p)``.
-    position : int, optional
-        Index of the site of ``p`` before which the ``length - len(p)`` new sites go
-        (an index into ``p``'s sites, so not ``len(p)``); default ``len(p) // 2``. The inserted sites take
-        that site's physical dimension and left bond, and its one-site marginal with
-        negative entries clipped to 0 and renormalised.
+        Sites of the result, at least ``len(p)``.
 
     Returns
     -------
     MPS
-        The padded state (all tensors copied), normalised to sum 1.
-
-    Raises
-    ------
-    ValueError
-        When ``length < len(p)``, or (from :func:`normalize`) the result does not sum
-        to a positive number.
+        Sum-normalised, ``length`` sites.
     """
     n = len(p)
-    if length < n:
-        raise ValueError("pad_mps only lengthens")
-    pos = n // 2 if position is None else position
-    marg = one_site_marginals(p)[pos]
-    marg = np.clip(marg, 0.0, None)
-    marg = marg / marg.sum()
-    d_bond = p.tensors[pos].shape[0]
-    eye = np.eye(d_bond)
-    insert = eye[:, None, :] * marg[None, :, None]
-    tensors = p.tensors[:pos] + [insert.copy() for _ in range(length - n)] + p.tensors[pos:]
-    return normalize(MPS([t.copy() for t in tensors], p.log_scale))
-
-
-# --------------------------------------------------------------------------- solver
+    if length < n or n < 1:
+        raise ValueError(f"cannot grow {n} sites to {length}")
+    if length == n:
+        return normalize(p.copy())
+    ts = list(_right_canonical(p).tensors)
+    e = np.ones(1)
+    for i in range(n - 1):  # left to right: Schmidt bases, signed by their sums
+        a, s, b = ts[i].shape
+        u, sv, vt = _svd(ts[i].reshape(a * s, b))
+        k = int(np.count_nonzero(sv > sv[0] * 1e-15)) if sv.size else 0
+        k = max(k, 1)
+        u, sv, vt = u[:, :k], sv[:k], vt[:k]
+        a_i = u.reshape(a, s, k)
+        sums = e @ a_i.sum(axis=1)
+        sign = np.where(sums < 0, -1.0, 1.0)
+        a_i = a_i * sign
+        ts[i] = a_i
+        ts[i + 1] = np.tensordot((sign * sv)[:, None] * vt, ts[i + 1], axes=(1, 0))
+        e = _unit(e @ a_i.sum(axis=1))
+    m = n // 2  # the copied site, right of bond m - 1
+    chi = min(ts[m].shape[0], ts[m].shape[2])
+    if m > 0:
+        ts[m - 1] = ts[m - 1][:, :, :chi]
+    if m + 1 < n:
+        ts[m + 1] = ts[m + 1][:chi]
+    middle = ts[m][:chi, :, :chi]
+    ts[m] = middle
+    grown = ts[:m + 1] + [middle.copy() for _ in range(length - n)] + ts[m + 1:]
+    out = MPS(grown)
+    if log_total(out)[0] < 0:
+        grown[0] = -grown[0]
+    return normalize(_right_canonical(MPS(grown)))
 
 
 def _effective_two_site(le, w1, w2, re):
@@ -1196,7 +1211,7 @@ def stationary_mps(
     max_iterations : int
         Most sweeps (``"dmrg"``) or power steps (``"power"``).
     start : MPS, optional
-        Warm start (e.g. :func:`pad_mps` of a shorter chain's result); default the uniform
+        Warm start (e.g. :func:`grow_mps` of a shorter chain's result); default the uniform
         product state.
     cutoff : float, optional
         Relative discarded squared weight allowed per cut; default ``(tol / 10)**2 / L``,

@@ -73,6 +73,27 @@ SETTLED = 1e-12
 LADDER_FRACTION = 0.1
 #: ... or, below ``chi / 2``, where the state is only a start, below this, relative.
 WARM_UP_SETTLED = 1e-4
+#: The smallest relative squared Schmidt weight kept at a cut is ``(CUTOFF_TOL * tol)**2``
+#: divided by the chain steps of a time step (L + 1 under random-sequential update, whose
+#: gap per chain step is that much smaller), not by L as in
+#: :func:`markov.mps.stationary.stationary_mps`: directions below the sweeps' own noise
+#: carry nothing, and a Galerkin sweep that keeps them can leave its fixed point.  The
+#: special line at L = 1000, chi 8, started 7e-13 from the exact J: with a cutoff of 1e-28,
+#: 2e-5 off after its second sweep and wandering there; 1e-25 (L's share at tol 1e-10):
+#: within 2.4e-11 for 12 sweeps; 1e-24 and 1e-22: within 3e-12.  Under random-sequential
+#: update the small cutoff is needed: DEHP low density at L = 500, tol 1e-12, 6.1e-9 at
+#: 2e-29, 1.1e-8 at 1e-26 (docs/mps_solver_notes.md, 2026-12-05, late).
+CUTOFF_TOL = 0.1
+#: Roads longer than twice this are started from the road of this many cells, solved first
+#: at the same bond dimension and grown (:func:`markov.mps.stationary.grow_mps`), where that
+#: road's J settled with a bar; the sweeps of a long road started from the uniform product
+#: wander for tens of sweeps before they find the fixed point, or never do.
+GROW_FROM = 100
+#: Most sweeps of a rung from the grown start; where J has not settled by then, the road
+#: is solved again from the uniform product (at coexistence, alpha = beta = 0.2, L = 1000,
+#: the grown start's rungs ran 44 sweeps without a bar, where the uniform one's gave one;
+#: a grown start that works needs 8-15 sweeps in all, docs/mps_solver_notes.md).
+GROWN_SWEEPS = 20
 #: Most sweeps of a rung below ``chi / 2`` (its state is a start, not a result).
 WARM_UP_SWEEPS = 12
 #: The smallest bond dimension of the ladder (:func:`ladder`).
@@ -99,25 +120,25 @@ LOCAL_RULE = "nearest"
 LOCAL_RULE_RANDOM_SEQUENTIAL = "fixed-sum"
 
 
-def _geometric_tail(values) -> float:
+def _geometric_tail(values, rounding: float = ROUNDING) -> float:
     """The change still to come of a sequence whose last three changes shrink
     geometrically (:func:`flux_tail`); ``inf`` where they do not."""
     if len(values) < 4:
         return math.inf
     d = [abs(values[i] - values[i - 1]) for i in (-3, -2, -1)]
-    if d[2] <= 1e-13 * abs(values[-1]):
+    if d[2] <= rounding * abs(values[-1]):
         return 0.0
     r = max(d[1] / d[0] if d[0] > 0 else 1.0, d[2] / d[1] if d[1] > 0 else 1.0)
     return d[2] * r / (1 - r) if r < 0.9 else math.inf
 
 
-def flux_tail(fluxes) -> float:
+def flux_tail(fluxes, rounding: float = ROUNDING) -> float:
     """The change of J still to come over further sweeps, from its last values.
 
     The sweeps' changes of J shrink geometrically once the state is near its fixed
     point at this bond dimension: with the last three changes ``d1, d2, d3`` and
     ``r = max(d2 / d1, d3 / d2) < 0.9``, the tail is ``d3 r / (1 - r)``; a last change
-    below 1e-13 of J is rounding (tail 0).  (Three values were too few: the first
+    below ``rounding`` of J is rounding (tail 0).  (Three values were too few: the first
     sweeps from a smaller bond dimension's state go back and forth, and one shrinking
     ratio there stopped a vmax 2 road 2e-3 short of its J.)  Where J alternates between
     two values, each settling (a two-cycle of the sweeps, seen on a vmax 2 road at
@@ -128,25 +149,31 @@ def flux_tail(fluxes) -> float:
     ----------
     fluxes : sequence of float
         J after each sweep.
+    rounding : float
+        Relative changes of J at most this are rounding: the sweeps' own accuracy,
+        :data:`ROUNDING` per cell on a long road (L = 1000: J moved by 1e-12 relative
+        a sweep on the special line, 2.7e-12 from the exact J, and never settled below
+        1e-13).
 
     Returns
     -------
     float
     """
     fluxes = list(fluxes)
-    tail = _geometric_tail(fluxes)
+    tail = _geometric_tail(fluxes, rounding)
     if math.isinf(tail) and len(fluxes) >= 8:
         last, before = fluxes[::-2][:4][::-1], fluxes[-2::-2][:4][::-1]
-        tail = abs(fluxes[-1] - fluxes[-2]) + _geometric_tail(last) + _geometric_tail(before)
+        tail = (abs(fluxes[-1] - fluxes[-2]) + _geometric_tail(last, rounding)
+                + _geometric_tail(before, rounding))
     return tail
 
 
-def _stalled(fluxes) -> bool:
+def _stalled(fluxes, rounding: float = ROUNDING) -> bool:
     """More sweeps will not narrow the tail: finite and no smaller than two sweeps ago
     (a two-cycle whose two values have settled)."""
     if len(fluxes) < 10:
         return False
-    now, before = flux_tail(fluxes), flux_tail(fluxes[:-2])
+    now, before = flux_tail(fluxes, rounding), flux_tail(fluxes[:-2], rounding)
     return math.isfinite(now) and now > 0 and now >= 0.99 * before
 
 
@@ -231,6 +258,7 @@ class MPSRoadSolution:
     negative_marginal : float
         The most negative one-site marginal probability (0 where none is negative).
     iterations : int
+        Sweeps in all (those of an abandoned grown start included; not the short road's).
     seconds : float
     mpo_bond_dimension : int
     velocities : str
@@ -251,6 +279,8 @@ class MPSRoadSolution:
         the velocity profile is then NaN).
     local_rule : str
         The local vector of each two-site step (:data:`LOCAL_RULES`).
+    start : str
+        What the sweeps started from, in words (a grown shorter road: :data:`GROW_FROM`).
     state : MPS
         The stationary vector (:mod:`markov.mps.stationary`).
     """
@@ -278,6 +308,7 @@ class MPSRoadSolution:
     stopped: str
     velocities_known: bool = True
     local_rule: str = LOCAL_RULE
+    start: str = "the uniform product state"
     state: object = field(default=None, repr=False, compare=False)
 
     @property
@@ -325,6 +356,7 @@ class MPSRoadSolution:
             "velocities": self.velocities, "closed_classes": self.closed_classes,
             "converged": self.converged, "tol": self.tol, "stopped": self.stopped,
             "local_rule": self.local_rule, "velocities_known": self.velocities_known,
+            "start": self.start,
             "time_step": (f"{_chain_steps(self.system)} sub-steps"
                           if self.system.update == RANDOM_SEQUENTIAL else "one step"),
         })
@@ -423,7 +455,8 @@ def mps_bytes(length: int, bond_dimension: int, site_dimension: int, mpo_bond: i
 def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
                    tol: float = DEFAULT_MPS_TOL, lump: bool = True, max_sweeps: int = 40,
                    start=None, max_memory: float | None = None,
-                   on_sweep=None, local_rule: str | None = None) -> MPSRoadSolution:
+                   on_sweep=None, local_rule: str | None = None,
+                   grow: bool = True) -> MPSRoadSolution:
     """The stationary state of an open road as a matrix product state, with its error bar.
 
     Parameters
@@ -452,6 +485,10 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         (:data:`LOCAL_RULE_RANDOM_SEQUENTIAL` under random-sequential update).
         ``"fixed-sum"`` for the maximal current and the special line of long vmax 1
         roads (L = 200-400; docs/mps_solver_notes.md).
+    grow : bool
+        Start a road of more than ``2 GROW_FROM`` cells (without ``start``) from the
+        road of :data:`GROW_FROM` cells, solved first and grown; the solution's ``start``
+        says what the sweeps started from.
 
     Returns
     -------
@@ -492,28 +529,46 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
                       ": a smaller --bond-dimension")
     steps = _chain_steps(road)
     base, left = mpo.count_base, mpo.count("left")
+    began = "the given state" if start is not None else "the uniform product state"
+    grown = False
+    if start is None and grow and road.length > 2 * GROW_FROM:
+        if road.stretches or road.ramps:
+            began += " (a road with stretches or ramps is not grown from a shorter one)"
+        else:
+            start, began = _grown_start(road, chi, tol, lump, max_sweeps, max_memory, rule)
+            grown = start is not None
+    rounding = ROUNDING * road.length
     with progress_bar(None, "MPS sweeps", "sweep") as bar:
-        results = []
+        def solve(levels: list[int], start, most: int) -> list:
+            results: list = []
+            for c in levels:
+                previous = results[-1][1][-1] if results else None
+                got = _sweeps(mpo, c, tol, most, start, bar, on_sweep, previous,
+                              warm_up=len(levels) > 2 and c < chi // 2, residuals=c == chi,
+                              rule=rule)
+                results.append(got)
+                start = got[0].mps
+            return results
+
         # a warm start (a neighbour's state, a shorter road's) already has the shape the
         # ladder's first rungs would find: from it, chi / 2 and chi only
-        levels = ladder(chi) if start is None else ladder(chi)[-2:]
-        for c in levels:
-            final = c == chi
-            previous = results[-1][1][-1] if results else None
-            got = _sweeps(mpo, c, tol, max_sweeps, start, bar, on_sweep, previous,
-                          warm_up=len(levels) > 2 and c < chi // 2, residuals=final,
-                          rule=rule)
-            results.append(got)
-            start = got[0].mps
+        results = solve(ladder(chi) if start is None else ladder(chi)[-2:], start,
+                        min(max_sweeps, GROWN_SWEEPS) if grown else max_sweeps)
+        spent = 0
+        if grown and math.isinf(_tail(results, rounding)):
+            # the short road's bulk was not the long one's (a domain wall's, a power
+            # law's): start again from the uniform product
+            spent = sum(r.iterations for r, _ in results)
+            results = solve(ladder(chi), None, max_sweeps)
+            began = ("the uniform product state (the start grown from the road of"
+                     f" {GROW_FROM} cells gave no bar in {GROWN_SWEEPS} sweeps a rung)")
     (half, half_fluxes), (full, fluxes) = results[-2], results[-1]
     flux_half = steps * expectation(half.mps, base, left)
     p = full.mps
     flux = steps * expectation(p, base, left)
     # the reported state is the lowest-residual one, not always the last: the tail is the
     # last J's, so the bar also holds the distance between the two
-    tail = 0.0 if full.converged and len(fluxes) < 4 else flux_tail(fluxes)
-    tail += abs(flux - fluxes[-1]) if fluxes else 0.0
-    tail += 0.0 if half.converged and len(half_fluxes) < 4 else flux_tail(half_fluxes)
+    tail = _tail(results, rounding) + (abs(flux - fluxes[-1]) if fluxes else 0.0)
     L = road.length
     density = np.array([1.0 - m[0] / m.sum() for m in one_site_marginals(p)])
 
@@ -542,11 +597,39 @@ def solve_road_mps(road: Road, bond_dimension: int = DEFAULT_BOND_DIMENSION,
         ramp_inflows=ramps, bond_currents=bonds, density_profile=density,
         velocity_profile=vel, residual=full.residual, truncation_error=full.truncation_error,
         negative_marginal=float(min(0.0, neg.get("min_one_site", 0.0))),
-        iterations=sum(r.iterations for r, _ in results), seconds=time.perf_counter() - t0,
+        iterations=spent + sum(r.iterations for r, _ in results),
+        seconds=time.perf_counter() - t0,
         mpo_bond_dimension=max(mpo.bond_dimensions, default=1),
         velocities=_velocities(road, mpo, tables), closed_classes=classes,
         converged=settled and bar is not None, tol=tol, stopped=full.stopped,
-        velocities_known=mpo.velocities_known, local_rule=rule, state=p)
+        velocities_known=mpo.velocities_known, local_rule=rule, start=began, state=p)
+
+
+def _tail(results: list, rounding: float) -> float:
+    """The changes of J still to come at ``chi`` and ``chi / 2`` (the last two rungs)."""
+    (half, half_fluxes), (full, fluxes) = results[-2], results[-1]
+    tail = 0.0 if full.converged and len(fluxes) < 4 else flux_tail(fluxes, rounding)
+    return tail + (0.0 if half.converged and len(half_fluxes) < 4
+                   else flux_tail(half_fluxes, rounding))
+
+
+def _grown_start(road: Road, chi: int, tol: float, lump: bool, max_sweeps: int,
+                 max_memory: float | None, rule: str) -> tuple:
+    """The start of a long homogeneous road: the road of :data:`GROW_FROM` cells (the same
+    model, update, entry and exit), solved at ``chi`` and grown to ``road.length`` cells;
+    the uniform product where that road gives no bar."""
+    from markov.mps.stationary import grow_mps
+
+    short = Road(GROW_FROM, road.model, road.update, road.alpha, road.beta, road.entry,
+                 road.exit, road.v_in)
+    sol = solve_road_mps(short, chi, tol, lump, max_sweeps, None, max_memory,
+                         local_rule=rule, grow=False)
+    if sol.flux_error is None:
+        return None, (f"the uniform product state (the road of {GROW_FROM} cells, solved"
+                      " first to be grown, did not settle)")
+    return grow_mps(sol.state, road.length), (
+        f"the road of {GROW_FROM} cells (J = {sol.flux:.12g} +- {sol.flux_error:.2g}),"
+        " its middle cell repeated (grow_mps)")
 
 
 def _chain_steps(road: Road) -> int:
@@ -605,13 +688,15 @@ def _sweeps(mpo, chi: int, tol: float, max_sweeps: int, start, bar, on_sweep,
             enough = max(enough, LADDER_FRACTION * abs(j - previous))
         if warm_up:
             enough = max(enough, WARM_UP_SETTLED * abs(j))
-        return flux_tail(fluxes) <= enough or _stalled(fluxes)
+        rounding = ROUNDING * road.length
+        return flux_tail(fluxes, rounding) <= enough or _stalled(fluxes, rounding)
 
     result = stationary_mps(mpo.tensors, chi, tol=tol,
                             max_iterations=min(max_sweeps, WARM_UP_SWEEPS) if warm_up
                             else max_sweeps,
                             check_every=RESIDUAL_EVERY if residuals else 0, start=start,
-                            monitor=settled, ncv=KRYLOV, local_maxiter=1, select=rule)
+                            monitor=settled, ncv=KRYLOV, local_maxiter=1, select=rule,
+                            cutoff=(CUTOFF_TOL * tol) ** 2 / _chain_steps(road))
     return result, fluxes
 
 

@@ -356,6 +356,7 @@ def _solve_mps(system, method, chi, local_rule, start, every_class, operator, to
                f" local rule {sol.local_rule}, {sol.seconds:.1f} s")
     click.echo(f"  states: velocities {sol.velocities}; closed classes: {sol.closed_classes};"
                f" per time step ({data['time_step']})")
+    click.echo(f"  start: {sol.start}")
     if sol.flux_error is None:
         click.echo(f"  flux           {sol.flux:.12g}  NO ERROR BAR: J has not settled over the"
                    f" sweeps (they ended: {sol.stopped}; residual {sol.residual:.1e})")
