@@ -60,6 +60,7 @@ __all__ = [
     "distance",
     "expectation",
     "expectations",
+    "grow_mps",
     "log_norm",
     "log_total",
     "mps_to_dense",
@@ -67,7 +68,6 @@ __all__ = [
     "negativity",
     "normalize",
     "one_site_marginals",
-    "grow_mps",
     "product_mps",
     "residual",
     "stationary_mps",
@@ -853,9 +853,6 @@ def mpo_to_dense(mpo: Sequence[np.ndarray]) -> np.ndarray:
 # --------------------------------------------------------------------------- warm starts
 
 
-# --------------------------------------------------------------------------- solver
-
-
 def grow_mps(p: MPS, length: int) -> MPS:
     """A longer chain's start from a shorter chain's state: its middle site repeated.
 
@@ -879,6 +876,11 @@ def grow_mps(p: MPS, length: int) -> MPS:
     -------
     MPS
         Sum-normalised, ``length`` sites.
+
+    Raises
+    ------
+    ValueError
+        When ``length < len(p)``.
     """
     n = len(p)
     if length < n or n < 1:
@@ -890,8 +892,7 @@ def grow_mps(p: MPS, length: int) -> MPS:
     for i in range(n - 1):  # left to right: Schmidt bases, signed by their sums
         a, s, b = ts[i].shape
         u, sv, vt = _svd(ts[i].reshape(a * s, b))
-        k = int(np.count_nonzero(sv > sv[0] * 1e-15)) if sv.size else 0
-        k = max(k, 1)
+        k = max(1, int(np.count_nonzero(sv > sv[0] * 1e-15)))
         u, sv, vt = u[:, :k], sv[:k], vt[:k]
         a_i = u.reshape(a, s, k)
         sums = e @ a_i.sum(axis=1)
@@ -909,10 +910,12 @@ def grow_mps(p: MPS, length: int) -> MPS:
     middle = ts[m][:chi, :, :chi]
     ts[m] = middle
     grown = ts[:m + 1] + [middle.copy() for _ in range(length - n)] + ts[m + 1:]
-    out = MPS(grown)
-    if log_total(out)[0] < 0:
+    if log_total(MPS(grown))[0] < 0:
         grown[0] = -grown[0]
     return normalize(_right_canonical(MPS(grown)))
+
+
+# --------------------------------------------------------------------------- solver
 
 
 def _effective_two_site(le, w1, w2, re):
