@@ -620,8 +620,7 @@ def _grown_start(road: Road, chi: int, tol: float, lump: bool, max_sweeps: int,
     the uniform product where that road gives no bar."""
     from markov.mps.stationary import grow_mps
 
-    short = Road(GROW_FROM, road.model, road.update, road.alpha, road.beta, road.entry,
-                 road.exit, road.v_in)
+    short = _shortened(road, GROW_FROM)
     sol = solve_road_mps(short, chi, tol, lump, max_sweeps, None, max_memory,
                          local_rule=rule, grow=False)
     if sol.flux_error is None:
@@ -672,6 +671,7 @@ def _sweeps(mpo, chi: int, tol: float, max_sweeps: int, start, bar, on_sweep,
     road = mpo.road
     steps = _chain_steps(road)
     base, left = mpo.count_base, mpo.count("left")
+    rounding = ROUNDING * road.length
     fluxes: list[float] = []
 
     def settled(sweep: int, p) -> bool:
@@ -688,7 +688,6 @@ def _sweeps(mpo, chi: int, tol: float, max_sweeps: int, start, bar, on_sweep,
             enough = max(enough, LADDER_FRACTION * abs(j - previous))
         if warm_up:
             enough = max(enough, WARM_UP_SETTLED * abs(j))
-        rounding = ROUNDING * road.length
         return flux_tail(fluxes, rounding) <= enough or _stalled(fluxes, rounding)
 
     result = stationary_mps(mpo.tensors, chi, tol=tol,
